@@ -1,0 +1,75 @@
+"""Acceptance measurements of the driver and the simulated chip (issue 6 items 1-3, 5;
+issue 5 item 3). Run: ``.venv/bin/python bench/bench_driver.py [--quick]``.
+
+Prints one line per measurement; figures go to docs/benchmarks.md by hand.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+
+import numpy as np
+
+from imubench.errors import SourceError
+from imubench.sources.registry import open_source
+
+
+def cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def drain(uri: str) -> tuple[object, np.ndarray, float, float]:
+    src = open_source(uri)
+    t0, c0 = time.perf_counter(), cpu_s()
+    idx = []
+    with src:
+        for b in src:
+            idx.append(b.index)
+    return src, np.concatenate(idx), time.perf_counter() - t0, cpu_s() - c0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="1 h instead of 24 h for speed")
+    args = ap.parse_args()
+    import imubench.sources.chip  # noqa: F401 - imports outside the timed region
+
+    hours = 1 if args.quick else 24
+    src, idx, wall, cpu = drain(f"sim://lsm6dsl?odr_hz=104&duration_s={hours * 3600}")
+    print(
+        f"speed: {hours} h at 104 Hz = {len(idx)} sample sets in {wall:.1f} s wall, "
+        f"{cpu:.1f} s CPU -> {len(idx) / wall:,.0f} /s wall, {len(idx) / cpu:,.0f} /s CPU"
+    )
+
+    src, idx, wall, _ = drain("sim://lsm6dsl?odr_hz=3330&bus_khz=400&duration_s=60&counting=1")
+    payload = 12 * len(idx) / (src.elapsed_s * 400e3 / 9)
+    print(
+        f"item 1: 3330 Hz 60 s on 400 kHz: {len(idx)} samples (expected {3330 * 60}), "
+        f"overruns {src.counters['overruns']}, lost {src.counters['lost_samples']}, "
+        f"sample payload {payload:.1%} of the link limit, wire utilisation "
+        f"{src.bus_utilization:.1%}, {wall:.1f} s wall"
+    )
+
+    try:
+        open_source("sim://lsm6dsl?odr_hz=6660&bus_khz=400&duration_s=1")
+    except SourceError as exc:
+        print(f"item 2: refused: {exc}")
+
+    src, idx, wall, _ = drain(
+        "sim://lsm6dsl?odr_hz=104&bus_khz=400&nack_rate=1e-3&nack_burst=3&reset_every_s=10"
+        "&overrun_at_s=25&watermark_s=0.25&counting=1&seed=7&duration_s=600"
+    )
+    c = src.counters
+    print(
+        f"item 3: faults 600 s at 104 Hz: delivered {c['samples']} + lost "
+        f"{c['lost_samples']} = {c['samples'] + c['lost_samples']} (expected {104 * 600}); "
+        f"gaps {c['gaps']}, overruns {c['overruns']}, io_errors {c['io_errors']}, "
+        f"retries {c['retries']}, injected {src.sim_bus.faults.injected}"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,457 @@
+"""FIFO streaming of gyro + accelerometer sample sets (reference §9, §12).
+
+:class:`FifoStream` runs the FIFO in continuous mode at FIFO ODR = sensor ODR, gyro and
+accelerometer not decimated, and (by default) the timestamp as 4th data set every ``d``
+slots (``d`` chosen so that the bus budget holds). One :meth:`FifoStream.poll`:
+
+1. reads FIFO_STATUS1-4 in one 4-byte transfer;
+2. on OVER_RUN: restarts the FIFO (bypass then continuous, as ST's DS3H driver does) and
+   lets the timestamps size the gap (samples lost are reported, never silent);
+3. reads the whole patterns present (FIFO_STATUS3/4 must show pattern position 0, else
+   it realigns) in one ``i2c_rdwr`` burst from FIFO_DATA_OUT_L, at most 4092 bytes;
+4. decodes them vectorised into sample indices (nominal ODR periods since the first
+   sample), raw int16, host times, and reads the temperature once.
+
+Sample index. Inside one FIFO run slots are consecutive. Each pattern's timestamp
+(25 us ticks, unwrapped modulo 2^24) checks that and gives the exact number of slots
+skipped across an overrun restart: ``round(delta_ticks / ticks_per_slot)`` with
+``ticks_per_slot = 40 000 / odr`` (timestamp and ODR share the chip's oscillator, so this
+holds whatever its frequency error). After a chip reset the counter restarts; the gap
+is then sized from host time, mapping ticks to host seconds with the tick period
+estimated against the host clock (the sensor clock's drift). Without timestamps, gaps at
+restarts are sized from the host clock alone (±1 sample).
+
+Chip resets are detected by reading back CTRL1_XL/CTRL2_G every ``verify_every_s`` and
+whenever the FIFO is empty when data were due; then the stream re-probes, reconfigures
+and restarts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lsm6ds.driver import LSM6DS, ImuConfig
+from lsm6ds.errors import BusBudgetError, DriverIOError, LSM6DSError
+from lsm6ds.registers import DECIMATION, FIFO_DEPTH_WORDS, FIFO_MODES, ODR_HZ
+
+TICK_S = 25e-6
+"""Timestamp tick at TIMER_HR = 1 (§7-8)."""
+TICKS_WRAP = 1 << 24
+MAX_BURST_BYTES = 4092
+"""One FIFO burst at most: the whole FIFO (§9.2)."""
+BITS_PER_BYTE = 9
+BUDGET_FRACTION = 0.95
+"""Share of the bus payload limit the stream may plan to use."""
+POLL_OVERHEAD_BYTES = 16
+"""Wire bytes per poll besides the FIFO data (status and temperature reads, addresses)."""
+
+
+def ds4_decimation_code(factor: int) -> int:
+    for code, f in DECIMATION.items():
+        if f == factor:
+            return code
+    raise ValueError(f"decimation factor {factor} is not one of 1, 2, 3, 4, 8, 16, 32")
+
+
+@dataclass
+class StreamChunk:
+    """Samples decoded by one poll.
+
+    Attributes:
+        index: int64 (n,) sample index (nominal ODR periods since the first sample).
+        raw: int16 (n, 6) gx gy gz ax ay az counts.
+        t_s: float64 (n,) host time of each sample, s (driver's ``monotonic`` scale).
+        temp_c: temperature read at this poll, degC.
+        gaps: (index of the sample after the hole, samples lost, reason) of this chunk.
+    """
+
+    index: np.ndarray
+    raw: np.ndarray
+    t_s: np.ndarray
+    temp_c: float
+    gaps: list[tuple[int, int, str]] = field(default_factory=list)
+
+
+def bus_need_bytes_per_s(odr_hz: float, ts_decimation: int | None) -> float:
+    """FIFO data rate of gyro+accel (12 bytes per slot) plus a 6-byte timestamp set every
+    ``ts_decimation`` slots, B/s."""
+    per_slot = 12.0 + (6.0 / ts_decimation if ts_decimation else 0.0)
+    return odr_hz * per_slot
+
+
+class FifoStream:
+    """Continuous FIFO streaming of one :class:`LSM6DS`.
+
+    Args:
+        dev: the driver (configured or not: :meth:`start` configures it).
+        cfg: sensor configuration.
+        watermark_s: data the stream lets accumulate between polls, s (capped at 40 %
+            of the FIFO).
+        bus_hz: I2C speed for the budget check (None = no check).
+        on_overbudget: ``refuse`` (raise :class:`BusBudgetError`) or ``degrade`` (use
+            the highest ODR that fits and say so in :attr:`degraded_from_hz`).
+        verify_every_s: period of the configuration read-back, s.
+        max_fill: largest watermark as a share of the FIFO depth.
+    """
+
+    def __init__(
+        self,
+        dev: LSM6DS,
+        cfg: ImuConfig,
+        *,
+        watermark_s: float = 0.1,
+        bus_hz: float | None = None,
+        on_overbudget: str = "refuse",
+        verify_every_s: float = 1.0,
+        max_fill: float = 0.4,
+    ) -> None:
+        if on_overbudget not in ("refuse", "degrade"):
+            raise ValueError(f"on_overbudget={on_overbudget!r} must be refuse or degrade")
+        self.dev = dev
+        self.bus_hz = bus_hz
+        self.on_overbudget = on_overbudget
+        self.verify_every_s = verify_every_s
+        self.degraded_from_hz: float | None = None
+        self.cfg, self.ts_decimation = self._plan(cfg)
+        self.odr_hz = self.cfg.odr_hz
+        slot_words = 6
+        self.pattern_slots = self.ts_decimation or 1
+        self.pattern_words = self.pattern_slots * slot_words + (3 if self.ts_decimation else 0)
+        wm_slots = max(1, round(watermark_s * self.odr_hz))
+        wm_words = min(wm_slots * slot_words, int(max_fill * FIFO_DEPTH_WORDS))
+        wm_patterns = max(1, wm_words // self.pattern_words)
+        self.watermark_words = wm_patterns * self.pattern_words
+        self._layout()
+        self.counters: dict[str, int] = {
+            "samples": 0,
+            "gaps": 0,
+            "lost_samples": 0,
+            "overruns": 0,
+            "chip_resets": 0,
+            "realigns": 0,
+            "fifo_bytes": 0,
+        }
+        self.started = False
+        self._next_index: int | None = None  # index of the next slot expected
+        self._last_ticks: int | None = None  # unwrapped ticks of the last pattern start
+        self._last_raw_ticks = 0
+        self._epoch_t_ref = 0.0
+        self._tick_s_est = TICK_S
+        self._drift_ref: tuple[float, float] | None = None
+        self._drift_cur: tuple[float, float] | None = None
+        self._drift_sum: tuple[float, float] = (0.0, 0.0)
+        self._last_sample_host_t: float | None = None
+        self._pending_gap_reason: str | None = None
+        self._last_verify_t = 0.0
+        self._last_data_t = 0.0
+
+    # ---------------------------------------------------------------- planning
+    def _plan(self, cfg: ImuConfig) -> tuple[ImuConfig, int | None]:
+        if not cfg.timestamp:
+            ts_choices: list[int | None] = [None]
+        else:
+            ts_choices = [8, 16, 32]
+        if self.bus_hz is None:
+            return cfg, (
+                ts_choices[0] if ts_choices[0] is None or cfg.odr_hz <= 1660 else ts_choices[-1]
+            )
+        limit = self.bus_hz / BITS_PER_BYTE * BUDGET_FRACTION
+        for d in ts_choices:
+            if bus_need_bytes_per_s(cfg.odr_hz, d) <= limit:
+                return cfg, d
+        need = bus_need_bytes_per_s(cfg.odr_hz, ts_choices[-1])
+        fitting = [
+            f
+            for f in sorted(ODR_HZ.values())
+            if f > 2 and f <= cfg.odr_hz and bus_need_bytes_per_s(f, ts_choices[-1]) <= limit
+        ]
+        best = fitting[-1] if fitting else None
+        msg = (
+            f"{self.dev.chip} at {cfg.odr_hz:g} Hz (gyro + accel, 12 bytes per sample set"
+            f"{' + timestamp' if cfg.timestamp else ''}) needs {need:,.0f} B/s of FIFO data "
+            f"but a {self.bus_hz / 1e3:g} kHz I2C bus carries at most "
+            f"{self.bus_hz / BITS_PER_BYTE:,.0f} B/s (9 bit-times per byte; plan limit "
+            f"{BUDGET_FRACTION:.0%}): the highest ODR that fits is "
+            f"{best:g} Hz"
+            if best
+            else "no ODR fits"
+        )
+        if self.on_overbudget == "refuse" or best is None:
+            raise BusBudgetError(
+                msg + "; lower odr_hz, raise the bus speed, or set on_overbudget=degrade"
+            )
+        self.degraded_from_hz = cfg.odr_hz
+        new = ImuConfig(**{**cfg.__dict__, "odr_hz": best})
+        return self._plan(new)
+
+    def _layout(self) -> None:
+        d = self.pattern_slots
+        gyro = np.empty((d, 3), dtype=np.int64)
+        accel = np.empty((d, 3), dtype=np.int64)
+        offset = 0
+        for s in range(d):
+            gyro[s] = offset + np.arange(3)
+            accel[s] = offset + 3 + np.arange(3)
+            offset += 6
+            if s == 0 and self.ts_decimation:
+                self._ts_offset = offset
+                offset += 3
+        self._gyro_idx = gyro
+        self._accel_idx = accel
+        self.ticks_per_slot = 1.0 / (self.odr_hz * TICK_S)
+
+    @property
+    def bytes_per_s(self) -> float:
+        return bus_need_bytes_per_s(self.odr_hz, self.ts_decimation)
+
+    # ---------------------------------------------------------------- control
+    def fifo_writes(self) -> list[tuple[int, int]]:
+        """The exact (register, value) writes of the FIFO set-up, before the timestamp
+        reset and the switch to continuous mode."""
+        m = self.dev.map
+        fth = self.watermark_words
+        fth_h_mask = m.field("FTH_H").mask
+        ctrl2 = (fth >> 8) & fth_h_mask
+        if self.ts_decimation:
+            ctrl2 |= m.field("TIMER_PEDO_FIFO_EN").mask
+        ds4 = ds4_decimation_code(self.ts_decimation) if self.ts_decimation else 0
+        return [
+            (m.addr("FIFO_CTRL5"), FIFO_MODES["bypass"]),  # flush (§9.3)
+            (m.addr("FIFO_CTRL1"), fth & 0xFF),
+            (m.addr("FIFO_CTRL2"), ctrl2),
+            (m.addr("FIFO_CTRL3"), (1 << 3) | 1),  # gyro and accel, no decimation (§9.4)
+            (m.addr("FIFO_CTRL4"), ds4 << 3),
+        ]
+
+    def continuous_value(self) -> int:
+        code = self.dev.map.odr_code(self.odr_hz, "fifo")
+        return (code << 3) | FIFO_MODES["continuous"]
+
+    def start(self, *, reset: bool = True) -> None:
+        """Probe, (reset,) configure and start the FIFO in continuous mode."""
+        self.dev.probe()
+        if reset:
+            self.dev.reset()
+        self.dev.configure(self.cfg)
+        self._start_fifo(new_epoch=True)
+        self.started = True
+
+    def _start_fifo(self, new_epoch: bool) -> None:
+        for reg, value in self.fifo_writes():
+            self.dev.write_reg(reg, value)
+        if new_epoch and self.ts_decimation:
+            self._epoch_t_ref = self.dev.reset_timestamp()
+            self._last_ticks = None
+            self._drift_ref = None
+            if self._drift_cur is not None:  # bank the finished epoch's baseline
+                self._drift_sum = (
+                    self._drift_sum[0] + self._drift_cur[0],
+                    self._drift_sum[1] + self._drift_cur[1],
+                )
+                self._drift_cur = None
+        self.dev.write_reg("FIFO_CTRL5", self.continuous_value())
+        now = self.dev.monotonic()
+        self._last_verify_t = now
+        self._last_data_t = now
+
+    def _restart_after_overrun(self) -> None:
+        d = self.dev
+        d.write_reg("FIFO_CTRL5", FIFO_MODES["bypass"])
+        d.write_reg("FIFO_CTRL5", self.continuous_value())
+        self._last_data_t = d.monotonic()
+
+    def _recover_chip_reset(self) -> None:
+        self.counters["chip_resets"] += 1
+        self._pending_gap_reason = "chip reset"
+        self.dev.probe()
+        self.dev.configure(self.cfg)
+        self._start_fifo(new_epoch=True)
+
+    def stop(self) -> None:
+        if self.started:
+            with contextlib.suppress(LSM6DSError):
+                self.dev.write_reg("FIFO_CTRL5", FIFO_MODES["bypass"])
+            self.started = False
+
+    @property
+    def words_per_s(self) -> float:
+        return self.odr_hz * self.pattern_words / self.pattern_slots
+
+    def time_to_watermark_s(self, level_words: int) -> float:
+        """Host seconds until the FIFO holds the watermark, from ``level_words`` now."""
+        return max(0.0, (self.watermark_words - level_words) / self.words_per_s)
+
+    # ---------------------------------------------------------------- polling
+    def poll(self) -> tuple[StreamChunk | None, int]:
+        """One status read and (if whole patterns are there) one burst.
+
+        Returns (chunk or None, FIFO level in words left after the read).
+        """
+        if not self.started:
+            raise LSM6DSError("FifoStream.poll before start()")
+        dev = self.dev
+        now = dev.monotonic()
+        verify_every = max(self.verify_every_s, 2.0 * self.time_to_watermark_s(0))
+        if now - self._last_verify_t >= verify_every:
+            self._last_verify_t = now
+            if not dev.config_intact():
+                self._recover_chip_reset()
+                return None, 0
+        status = dev.read_block("FIFO_STATUS1", 4)
+        t_status = dev.monotonic()
+        diff_mask = (1 << dev.map.fifo_diff_bits) - 1
+        level = (status[0] | (status[1] << 8)) & diff_mask
+        if status[1] & 0x10:
+            level = 0
+        pattern_pos = status[2] | ((status[3] & 0x03) << 8)
+        if status[1] & 0x40:  # OVER_RUN (§9.1)
+            self.counters["overruns"] += 1
+            self._pending_gap_reason = "fifo overrun"
+            self._restart_after_overrun()
+            return None, 0
+        if level == 0:
+            due = 2.0 * self.watermark_words / (6 * self.odr_hz) + 0.05
+            if t_status - self._last_data_t > due and not dev.config_intact():
+                self._recover_chip_reset()
+            return None, 0
+        if pattern_pos != 0:  # realign to the pattern start (§9.4)
+            skip = self.pattern_words - pattern_pos
+            if skip > level:
+                return None, level
+            dev.read_block("FIFO_DATA_OUT_L", 2 * skip)
+            self.counters["realigns"] += 1
+            self._pending_gap_reason = self._pending_gap_reason or "fifo realign"
+            level -= skip
+        n_patterns = min(level // self.pattern_words, MAX_BURST_BYTES // (2 * self.pattern_words))
+        if n_patterns == 0:
+            return None, level
+        n_words = n_patterns * self.pattern_words
+        data = dev.read_block("FIFO_DATA_OUT_L", 2 * n_words)
+        temp_c = dev.read_temperature_c()
+        self._last_data_t = t_status
+        self.counters["fifo_bytes"] += 2 * n_words
+        words = np.frombuffer(data, dtype="<i2").reshape(n_patterns, self.pattern_words)
+        # slots produced after the newest one read, up to the status read (+ half a slot)
+        newest_lag = (level - n_words) * self.pattern_slots / self.pattern_words + 0.5
+        chunk = self._decode(words, t_status - newest_lag / self.odr_hz, temp_c)
+        # words that arrived while this poll read the bus count too (else the next sleep
+        # overshoots and, near the bus limit, the FIFO overruns)
+        arrived = (dev.monotonic() - t_status) * self.words_per_s
+        return chunk, level - n_words + int(arrived)
+
+    def _decode(self, words: np.ndarray, t_newest: float, temp_c: float) -> StreamChunk:
+        n_pat, d = len(words), self.pattern_slots
+        gyro = words[:, self._gyro_idx]  # (P, d, 3)
+        accel = words[:, self._accel_idx]
+        raw = np.concatenate([gyro, accel], axis=2).reshape(n_pat * d, 6).astype(np.int16)
+        gaps: list[tuple[int, int, str]] = []
+        if self.ts_decimation:
+            ts_w = words[:, self._ts_offset : self._ts_offset + 2].astype(np.int64) & 0xFFFF
+            raw_ticks = ((ts_w[:, 0] & 0xFF) << 8) | ((ts_w[:, 0] >> 8) << 16) | (ts_w[:, 1] >> 8)
+            start_slots, ticks = self._pattern_start_slots(raw_ticks, t_newest, n_pat, gaps)
+        else:
+            start_slots = self._pattern_start_slots_host(n_pat, t_newest, gaps)
+        index = (start_slots[:, None] + np.arange(d)).reshape(-1)
+        self._next_index = int(index[-1]) + 1
+        if self.ts_decimation:
+            # pattern-start ticks are measured; the other slots at nominal spacing
+            slot_ticks = ticks[:, None] + np.arange(d) * self.ticks_per_slot
+            t_s = self._epoch_t_ref + slot_ticks.reshape(-1) * self._tick_s_est
+        else:
+            t_s = t_newest + (index - index[-1]) / self.odr_hz
+        self._last_sample_host_t = float(t_s[-1])
+        n_lost = sum(g[1] for g in gaps)
+        self.counters["samples"] += len(index)
+        self.counters["gaps"] += len(gaps)
+        self.counters["lost_samples"] += n_lost
+        return StreamChunk(
+            index=index.astype(np.int64), raw=raw, t_s=np.asarray(t_s), temp_c=temp_c, gaps=gaps
+        )
+
+    def _pattern_start_slots(
+        self, raw_ticks: np.ndarray, t_newest: float, n_pat: int, gaps: list[tuple[int, int, str]]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Slot index and unwrapped ticks of each pattern start (timestamps mod 2^24)."""
+        d = self.pattern_slots
+        prev_raw = self._last_raw_ticks if self._last_ticks is not None else int(raw_ticks[0])
+        deltas = np.diff(np.concatenate([[prev_raw], raw_ticks])) % TICKS_WRAP
+        base = self._last_ticks if self._last_ticks is not None else 0
+        ticks = base + np.cumsum(deltas)
+        if self._last_ticks is None:  # new epoch: pattern 0 ticks = its raw value
+            ticks = ticks - ticks[0] + int(raw_ticks[0])
+        # drift: host seconds per tick over all epochs' baselines (each >= 2 s counts)
+        newest_ticks = int(ticks[-1]) + (d - 1) * self.ticks_per_slot
+        if self._drift_ref is None:
+            self._drift_ref = (t_newest, newest_ticks)
+        else:
+            t0, k0 = self._drift_ref
+            span_t, span_k = t_newest - t0, newest_ticks - k0
+            tot_t, tot_k = self._drift_sum[0] + span_t, self._drift_sum[1] + span_k
+            if span_k > 2.0 / TICK_S:
+                self._drift_cur = (span_t, span_k)
+            if tot_k > 5.0 / TICK_S:
+                est = tot_t / tot_k
+                if abs(est / TICK_S - 1.0) < 0.1:
+                    self._tick_s_est = est
+        slots_rel = np.rint((ticks - ticks[0]) / self.ticks_per_slot).astype(np.int64)
+        if self._next_index is None:
+            first = 0
+        elif self._last_ticks is not None:
+            first = (
+                self._next_index
+                - d
+                + round((int(ticks[0]) - self._last_ticks) / self.ticks_per_slot)
+            )
+        else:  # new epoch after a chip reset: size the gap from host time
+            t_first = self._epoch_t_ref + int(ticks[0]) * self._tick_s_est
+            assert self._last_sample_host_t is not None
+            period = self.ticks_per_slot * self._tick_s_est
+            first = self._next_index - 1 + round((t_first - self._last_sample_host_t) / period)
+        starts = first + slots_rel
+        self._last_ticks = int(ticks[-1])
+        self._last_raw_ticks = int(raw_ticks[-1])
+        self._record_gaps(starts, d, gaps)
+        return starts, ticks
+
+    def _pattern_start_slots_host(
+        self, n_pat: int, t_newest: float, gaps: list[tuple[int, int, str]]
+    ) -> np.ndarray:
+        d = self.pattern_slots
+        if self._next_index is None:
+            first = 0
+        elif self._pending_gap_reason is None:
+            first = self._next_index
+        else:  # restart without timestamps: size the gap from host time (±1 sample)
+            assert self._last_sample_host_t is not None
+            t_first = t_newest - (n_pat * d - 1) / self.odr_hz
+            first = max(
+                self._next_index,
+                self._next_index - 1 + round((t_first - self._last_sample_host_t) * self.odr_hz),
+            )
+        starts = first + d * np.arange(n_pat, dtype=np.int64)
+        self._record_gaps(starts, d, gaps)
+        return starts
+
+    def _record_gaps(self, starts: np.ndarray, d: int, gaps: list[tuple[int, int, str]]) -> None:
+        expected = np.concatenate(
+            [
+                [self._next_index if self._next_index is not None else int(starts[0])],
+                starts[:-1] + d,
+            ]
+        )
+        jumps = starts - expected
+        if np.any(jumps < 0):
+            raise LSM6DSError(
+                f"{self.dev.chip}: FIFO timestamps went backwards (slot {int(starts[0])}); "
+                "the stream cannot order these samples"
+            )
+        reason = self._pending_gap_reason or "samples lost"
+        for k in np.nonzero(jumps > 0)[0]:
+            gaps.append((int(starts[k]), int(jumps[k]), reason))
+        self._pending_gap_reason = None
+
+
+__all__ = ["BusBudgetError", "DriverIOError", "FifoStream", "StreamChunk"]

@@ -1,0 +1,549 @@
+"""Register-level model of the LSM6DS3H, LSM6DSM and LSM6DSL (reference ``lsm6ds-registers.md``).
+
+A :class:`SimChip` is a device on :class:`lsm6ds_sim.i2c.SimI2CBus`: the bus calls
+:meth:`SimChip.read` and :meth:`SimChip.write` for each transaction. Before serving an
+access the chip catches up with the simulated clock: it produces every sample due since
+its last access, in vectorised blocks (physics, self-test deflection, quantisation and
+saturation, output registers, FIFO words), so a driver reading the FIFO once every few
+seconds of virtual time costs a handful of numpy calls.
+
+Sample timing. The chip runs off one oscillator whose frequency error is ``crystal_ppm``
+(an LSM6DSM measured at 107.9 Hz for 104 Hz nominal is +37 500 ppm). Output sample ``k``
+of the fastest enabled sensor (the *base* ODR ``f``) is produced at ``k / (f (1 + ppm))``
+seconds; the grid is free-running (it survives reconfiguration and resets, as the chip's
+oscillator does). FIFO slot ``j`` at FIFO ODR ``f_fifo`` is written at
+``j / (f_fifo (1 + ppm))`` with the latest sample of each sensor; the timestamp counter
+ticks at 40 kHz (1 + ppm) (25 us, or 6.4 ms with TIMER_HR = 0, §7-8).
+
+What is modelled (reference section in brackets): register file with per-chip reset
+values and writable bits, reserved bits read 0 [§2, §3, §3.13]; WHO_AM_I [§1]; SW_RESET
+(restores reset values, bit reads 1 for 50 us) and BOOT (bit reads 1 for 15 ms) [§1,
+§3.3]; IF_INC auto-increment and ROUNDING wrap [§3.3, §3.5, §5]; BDU latching of L/H
+pairs [§3.3, §13]; ODR, full scale (sensitivities), power modes [§3.1-3.2, §4]; STATUS_REG
+XLDA/GDA/TDA set on new data and cleared by reading the outputs [§3.12]; temperature with
+each chip's scale [§6]; timestamp (enable per chip, both resolutions, 0xAA reset, FIFO
+byte order) [§7-8]; FIFO modes, FIFO ODR, decimation, pattern order gyro-accel-DS3-DS4,
+threshold, overrun, FIFO_STATUS1-4, FIFO_DATA_OUT wrap [§9]; self-test (CTRL5_C) [§3.5];
+the chip differences of [§10] through :mod:`lsm6ds.registers`.
+
+Not modelled: interrupts pins, embedded functions (pedometer, tilt, tap), sensor hub
+(DS3 words read 0), OIS/aux SPI, user offsets, filters other than what the physics
+applies, ONLY_HIGH_DATA.
+
+Test-only controls carry a ``sim_`` prefix.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any, Protocol
+
+import numpy as np
+from lsm6ds.registers import (
+    ACCEL_FS,
+    DECIMATION,
+    GYRO_FS,
+    ODR_HZ,
+    ChipMap,
+    chip_map,
+)
+
+from lsm6ds_sim.clock import SimClock
+from lsm6ds_sim.fifo import Fifo
+
+TIMESTAMP_HZ = 40_000.0
+"""Timestamp tick rate at TIMER_HR = 1 (25 us/LSB, §7-8)."""
+
+SW_RESET_BUSY_S = 50e-6
+BOOT_BUSY_S = 15e-3
+MAX_BLOCK = 65_536
+"""Samples generated per physics call at most (bounds memory on long sleeps)."""
+
+_OUT_FIRST = 0x20
+_OUT_LAST = 0x2D
+_FIFO_L = 0x3E
+_FIFO_H = 0x3F
+
+
+class Physics(Protocol):
+    """What the chip needs from :class:`lsm6ds_sim.physics.SensorPhysics`."""
+
+    def generate(self, n: int, dt_s: float) -> Any: ...
+
+
+@dataclass
+class _QuietSamples:
+    gyro_dps: np.ndarray
+    accel_g: np.ndarray
+    temp_c: np.ndarray
+
+
+class QuietPhysics:
+    """Fallback used only if :mod:`lsm6ds_sim.physics` is missing: a noiseless sensor at
+    rest, gravity +1 g on Z, 25 degC (the contract's ``SensorPhysics()`` default)."""
+
+    def generate(self, n: int, dt_s: float) -> _QuietSamples:
+        accel = np.zeros((n, 3))
+        accel[:, 2] = 1.0
+        return _QuietSamples(np.zeros((n, 3)), accel, np.full(n, 25.0))
+
+
+def default_physics(seed: int = 0) -> Physics:
+    """``SensorPhysics(seed=seed)`` (engineer D) if available, else :class:`QuietPhysics`."""
+    try:
+        from lsm6ds_sim.physics import SensorPhysics
+    except ImportError:
+        return QuietPhysics()
+    return SensorPhysics(seed=seed)
+
+
+@dataclass
+class _Config:
+    """Sample-production settings decoded from the registers."""
+
+    odr_g: float = 0.0
+    odr_xl: float = 0.0
+    base: float = 0.0
+    gyro_sens: float = GYRO_FS[0][1]
+    accel_sens: float = ACCEL_FS[0][1]
+    st_g: int = 0  # -1, 0, +1
+    st_xl: int = 0
+    fifo_odr: float = 0.0
+    dec: tuple[int, int, int, int] = (0, 0, 0, 0)  # gyro, accel, ds3, ds4 factors
+    ds4_timestamp: bool = False
+    ds4_temp: bool = False
+    timer_en: bool = False
+    timer_hr: bool = False
+    pattern_slots: int = 1
+    pos_table: np.ndarray = field(default_factory=lambda: np.zeros((1, 4), dtype=np.int64))
+    slot_offset: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
+    pattern_words: int = 0
+    fifo_ratio: Fraction = Fraction(1)  # f_fifo / f_base, exact
+
+
+class SimChip:
+    """One simulated LSM6DS3H / LSM6DSM / LSM6DSL.
+
+    Args:
+        chip: ``lsm6ds3h``, ``lsm6dsm`` or ``lsm6dsl``.
+        clock: the shared simulated clock.
+        physics: what the sensing element outputs (``generate(n, dt_s)``); default
+            :func:`default_physics`.
+        crystal_ppm: oscillator frequency error, ppm (actual ODR = nominal (1 + ppm 1e-6)).
+        sim_counting: test signal: raw gyro X of base sample ``k`` is ``k mod 2^16`` (as
+            int16), so a test can check every delivered sample's identity.
+    """
+
+    def __init__(
+        self,
+        chip: str = "lsm6dsl",
+        clock: SimClock | None = None,
+        physics: Physics | None = None,
+        *,
+        crystal_ppm: float = 0.0,
+        seed: int = 0,
+        sim_counting: bool = False,
+    ) -> None:
+        self.map: ChipMap = chip_map(chip)
+        self.name = self.map.name
+        self.clock = clock if clock is not None else SimClock()
+        self.physics: Physics = physics if physics is not None else default_physics(seed)
+        self.crystal_ppm = float(crystal_ppm)
+        self.fifo = Fifo()
+        self.sim_counting = sim_counting
+        self.sim_stuck_output = False
+        self.sim_self_test_gyro_lsb = np.array([5700.0, 5700.0, 5700.0])
+        """Gyro self-test deflection, LSB (5700 LSB = 50 dps at 250 dps, 399 dps at 2000)."""
+        self.sim_self_test_accel_g = np.array([0.5, 0.5, 0.5])
+        """Accelerometer self-test deflection, g (datasheet range 0.09-1.7 g)."""
+        self.sim_stats: dict[str, int] = {
+            "reserved_writes": 0,
+            "readonly_writes": 0,
+            "undefined_accesses": 0,
+            "resets": 0,
+            "samples": 0,
+            "fifo_underflow_words": 0,
+        }
+        self.sim_reserved_log: list[tuple[int, int]] = []
+        self._temp_glitch_c = 0.0
+        self._a = {name: reg.address for name, reg in self.map.registers.items()}
+        self._power_on()
+
+    # ---------------------------------------------------------------- state / reset
+    @property
+    def _f_scale(self) -> float:
+        return 1.0 + self.crystal_ppm * 1e-6
+
+    def _power_on(self) -> None:
+        now = self.clock.now()
+        self.regs = bytearray(128)
+        for addr, value in self.map.reset_values.items():
+            self.regs[addr] = value
+        self._out = bytearray(14)
+        self._held = np.zeros(7, dtype=np.int64)  # temp, gx gy gz, ax ay az
+        self._status = 0
+        self._bdu_locked: set[int] = set()
+        self._half: int | None = None
+        self.fifo.set_mode(0)
+        self.fifo.threshold_words = 0
+        self._t_done = now
+        self._sw_reset_until = -math.inf
+        self._boot_until = -math.inf
+        self._ts_origin = self._ticks_at(now)
+        self._cfg = _Config()
+        self._k_last = 0
+        self._j_last = 0
+        self._slot0 = 0
+        self._reconfigure(now)
+
+    def _ticks_at(self, t_s: float) -> int:
+        return math.floor(t_s * TIMESTAMP_HZ * self._f_scale)
+
+    def sim_reset(self) -> None:
+        """Spontaneous reset: registers back to reset values, FIFO and outputs cleared."""
+        self.sim_advance_to(self.clock.now())
+        self.sim_stats["resets"] += 1
+        self._power_on()
+
+    def sim_force_overrun(self) -> None:
+        """Lose the FIFO's content as an overrun would, setting OVER_RUN."""
+        self.fifo.drop_all()
+
+    def sim_temp_glitch(self, delta_c: float) -> None:
+        """Add ``delta_c`` to the temperature output of the next sample only."""
+        self._temp_glitch_c += delta_c
+
+    def sim_trigger_fifo(self) -> None:
+        """The trigger event of the continuous-to-FIFO and bypass-to-continuous modes."""
+        self.fifo.trigger()
+
+    def sim_advance_to(self, t_s: float) -> None:
+        """Produce every sample due up to time ``t_s``."""
+        self._advance(t_s)
+
+    # ---------------------------------------------------------------- configuration
+    def _bits(self, field_name: str) -> int:
+        reg, mask = self.map.field_addr_mask(field_name)
+        return (self.regs[reg] & mask) >> ((mask & -mask).bit_length() - 1)
+
+    def _reconfigure(self, now: float) -> None:
+        old = self._cfg
+        c = _Config()
+        odr_g_code = self._bits("ODR_G")
+        odr_xl_code = self._bits("ODR_XL")
+        c.odr_g = ODR_HZ.get(odr_g_code, 0.0) if odr_g_code in self.map.gyro_odr_codes else 0.0
+        c.odr_xl = ODR_HZ.get(odr_xl_code, 0.0) if odr_xl_code in self.map.accel_odr_codes else 0.0
+        c.base = max(c.odr_g, c.odr_xl)
+        c.gyro_sens = GYRO_FS.get(self._bits("FS_G"), GYRO_FS[0])[1]
+        c.accel_sens = ACCEL_FS[self._bits("FS_XL")][1]
+        st_g = self._bits("ST_G")
+        st_xl = self._bits("ST_XL")
+        c.st_g = {0: 0, 1: 1, 3: -1}.get(st_g, 0)
+        c.st_xl = {0: 0, 1: 1, 2: -1}.get(st_xl, 0)
+        fifo_code = self._bits("ODR_FIFO")
+        c.fifo_odr = ODR_HZ.get(fifo_code, 0.0) if fifo_code <= 10 else 0.0
+        c.ds4_timestamp = bool(self._bits("TIMER_PEDO_FIFO_EN"))
+        c.ds4_temp = bool(self._bits("FIFO_TEMP_EN")) and not c.ds4_timestamp
+        c.dec = (
+            DECIMATION[self._bits("DEC_FIFO_GYRO")],
+            DECIMATION[self._bits("DEC_FIFO_XL")],
+            DECIMATION[self._bits("DEC_DS3_FIFO")],
+            DECIMATION[self._bits("DEC_DS4_FIFO")] if (c.ds4_timestamp or c.ds4_temp) else 0,
+        )
+        c.timer_en = bool(self._bits("TIMER_EN"))
+        c.timer_hr = bool(self._bits("TIMER_HR"))
+        self._build_pattern(c)
+        if c.base and c.fifo_odr:
+            c.fifo_ratio = Fraction(round(c.fifo_odr * 10)) / Fraction(round(c.base * 10))
+        # FIFO threshold, 11 or 12 bits (§9.1)
+        self.fifo.threshold_words = self.regs[self._a["FIFO_CTRL1"]] | (self._bits("FTH_H") << 8)
+        self.fifo.stop_on_fth = bool(self._bits("STOP_ON_FTH"))
+        mode = self._bits("FIFO_MODE")
+        fifo_restart = (
+            mode != self.fifo.mode
+            or c.fifo_odr != old.fifo_odr
+            or c.dec != old.dec
+            or c.base != old.base
+        )
+        if mode != self.fifo.mode:
+            self.fifo.set_mode(mode)
+        if c.timer_en and not old.timer_en:
+            self._ts_origin = self._ticks_at(now)
+        # the free-running grids: last produced sample / slot at or before now
+        if c.base != old.base:
+            self._k_last = math.floor(now * c.base * self._f_scale) if c.base else 0
+        if c.fifo_odr != old.fifo_odr:
+            self._j_last = math.floor(now * c.fifo_odr * self._f_scale) if c.fifo_odr else 0
+        if fifo_restart:
+            self._slot0 = self._j_last + 1
+            self.fifo.next_pattern_pos = 0
+        self._cfg = c
+
+    @staticmethod
+    def _build_pattern(c: _Config) -> None:
+        """Pattern layout (§9.4): slot ``s`` holds data set ``i`` (gyro, accel, DS3, DS4)
+        when its decimation factor ``d_i`` is non-zero and ``s % d_i == 0``; the pattern
+        repeats after lcm(d_i) slots."""
+        factors = [d for d in c.dec if d]
+        slots = math.lcm(*factors) if factors else 1
+        present = np.zeros((slots, 4), dtype=bool)
+        for i, d in enumerate(c.dec):
+            if d:
+                present[::d, i] = True
+        counts = present.sum(axis=1)
+        slot_offset = np.concatenate([[0], np.cumsum(counts * 3)[:-1]]).astype(np.int64)
+        rank = np.cumsum(present, axis=1) - 1
+        pos_table = np.where(present, slot_offset[:, None] + 3 * rank, -1)
+        c.pattern_slots = slots
+        c.pos_table = pos_table
+        c.slot_offset = slot_offset
+        c.pattern_words = int(counts.sum() * 3)
+
+    # ---------------------------------------------------------------- sample production
+    def _advance(self, now: float) -> None:
+        if now <= self._t_done:
+            return
+        c = self._cfg
+        self._t_done = now
+        if c.base <= 0:
+            return
+        k_due = math.floor(now * c.base * self._f_scale)
+        while self._k_last < k_due:
+            n = min(MAX_BLOCK, k_due - self._k_last)
+            self._produce(self._k_last + 1, self._k_last + n)
+            self._k_last += n
+
+    def _produce(self, k0: int, k1: int) -> None:
+        """Produce base samples ``k0..k1`` (inclusive)."""
+        c = self._cfg
+        n = k1 - k0 + 1
+        dt = 1.0 / (c.base * self._f_scale)
+        if self.sim_stuck_output:
+            rows = np.broadcast_to(self._held, (n, 7)).copy()
+        else:
+            true = self.physics.generate(n, dt)
+            f = np.empty((n, 7))
+            f[:, 0] = true.temp_c
+            f[:, 1:4] = true.gyro_dps
+            f[:, 4:7] = true.accel_g
+            f[:, 0] -= self.map.temp_zero_c
+            f[:, 0] *= self.map.temp_lsb_per_c
+            if self._temp_glitch_c:
+                f[0, 0] += self._temp_glitch_c * self.map.temp_lsb_per_c
+                self._temp_glitch_c = 0.0
+            f[:, 1:4] *= 1.0 / c.gyro_sens
+            if c.st_g:
+                f[:, 1:4] += c.st_g * self.sim_self_test_gyro_lsb
+            if c.st_xl:
+                f[:, 4:7] += c.st_xl * self.sim_self_test_accel_g
+            f[:, 4:7] *= 1.0 / c.accel_sens
+            np.rint(f, out=f)
+            np.clip(f, -32768, 32767, out=f)  # saturation at full scale (int16)
+            rows = f.astype(np.int64)
+            if self.sim_counting:
+                rows[:, 1] = (np.arange(k0, k1 + 1) & 0xFFFF).astype(np.uint16).view(np.int16)
+            for cols, odr in ((slice(1, 4), c.odr_g), (slice(4, 7), c.odr_xl)):
+                ratio = round(c.base / odr) if odr else 0
+                if ratio == 1:
+                    continue
+                k = np.arange(k0, k1 + 1)
+                fresh = (k % ratio == 0) if ratio else np.zeros(n, dtype=bool)
+                idx = np.maximum.accumulate(np.where(fresh, np.arange(n), -1))
+                held = rows[:, cols].copy()
+                rows[:, cols] = np.where(
+                    idx[:, None] >= 0, held[np.maximum(idx, 0)], self._held[cols]
+                )
+        prev = self._held.copy()
+        self._held = rows[-1].copy()
+        self.sim_stats["samples"] += n
+        self._update_outputs(rows[-1])
+        if c.fifo_odr > 0 and self.fifo.accepting:
+            self._fill_fifo(k0, k1, np.vstack([prev[None, :], rows]))
+
+    def _update_outputs(self, row: np.ndarray) -> None:
+        c = self._cfg
+        data = row.astype(np.int16).tobytes()  # temp, gx, gy, gz, ax, ay, az (LE)
+        bdu = bool(self._bits("BDU"))
+        for pair in range(7):
+            if bdu and pair in self._bdu_locked:
+                continue
+            self._out[2 * pair : 2 * pair + 2] = data[2 * pair : 2 * pair + 2]
+        self._status |= 0x04 | (0x02 if c.odr_g else 0) | (0x01 if c.odr_xl else 0)
+
+    def _fill_fifo(self, k0: int, k1: int, src: np.ndarray) -> None:
+        """Write FIFO slots due between base samples ``k0 - 1`` (excl.) and ``k1``;
+        ``src[0]`` is the sample before ``k0``, ``src[i]`` sample ``k0 - 1 + i``."""
+        c = self._cfg
+        r = c.fifo_ratio
+        j_due = math.floor(k1 * r)
+        j_from = max(self._j_last + 1, self._slot0)
+        self._j_last = max(self._j_last, j_due)
+        if j_due < j_from:
+            return
+        j = np.arange(j_from, j_due + 1, dtype=np.int64)
+        kb = (j * r.denominator) // r.numerator  # latest base sample at slot time
+        idx = np.clip(kb - (k0 - 1), 0, len(src) - 1)
+        m = len(j)
+        sets = np.zeros((m, 4, 3), dtype=np.int64)
+        sets[:, 0] = src[idx, 1:4]
+        sets[:, 1] = src[idx, 4:7]
+        if c.ds4_timestamp:
+            ticks = (j * round(TIMESTAMP_HZ * 10)) // round(c.fifo_odr * 10) - self._ts_origin
+            if not c.timer_en:
+                ticks = np.zeros_like(ticks)
+            if not c.timer_hr:
+                ticks = ticks // 256
+            ticks &= 0xFFFFFF
+            sets[:, 3, 0] = ((ticks >> 8) & 0xFF) | (((ticks >> 16) & 0xFF) << 8)
+            sets[:, 3, 1] = (ticks & 0xFF) << 8
+        elif c.ds4_temp:
+            sets[:, 3, 0] = src[idx, 0]
+        slot = (j - self._slot0) % c.pattern_slots
+        present = c.pos_table[slot] >= 0
+        words = sets[present].reshape(-1).astype(np.uint16).view(np.int16)
+        start = c.pos_table[slot][present]
+        pos = (start[:, None] + np.arange(3)).reshape(-1).astype(np.uint16)
+        self.fifo.push(words, pos)
+        self.fifo.next_pattern_pos = int(c.slot_offset[(j_due + 1 - self._slot0) % c.pattern_slots])
+
+    # ---------------------------------------------------------------- register access
+    def _ctrl3(self) -> int:
+        now = self.clock.now()
+        v = self.regs[self._a["CTRL3_C"]] & ~0x81
+        if now < self._sw_reset_until:
+            v |= 0x01
+        if now < self._boot_until:
+            v |= 0x80
+        return v
+
+    def _timestamp_now(self) -> int:
+        if not self._cfg.timer_en:
+            return 0
+        ticks = self._ticks_at(self.clock.now()) - self._ts_origin
+        if not self._cfg.timer_hr:
+            ticks //= 256
+        return ticks & 0xFFFFFF
+
+    def _read_byte(self, a: int) -> int:
+        if _OUT_FIRST <= a <= _OUT_LAST:
+            if a <= 0x21:
+                self._status &= ~0x04
+            elif a <= 0x27:
+                self._status &= ~0x02
+            else:
+                self._status &= ~0x01
+            return self._out[a - _OUT_FIRST]
+        if a == 0x1E:
+            return self._status
+        if a == 0x12:
+            return self._ctrl3()
+        if a == 0x3A:
+            return min(self.fifo.level, (1 << self.map.fifo_diff_bits) - 1) & 0xFF
+        if a == 0x3B:
+            level = min(self.fifo.level, (1 << self.map.fifo_diff_bits) - 1)
+            diff_mask = self.map.field("DIFF_FIFO_H").mask
+            flags = (
+                (0x80 if self.fifo.watermark() else 0)
+                | (0x40 if self.fifo.overrun else 0)
+                | (0x20 if self.fifo.full() else 0)
+                | (0x10 if self.fifo.level == 0 else 0)
+            )
+            return flags | ((level >> 8) & diff_mask)
+        if a == 0x3C:
+            return self.fifo.pattern_position() & 0xFF
+        if a == 0x3D:
+            return (self.fifo.pattern_position() >> 8) & 0x03
+        if 0x40 <= a <= 0x42:
+            return (self._timestamp_now() >> (8 * (a - 0x40))) & 0xFF
+        if a in self.map.by_address:
+            return self.regs[a]
+        self.sim_stats["undefined_accesses"] += 1
+        return 0
+
+    def _next_addr(self, a: int) -> int:
+        if not self.regs[self._a["CTRL3_C"]] & 0x04:  # IF_INC = 0
+            return a
+        rounding = self._bits("ROUNDING")
+        if rounding in (1, 3, 5, 6, 7) and a == 0x2D:
+            return 0x22 if rounding in (3, 6, 7) else 0x28
+        if rounding == 2 and a == 0x27:
+            return 0x22
+        return (a + 1) & 0x7F
+
+    def read(self, register: int, length: int) -> bytes:
+        """One read transaction of ``length`` bytes starting at ``register``."""
+        self._advance(self.clock.now())
+        if register == _FIFO_L and length % 2 == 0 and self._half is None:
+            words = self.fifo.pop_words(length // 2)  # FIFO_DATA_OUT wraps (§9.4)
+            self.sim_stats["fifo_underflow_words"] = self.fifo.underflow_reads
+            return words.tobytes()
+        out = bytearray(length)
+        a = register
+        read_l: set[int] = set()
+        for i in range(length):
+            if a == _FIFO_L:
+                word = int(self.fifo.pop_words(1)[0]) & 0xFFFF
+                out[i] = word & 0xFF
+                self._half = word >> 8
+                a = _FIFO_H
+                continue
+            if a == _FIFO_H:
+                if self._half is None:
+                    self._half = (int(self.fifo.pop_words(1)[0]) & 0xFFFF) >> 8
+                out[i] = self._half
+                self._half = None
+                a = _FIFO_L
+                continue
+            out[i] = self._read_byte(a)
+            if _OUT_FIRST <= a <= _OUT_LAST:
+                pair = (a - _OUT_FIRST) // 2
+                if a % 2 == 0:
+                    read_l.add(pair)
+                else:
+                    read_l.discard(pair)
+                    self._bdu_locked.discard(pair)
+            a = self._next_addr(a)
+        if read_l and self._bits("BDU"):
+            self._bdu_locked |= read_l
+        return bytes(out)
+
+    def write(self, register: int, data: bytes) -> None:
+        """One write transaction: ``data`` bytes to ``register`` onwards."""
+        now = self.clock.now()
+        self._advance(now)
+        a = register
+        for value in data:
+            self._write_byte(a, value, now)
+            a = self._next_addr(a)
+        self._reconfigure(now)
+
+    def _write_byte(self, a: int, value: int, now: float) -> None:
+        reg = self.map.by_address.get(a)
+        if reg is None:
+            self.sim_stats["undefined_accesses"] += 1
+            return
+        if reg.name == "TIMESTAMP2_REG":
+            if value == 0xAA:  # counter reset (§7-8)
+                self._ts_origin = self._ticks_at(now)
+            else:
+                self.sim_stats["readonly_writes"] += 1
+            return
+        if reg.writable == 0:
+            self.sim_stats["readonly_writes"] += 1
+            return
+        if value & ~reg.writable & 0xFF:
+            self.sim_stats["reserved_writes"] += 1
+            self.sim_reserved_log.append((a, value & ~reg.writable & 0xFF))
+        value &= reg.writable
+        if reg.name == "CTRL3_C":
+            if value & 0x01:  # SW_RESET: reset values back, bit self-clears (§1, §3.3)
+                self.sim_stats["resets"] += 1
+                self._power_on()
+                self._sw_reset_until = now + SW_RESET_BUSY_S
+                return
+            if value & 0x80:  # BOOT: reload trimming, bit self-clears
+                self._boot_until = now + BOOT_BUSY_S
+            value &= ~0x81
+        self.regs[a] = value

@@ -1,0 +1,135 @@
+"""What the simulated SensorTile firmware reads its IMU through.
+
+The firmware only needs :class:`ChipPort` — "give me the current output registers as the
+BSP converts them" — so it runs against:
+
+* :class:`I2cChipPort`: a simulated LSM6DSM (engineer C's chip, or anything on a bus that
+  satisfies :class:`lsm6ds.bus.I2CBus`) read like the ST BSP does: STATUS_REG (0x1E) for
+  data-ready, then a 14-byte burst from OUT_TEMP_L (0x20): temp, gyro, accel int16 LE.
+  :func:`simulated_lsm6dsm` builds that chip (``lsm6ds_sim.chip.SimChip`` with
+  ``lsm6ds_sim.physics.SensorPhysics``).
+
+Counts become mg / mdps as the ST BSP does it (``LSM6DSM_ACC_GetAxes``):
+``(int32_t)((float)raw * sensitivity)``, float32 arithmetic truncated toward zero, with
+sensitivities 0.061 mg/LSB (±2 g) and 8.75 mdps/LSB (±245/250 dps) [§4.2].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+Triple = tuple[int, int, int]
+
+OUT_TEMP_L = 0x20
+STATUS_REG = 0x1E
+CTRL1_XL = 0x10
+CTRL2_G = 0x11
+CTRL3_C = 0x12
+LSM6DSM_ADDR = 0x6A
+
+ACCEL_SENS_MG = 0.061
+"""mg/LSB at ±2 g (BSP ``LSM6DSM_ACC_SENSITIVITY_FS_2G``)."""
+GYRO_SENS_MDPS = 8.75
+"""mdps/LSB at ±245/250 dps (BSP ``LSM6DSM_GYRO_SENSITIVITY_FS_245DPS``)."""
+TEMP_LSB_PER_C = 256.0
+"""LSM6DSM temperature: raw/256 + 25 degC [§6]."""
+
+
+def bsp_scale(counts: np.ndarray | list[int], sensitivity: float) -> Triple:
+    """``(int32_t)((float)raw * sensitivity)`` for three axes (float32, toward zero)."""
+    vals = np.asarray(counts, dtype=np.float32) * np.float32(sensitivity)
+    t = np.trunc(vals).astype(np.int64)
+    return (int(t[0]), int(t[1]), int(t[2]))
+
+
+@dataclass(frozen=True)
+class ChipOutputs:
+    """One reading of the chip by the firmware."""
+
+    gyro_mdps: Triple
+    accel_mg: Triple
+    temp_c: float
+    gyro_new: bool = True
+    accel_new: bool = True
+
+
+@runtime_checkable
+class ChipPort(Protocol):
+    """The tiny interface the firmware needs: the current outputs (at the clock's now)."""
+
+    def read_outputs(self) -> ChipOutputs: ...
+
+
+class _Clock(Protocol):
+    def now(self) -> float: ...
+
+
+class I2cChipPort:
+    """A chip on an I2C bus read like the SensorTile BSP: STATUS_REG then a 14-byte burst.
+
+    ``configure()`` writes CTRL3_C = BDU | IF_INC (0x44), CTRL1_XL = 104 Hz ±2 g (0x40)
+    and CTRL2_G = 104 Hz 250 dps (0x40), the DataLogExtended defaults.
+    """
+
+    def __init__(self, bus: object, addr: int = LSM6DSM_ADDR) -> None:
+        self.bus = bus
+        self.addr = addr
+
+    def configure(self, odr_code: int = 4) -> None:
+        bus = self.bus
+        bus.write_byte_data(self.addr, CTRL3_C, 0x44)  # type: ignore[attr-defined]
+        bus.write_byte_data(self.addr, CTRL1_XL, (odr_code << 4) | 0x00)  # type: ignore[attr-defined]
+        bus.write_byte_data(self.addr, CTRL2_G, (odr_code << 4) | 0x00)  # type: ignore[attr-defined]
+
+    def read_outputs(self) -> ChipOutputs:
+        status = self.bus.read_byte_data(self.addr, STATUS_REG)  # type: ignore[attr-defined]
+        raw = bytes(self.bus.read_i2c_block_data(self.addr, OUT_TEMP_L, 14))  # type: ignore[attr-defined]
+        words = np.frombuffer(raw, dtype="<i2").astype(np.int64)
+        return ChipOutputs(
+            gyro_mdps=bsp_scale(words[1:4], GYRO_SENS_MDPS),
+            accel_mg=bsp_scale(words[4:7], ACCEL_SENS_MG),
+            temp_c=float(words[0]) / TEMP_LSB_PER_C + 25.0,
+            gyro_new=bool(status & 0x02),
+            accel_new=bool(status & 0x01),
+        )
+
+
+def datasheet_model() -> object:
+    """White noise at LSM6DSM datasheet-typical densities (§11, unverified): gyro
+    3.8 mdps/sqrt(Hz), accel 90 ug/sqrt(Hz); the default when no model file is given."""
+    from lsm6ds_sim.model import NoiseModel
+
+    model = NoiseModel.quiet()
+    for ch in ("gx", "gy", "gz"):
+        model = model.with_channel(ch, white=3.8e-3)
+    for ch in ("ax", "ay", "az"):
+        model = model.with_channel(ch, white=90e-6)
+    return model
+
+
+def simulated_lsm6dsm(
+    clock: object,
+    seed: int = 0,
+    model: object | None = None,
+    odr_code: int = 4,
+    crystal_ppm: float = 0.0,
+    bus_hz: float | None = 400_000.0,
+) -> I2cChipPort:
+    """Engineer C's :class:`lsm6ds_sim.chip.SimChip` (LSM6DSM) with engineer D's physics on
+    the simulated I2C bus (:class:`lsm6ds_sim.i2c.SimI2CBus`, ``bus_hz`` timing model),
+    configured like the DataLogExtended firmware (``odr_code`` 4 = 104 Hz, +-2 g, 250 dps,
+    BDU + IF_INC)."""
+    from lsm6ds_sim.chip import SimChip
+    from lsm6ds_sim.i2c import SimI2CBus
+    from lsm6ds_sim.physics import SensorPhysics
+
+    physics = SensorPhysics(model if model is not None else datasheet_model(), seed=seed)  # type: ignore[arg-type]
+    chip = SimChip("lsm6dsm", clock, physics, crystal_ppm=crystal_ppm, seed=seed)  # type: ignore[arg-type]
+    bus = SimI2CBus(clock, bus_hz=bus_hz)  # type: ignore[arg-type]
+    bus.attach(LSM6DSM_ADDR, chip)
+    port = I2cChipPort(bus, LSM6DSM_ADDR)
+    port.configure(odr_code)
+    return port

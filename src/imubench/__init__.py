@@ -1,0 +1,3 @@
+"""imubench: live acquisition and Allan-family noise analysis for ST LSM6DS IMUs."""
+
+__version__ = "0.1.0"

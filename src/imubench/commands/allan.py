@@ -1,0 +1,206 @@
+"""``imubench allan``: one Allan-family statistic of a recording or a one-column file.
+
+INPUT is a recording (``.imbr`` native or ``.csv``; pick the channel with ``--column``) or
+a one-column text file (one value per line, ``#`` comments, optionally ``.gz``). Prints a
+table, or JSON with ``--json PATH`` (``-`` for stdout). Exit status 0 on success, 2 on an
+imubench error (the message says what and where).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from imubench.errors import ImubenchError, RecordingError, StatsError
+from imubench.stats import STATISTICS, compute
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "allan",
+        help="Allan-family statistic (adev, oadev, mdev, ..., theoh) of a recording",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("input", type=Path, help="recording (.imbr/.csv) or one-column text (.gz ok)")
+    p.add_argument("--stat", required=True, choices=STATISTICS, help="statistic (deviation)")
+    p.add_argument(
+        "--data-type",
+        choices=("phase", "freq"),
+        default="freq",
+        help="phase (s) or frequency/rate samples (default freq: a rate in dps or g)",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        help="sample rate in Hz (default: the recording's, or 1.0 for text)",
+    )
+    p.add_argument(
+        "--taus",
+        default="octave",
+        help="octave | decade | all | N (points per decade) | comma list of tau_s",
+    )
+    p.add_argument(
+        "--column",
+        default=None,
+        help="recording channel, e.g. gx (required for multi-channel recordings)",
+    )
+    p.add_argument("--ci", type=float, default=0.683, help="confidence level (default 0.683)")
+    p.add_argument(
+        "--alpha",
+        type=int,
+        default=None,
+        choices=(-2, -1, 0, 1, 2),
+        help="fix the noise type alpha instead of identifying it per tau",
+    )
+    p.add_argument(
+        "--no-bias-correction",
+        action="store_true",
+        help="do not apply Stable32's bias corrections (TOT, HTOT, Theo1)",
+    )
+    p.add_argument(
+        "--remove-drift", action="store_true", help="remove linear frequency drift first (reported)"
+    )
+    p.add_argument("--json", default=None, metavar="PATH|-", help="write JSON here")
+    p.set_defaults(func=run)
+
+
+def parse_taus(text: str) -> str | int | list[float]:
+    """--taus value: keyword, int points per decade, or comma-separated seconds."""
+    t = text.strip().lower()
+    if t in ("octave", "decade", "all"):
+        return t
+    try:
+        if "," not in t and "." not in t and "e" not in t:
+            return int(t)
+        return [float(v) for v in t.split(",") if v.strip()]
+    except ValueError:
+        raise StatsError(
+            f"--taus {text!r}: use octave, decade, all, an integer (points per decade) or a "
+            "comma-separated list of tau values in seconds"
+        ) from None
+
+
+def read_column_text(path: Path) -> np.ndarray:
+    """One value per line, '#' comments and blank lines ignored, 'nan' marks a gap; .gz ok."""
+    opener: Any = gzip.open if path.suffix == ".gz" else open
+    values: list[float] = []
+    try:
+        with opener(path, "rt", encoding="utf-8") as fh:
+            for lineno, line in enumerate(fh, 1):
+                s = line.split("#", 1)[0].strip()
+                if not s:
+                    continue
+                try:
+                    values.append(float(s.split()[0]))
+                except ValueError:
+                    raise RecordingError(
+                        f"{path}:{lineno}: {s!r} is not a number; one value per line expected"
+                    ) from None
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read ({exc})") from exc
+    if not values:
+        raise RecordingError(f"{path}: no values found")
+    return np.asarray(values, dtype=np.float64)
+
+
+def load_input(path: Path, column: str | None) -> tuple[np.ndarray, float | None]:
+    """(data, rate_hz or None) from a recording or a one-column text file."""
+    name = path.name.lower()
+    if name.endswith((".imbr", ".csv")):
+        from imubench.recording import load_recording  # lazily: owned by the lead
+
+        rec = load_recording(path)
+        chans = list(rec.channels)
+        if column is None:
+            if len(chans) != 1:
+                raise RecordingError(f"{path}: pick a channel with --column (one of {chans})")
+            column = chans[0]
+        if column not in chans:
+            raise RecordingError(f"{path}: no channel {column!r}; channels are {chans}")
+        return np.asarray(rec.channel(column), dtype=np.float64), float(rec.rate_hz)
+    return read_column_text(path), None
+
+
+class ProgressBar:
+    """A one-line stderr progress bar shown only on a terminal after one second."""
+
+    def __init__(self, label: str, stream: TextIO = sys.stderr) -> None:
+        self.label = label
+        self.stream = stream
+        self.enabled = stream.isatty()
+        self.t0 = time.monotonic()
+        self.shown = False
+
+    def __call__(self, fraction: float) -> None:
+        if not self.enabled or time.monotonic() - self.t0 < 1.0:
+            return
+        n = int(30 * min(max(fraction, 0.0), 1.0))
+        self.stream.write(f"\r{self.label} [{'#' * n}{'.' * (30 - n)}] {fraction:5.1%}")
+        self.stream.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        if self.shown:
+            self.stream.write("\r" + " " * (len(self.label) + 40) + "\r")
+            self.stream.flush()
+
+
+def format_table(res: Any) -> str:
+    lines = [
+        f"# {res.stat}  data_type={res.data_type}  rate={res.rate_hz:g} Hz  "
+        f"confidence={res.confidence:g}  bias_corrected={res.bias_corrected}"
+        + (f"  drift={res.drift:.6g}/s" if res.drift is not None else ""),
+        f"{'AF':>8} {'tau_s':>12} {'n':>10} {'alpha':>5} {'ci_low':>12} {'dev':>12} "
+        f"{'ci_high':>12} {'edf':>9} {'gaps':>6}",
+    ]
+    for k in range(len(res)):
+        lines.append(
+            f"{res.m[k]:>8d} {res.tau_s[k]:>12.5e} {res.n[k]:>10d} {res.alpha[k]:>5d} "
+            f"{res.ci_low[k]:>12.5e} {res.dev[k]:>12.5e} {res.ci_high[k]:>12.5e} "
+            f"{res.edf[k]:>9.4g} {res.gaps[k]:>6d}"
+        )
+    lines.extend(f"# note: {n}" for n in res.notes)
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        data, rec_rate = load_input(args.input, args.column)
+        rate = args.rate if args.rate is not None else (rec_rate or 1.0)
+        bar = ProgressBar(f"{args.stat}")
+        try:
+            res = compute(
+                args.stat,
+                data,
+                rate,
+                args.data_type,
+                parse_taus(args.taus),
+                confidence=args.ci,
+                alpha=args.alpha,
+                bias_correction=not args.no_bias_correction,
+                remove_drift=args.remove_drift,
+                progress=bar,
+            )
+        finally:
+            bar.close()
+        if args.json is None:
+            print(format_table(res))
+        else:
+            text = json.dumps(res.to_dict(), indent=1)
+            if args.json == "-":
+                print(text)
+            else:
+                Path(args.json).write_text(text + "\n", encoding="utf-8")
+    except ImubenchError as exc:
+        print(f"imubench allan: error: {exc}", file=sys.stderr)
+        return 2
+    return 0

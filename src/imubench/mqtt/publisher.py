@@ -1,0 +1,367 @@
+"""Publish Allan snapshots and a retained status over MQTT with aiomqtt 2.x.
+
+Topics (see ``docs/mqtt.md``): ``imubench/<station>/<sensor>/allan`` carries one JSON
+snapshot per call of ``publish_allan`` (not retained); ``imubench/<station>/<sensor>/status``
+is retained: JSON ``{"state": "online", ...}`` after each (re)connection, the plain string
+``offline`` after a clean stop, and the same ``offline`` as last will (set at CONNECT, so the
+broker publishes it when the process dies or the link times out).
+
+The caller is never blocked for long: ``publish_allan`` only encodes and buffers. A
+background loop (``run``) connects, publishes, and reconnects with capped exponential
+backoff; while disconnected at most ``buffer_snapshots`` snapshots wait (the oldest are
+dropped and counted in ``dropped_snapshots``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import datetime as dt
+import json
+import logging
+import math
+import os
+import socket
+import ssl
+import uuid
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import urlsplit
+
+import aiomqtt
+
+from imubench.mqtt.errors import MqttError
+from imubench.mqtt.topics import allan_topic, status_topic
+
+log = logging.getLogger(__name__)
+
+OFFLINE_PAYLOAD = b"offline"
+"""Retained status after a clean stop, and the last will: plain text, not JSON."""
+
+
+@dataclass(frozen=True)
+class BrokerAddress:
+    """Where an external broker lives, parsed from ``mqtt://host:port`` or ``mqtts://...``."""
+
+    host: str
+    port: int
+    tls: bool
+
+
+def parse_broker_url(url: str) -> BrokerAddress:
+    """Parse ``mqtt://host[:port]`` (default port 1883) or ``mqtts://host[:port]`` (8883, TLS).
+
+    Raises ``MqttError`` naming the URL and the accepted forms.
+    """
+    forms = "use mqtt://HOST[:PORT] or mqtts://HOST[:PORT] (TLS), or 'embedded'"
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError as exc:
+        raise MqttError(f"mqtt.broker {url!r} is not a valid URL ({exc}); {forms}") from None
+    if parts.scheme not in ("mqtt", "mqtts"):
+        raise MqttError(f"mqtt.broker {url!r} has scheme {parts.scheme!r}; {forms}")
+    if not parts.hostname:
+        raise MqttError(f"mqtt.broker {url!r} has no host name; {forms}")
+    if parts.path not in ("", "/") or parts.query or parts.fragment:
+        raise MqttError(f"mqtt.broker {url!r} has a path or query, not allowed; {forms}")
+    tls = parts.scheme == "mqtts"
+    return BrokerAddress(parts.hostname, port or (8883 if tls else 1883), tls)
+
+
+def _jsonable(value: Any, path: str) -> Any:
+    """Convert numpy arrays/scalars to lists/numbers and non-finite floats to None."""
+    if value is None or isinstance(value, str | bool | int):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v, f"{path}.{k}") for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v, f"{path}[{i}]") for i, v in enumerate(value)]
+    tolist = getattr(value, "tolist", None)  # numpy arrays and numpy scalars
+    if callable(tolist):
+        return _jsonable(tolist(), path)
+    if isinstance(value, dt.datetime):
+        return value.isoformat()
+    raise MqttError(
+        f"MQTT payload key {path} holds a {type(value).__name__}, which has no JSON form; "
+        "use numbers, strings, lists, dicts or numpy arrays"
+    )
+
+
+def encode_json(payload: Mapping[str, Any]) -> bytes:
+    """UTF-8 JSON of ``payload``; numpy values become plain numbers, NaN/inf become null."""
+    return json.dumps(_jsonable(payload, "payload"), separators=(",", ":")).encode("utf-8")
+
+
+class MqttPublisher:
+    """Publishes one sensor's Allan snapshots and status to an MQTT broker.
+
+    Use as ``async with MqttPublisher(...) as pub: await pub.publish_allan(d)``, or start
+    ``await pub.run()`` as a task and call ``await pub.close()`` to stop. ``qos`` applies to
+    the snapshots; status messages always use QoS 1 and retain. ``keepalive_s`` is the MQTT
+    keep-alive (the broker declares the link dead after 1.5x it and publishes the will).
+    ``reconnect_min_s``/``reconnect_max_s`` bound the exponential reconnection backoff.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        station: str,
+        sensor: str,
+        *,
+        username: str | None = None,
+        password: str | None = None,
+        tls: bool = False,
+        tls_ca: str | os.PathLike[str] | None = None,
+        keepalive_s: int = 30,
+        client_id: str | None = None,
+        qos: int = 0,
+        buffer_snapshots: int = 3,
+        reconnect_min_s: float = 0.5,
+        reconnect_max_s: float = 30.0,
+        timeout_s: float = 10.0,
+        status_detail: Mapping[str, Any] | None = None,
+    ) -> None:
+        if qos not in (0, 1, 2):
+            raise MqttError(f"mqtt qos {qos!r} is invalid; use 0, 1 or 2")
+        if buffer_snapshots < 1:
+            raise MqttError(f"buffer_snapshots {buffer_snapshots} must be at least 1")
+        if not 0 < reconnect_min_s <= reconnect_max_s:
+            raise MqttError(
+                f"reconnect backoff {reconnect_min_s}..{reconnect_max_s} s is invalid; "
+                "need 0 < reconnect_min_s <= reconnect_max_s"
+            )
+        if not 0 <= keepalive_s <= 65535:
+            raise MqttError(f"mqtt keepalive_s {keepalive_s} is outside 0..65535")
+        self.host = host
+        self.port = port
+        self.station = station
+        self.sensor = sensor
+        self.allan_topic = allan_topic(station, sensor)  # validates station and sensor
+        self.status_topic = status_topic(station, sensor)
+        self.qos = qos
+        self.keepalive_s = keepalive_s
+        self.client_id = client_id or f"imubench-{station}-{sensor}-{uuid.uuid4().hex[:8]}"
+        self._username = username
+        self._password = password
+        self._tls_context = ssl.create_default_context(cafile=tls_ca) if tls else None
+        self._reconnect_min_s = reconnect_min_s
+        self._reconnect_max_s = reconnect_max_s
+        self._timeout_s = timeout_s
+        self._buffer: deque[bytes] = deque()
+        self._buffer_max = buffer_snapshots
+        self._status_detail: dict[str, Any] = dict(status_detail or {})
+        self._status_dirty = True
+        self._since = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+        self._wake = asyncio.Event()
+        self._closing = asyncio.Event()
+        self._connected = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+        self.dropped_snapshots = 0
+        self.published_snapshots = 0
+        self.connections = 0
+        self.last_error: str | None = None
+
+    # ------------------------------------------------------------------ public API
+
+    @property
+    def connected(self) -> bool:
+        """True while a connection to the broker is up."""
+        return self._connected.is_set()
+
+    @property
+    def buffered_snapshots(self) -> int:
+        """Snapshots waiting to be published."""
+        return len(self._buffer)
+
+    async def publish_allan(self, payload: Mapping[str, Any]) -> None:
+        """Queue one Allan snapshot for ``allan_topic``; returns at once.
+
+        ``payload`` is encoded as JSON now (numpy arrays allowed, NaN becomes null). When
+        ``buffer_snapshots`` are already waiting, the oldest is dropped and counted.
+        """
+        data = encode_json(payload)
+        self._buffer.append(data)
+        while len(self._buffer) > self._buffer_max:
+            self._buffer.popleft()
+            self.dropped_snapshots += 1
+        self._wake.set()
+
+    async def publish_status(self, detail: Mapping[str, Any] | None = None) -> None:
+        """Update the retained ``online`` status with ``detail`` merged in; returns at once.
+
+        The status is republished after every reconnection, so subscribers always find it.
+        """
+        if detail:
+            self._status_detail.update(detail)
+        self._status_dirty = True
+        self._wake.set()
+
+    def status_payload(self) -> bytes:
+        """The JSON of the retained online status (``state``, identity, ``since``, detail)."""
+        status = {
+            "state": "online",
+            "station": self.station,
+            "sensor": self.sensor,
+            "client_id": self.client_id,
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "since": self._since,
+            **self._status_detail,
+        }
+        return encode_json(status)
+
+    async def wait_connected(self, timeout_s: float) -> bool:
+        """Wait until connected (True) or ``timeout_s`` passed (False)."""
+        try:
+            await asyncio.wait_for(self._connected.wait(), timeout_s)
+        except TimeoutError:
+            return False
+        return True
+
+    async def __aenter__(self) -> MqttPublisher:
+        self._task = asyncio.create_task(self.run(), name=f"mqtt-publisher-{self.client_id}")
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.close()
+
+    async def close(self, timeout_s: float = 5.0) -> None:
+        """Publish retained ``offline`` (if connected), disconnect, and stop ``run``."""
+        self._closing.set()
+        self._wake.set()
+        task, self._task = self._task, None
+        if task is None:
+            return
+        try:
+            await asyncio.wait_for(asyncio.shield(task), timeout_s)
+        except TimeoutError:
+            log.warning(
+                "MQTT publisher %s did not stop within %.1f s; cancelling it",
+                self.client_id,
+                timeout_s,
+            )
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+
+    async def run(self) -> None:
+        """Connect, publish, reconnect with capped exponential backoff until ``close``."""
+        if self._task is None:
+            self._task = asyncio.current_task()  # so that close() waits for this loop
+        backoff = self._reconnect_min_s
+        failures = 0
+        while not self._closing.is_set():
+            try:
+                async with self._client() as client:
+                    self.connections += 1
+                    failures = 0
+                    backoff = self._reconnect_min_s
+                    self._status_dirty = True
+                    self._connected.set()
+                    log.info(
+                        "MQTT publisher %s connected to %s:%d", self.client_id, self.host, self.port
+                    )
+                    try:
+                        await self._pump(client)
+                    except asyncio.CancelledError:
+                        # Cancelled instead of closed: still leave a truthful status behind.
+                        with contextlib.suppress(Exception):
+                            await client.publish(
+                                self.status_topic, OFFLINE_PAYLOAD, qos=0, retain=True
+                            )
+                        raise
+                    # Clean stop: the broker will not publish the will after DISCONNECT.
+                    await client.publish(
+                        self.status_topic,
+                        OFFLINE_PAYLOAD,
+                        qos=1,
+                        retain=True,
+                        timeout=self._timeout_s,
+                    )
+                    return
+            except aiomqtt.MqttError as exc:
+                self.last_error = str(exc)
+                failures += 1
+                level = logging.WARNING if failures == 1 else logging.DEBUG
+                log.log(
+                    level,
+                    "MQTT broker %s:%d unavailable (%s); retrying in %.1f s",
+                    self.host,
+                    self.port,
+                    exc,
+                    backoff,
+                )
+            finally:
+                self._connected.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._closing.wait(), backoff)
+            backoff = min(backoff * 2, self._reconnect_max_s)
+
+    # ------------------------------------------------------------------ internals
+
+    def _client(self) -> aiomqtt.Client:
+        return aiomqtt.Client(
+            self.host,
+            self.port,
+            username=self._username,
+            password=self._password,
+            identifier=self.client_id,
+            will=aiomqtt.Will(self.status_topic, OFFLINE_PAYLOAD, qos=1, retain=True),
+            clean_session=True,
+            keepalive=self.keepalive_s,
+            timeout=self._timeout_s,
+            tls_context=self._tls_context,
+        )
+
+    async def _pump(self, client: aiomqtt.Client) -> None:
+        """Publish status and buffered snapshots until closing; raise MqttError on loss."""
+        watcher = asyncio.create_task(self._watch(client))
+        try:
+            while True:
+                if self._status_dirty:
+                    self._status_dirty = False
+                    await client.publish(
+                        self.status_topic,
+                        self.status_payload(),
+                        qos=1,
+                        retain=True,
+                        timeout=self._timeout_s,
+                    )
+                while self._buffer:
+                    data = self._buffer.popleft()
+                    try:
+                        await client.publish(
+                            self.allan_topic, data, qos=self.qos, timeout=self._timeout_s
+                        )
+                    except BaseException:
+                        self._buffer.appendleft(data)  # retried after reconnection
+                        while len(self._buffer) > self._buffer_max:
+                            self._buffer.popleft()
+                            self.dropped_snapshots += 1
+                        raise
+                    self.published_snapshots += 1
+                if self._closing.is_set():
+                    return
+                self._wake.clear()
+                waiter = asyncio.create_task(self._wake.wait())
+                await asyncio.wait((waiter, watcher), return_when=asyncio.FIRST_COMPLETED)
+                waiter.cancel()
+                if watcher.done():
+                    watcher.result()  # raises the disconnection
+                    raise aiomqtt.MqttError("connection lost")
+        finally:
+            watcher.cancel()
+            with contextlib.suppress(asyncio.CancelledError, aiomqtt.MqttError):
+                await watcher
+
+    @staticmethod
+    async def _watch(client: aiomqtt.Client) -> None:
+        """Return or raise when the connection drops (no subscriptions: no messages come)."""
+        async for _ in client.messages:
+            pass

@@ -1,0 +1,155 @@
+"""Recordings: the native ``.imbr`` format and CSV interchange, chosen by file suffix.
+
+* :func:`load_recording` reads a whole recording into a :class:`Recording`.
+* :func:`open_writer` opens a writer (native or CSV) for a new file.
+* :func:`convert` converts between the two.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imubench.batch import CHANNELS, Batch
+from imubench.errors import RecordingError
+from imubench.recording.csvio import CsvWriter, read_csv
+from imubench.recording.native import (
+    STORAGE_FLOAT,
+    STORAGE_RAW,
+    GapRecord,
+    NativeReader,
+    NativeWriter,
+)
+
+__all__ = [
+    "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "GapRecord", "NativeReader", "NativeWriter",
+    "Recording", "convert", "load_recording", "open_writer", "recording_kind",
+]
+
+Writer = NativeWriter | CsvWriter
+CONVERT_BLOCK = 65536
+"""Samples per data record when converting."""
+
+
+def recording_kind(path: str | Path) -> str:
+    """``native`` or ``csv`` from the suffix; RecordingError otherwise."""
+    name = Path(path).name.lower()
+    if name.endswith(".imbr"):
+        return "native"
+    if name.endswith((".csv", ".csv.gz")):
+        return "csv"
+    raise RecordingError(
+        f"{path}: unknown recording suffix; use .imbr (native) or .csv / .csv.gz"
+    )
+
+
+@dataclass
+class Recording:
+    """A whole recording in memory.
+
+    ``values`` are in :data:`CHANNELS` order (dps, g) at the sample indices ``index``
+    (increasing; holes are lost samples). :meth:`channel` returns a dense series on the
+    full index grid with NaN in the holes, ready for the statistics (NaN = gap).
+    """
+
+    path: Path
+    metadata: dict[str, Any]
+    index: np.ndarray
+    t_s: np.ndarray
+    values: np.ndarray
+    temp_c: np.ndarray
+    raw: np.ndarray | None = None
+    gaps: list[GapRecord] = field(default_factory=list)
+    damage: str | None = None
+    complete: bool = True
+
+    @property
+    def rate_hz(self) -> float:
+        return float(self.metadata["odr_hz"])
+
+    @property
+    def channels(self) -> list[str]:
+        """Channels holding at least one value (plus ``temp`` when measured)."""
+        out = [c for i, c in enumerate(CHANNELS) if np.isfinite(self.values[:, i]).any()]
+        if np.isfinite(self.temp_c).any():
+            out.append("temp")
+        return out
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    @property
+    def lost_samples(self) -> int:
+        if len(self.index) < 2:
+            return 0
+        return int(self.index[-1] - self.index[0] + 1 - len(self.index))
+
+    def _dense(self, column: np.ndarray) -> np.ndarray:
+        if not len(self.index):
+            return np.zeros(0)
+        out = np.full(int(self.index[-1] - self.index[0] + 1), np.nan)
+        out[self.index - self.index[0]] = column
+        return out
+
+    def channel(self, name: str) -> np.ndarray:
+        """Dense float64 series of ``name`` (gx..az, temp) with NaN where samples are lost."""
+        if name == "temp":
+            return self._dense(self.temp_c)
+        if name not in CHANNELS:
+            raise RecordingError(
+                f"{self.path}: no channel {name!r}; channels are {', '.join((*CHANNELS, 'temp'))}"
+            )
+        return self._dense(self.values[:, CHANNELS.index(name)])
+
+    def batch(self) -> Batch:
+        return Batch(self.index, self.t_s, self.values, self.temp_c, self.raw)
+
+
+def load_recording(path: str | Path) -> Recording:
+    """Read a native (``.imbr``) or CSV (``.csv``, ``.csv.gz``) recording."""
+    path = Path(path)
+    if recording_kind(path) == "csv":
+        meta, batch, gaps = read_csv(path)
+        return Recording(path, meta, batch.index, batch.t_s, batch.values, batch.temp_c,
+                         None, gaps)
+    with NativeReader(path) as reader:
+        batches = list(reader.batches())
+        if batches:
+            b = Batch.concat(batches)
+        else:
+            empty = np.zeros(0)
+            b = Batch(np.zeros(0, np.int64), empty, np.zeros((0, 6)), empty,
+                      np.zeros((0, 6), np.int16) if reader.storage == STORAGE_RAW else None)
+        return Recording(path, reader.metadata, b.index, b.t_s, b.values, b.temp_c, b.raw,
+                         reader.gaps, reader.damage, reader.end is not None)
+
+
+def open_writer(path: str | Path, metadata: dict[str, Any], **kwargs: Any) -> Writer:
+    """Writer for a new recording, native or CSV by suffix."""
+    if recording_kind(path) == "csv":
+        return CsvWriter(path, metadata, **kwargs)
+    return NativeWriter(path, metadata, **kwargs)
+
+
+def convert(src: str | Path, dst: str | Path) -> Recording:
+    """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts."""
+    rec = load_recording(src)
+    meta = dict(rec.metadata)
+    meta["converted_from"] = str(src)
+    if recording_kind(dst) == "native":
+        meta["storage"] = STORAGE_RAW if rec.raw is not None else STORAGE_FLOAT
+    else:
+        meta.pop("storage", None)
+    reasons = {g.at_index: g.reason for g in rec.gaps}
+    with open_writer(dst, meta) as writer:
+        for start in range(0, len(rec), CONVERT_BLOCK):
+            part = slice(start, start + CONVERT_BLOCK)
+            writer.write(
+                Batch(rec.index[part], rec.t_s[part], rec.values[part], rec.temp_c[part],
+                      None if rec.raw is None else rec.raw[part]),
+                reasons,
+            )
+    return rec

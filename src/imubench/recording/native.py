@@ -1,0 +1,302 @@
+"""The native recording format (``.imbr``): append-only, crash-safe, self-describing.
+
+Layout (all integers little-endian)::
+
+    file    := MAGIC header record*
+    MAGIC   := b"IMBR" u16 version(=1) b"\\r\\n"          (8 bytes)
+    header  := u32 length, JSON metadata (UTF-8, `length` bytes), u32 crc32(JSON)
+    record  := u8 kind, u32 length, u32 crc32(payload), payload (`length` bytes)
+
+Record kinds:
+
+* ``D`` data: ``u32 n``, then ``index int64[n]``, ``t_s float64[n]``,
+  ``temp_c float32[n]`` (NaN = not measured), then the samples: ``int16[n, 6]`` raw
+  counts when the header says ``"storage": "raw_int16"`` (scaled values are
+  ``raw * sensitivity`` per the header), else ``float64[n, 6]`` scaled values
+  (``"storage": "float64"``). Channel order gx gy gz ax ay az (dps, g).
+* ``G`` gap: ``int64 at_index``, ``int64 lost``, UTF-8 reason. Written when a source
+  reports lost samples; the hole is also visible in the data's sample indices.
+* ``E`` end: JSON ``{"samples": n, "gaps": k, "lost_samples": l, "stopped_utc": ...}``
+  written by a clean close. Its absence means the writer died; everything before the
+  first incomplete or damaged record is still read.
+
+The header's JSON metadata holds: ``format``, ``version``, ``chip``, ``odr_hz``,
+``fs_dps``, ``fs_g``, ``gyro_sensitivity_dps`` and ``accel_sensitivity_g`` (per LSB),
+``channels``, ``storage``, ``start_utc``, ``source_uri``, ``config`` (the daemon's
+configuration) and any extra keys the writer was given.
+
+Crash safety: records are written whole with one ``write`` call and flushed; ``fsync``
+runs at least every ``fsync_interval_s``. A reader stops at the first record that is
+truncated or fails its CRC and reports it (:attr:`NativeReader.damage`), never
+returning data from a damaged record.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import time
+import zlib
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from imubench.batch import CHANNELS, Batch
+from imubench.errors import RecordingError
+
+MAGIC = b"IMBR"
+VERSION = 1
+_PREAMBLE = MAGIC + struct.pack("<H", VERSION) + b"\r\n"
+_REC = struct.Struct("<cII")
+STORAGE_RAW = "raw_int16"
+STORAGE_FLOAT = "float64"
+
+
+@dataclass(frozen=True)
+class GapRecord:
+    """``lost`` samples missing just before sample index ``at_index``."""
+
+    at_index: int
+    lost: int
+    reason: str
+
+
+def gaps_of(batch: Batch, last_index: int | None) -> list[tuple[int, int]]:
+    """(index after the hole, samples lost) for every hole in ``batch``, including the
+    one between ``last_index`` (the previous sample written) and the batch's first."""
+    out = []
+    first = int(batch.index[0])
+    if last_index is not None and first > last_index + 1:
+        out.append((first, first - last_index - 1))
+    elif last_index is None and batch.lost_before:
+        out.append((first, int(batch.lost_before)))
+    out.extend((int(a), int(lost)) for a, lost in batch.internal_gaps)
+    return out
+
+
+class NativeWriter:
+    """Append-only writer of ``.imbr`` recordings."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        metadata: dict[str, Any],
+        *,
+        fsync_interval_s: float = 1.0,
+    ) -> None:
+        self.path = Path(path)
+        self.metadata = dict(metadata)
+        self.metadata.setdefault("format", "imubench-native")
+        self.metadata.setdefault("version", VERSION)
+        self.metadata.setdefault("start_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
+        self.metadata.setdefault("channels", list(CHANNELS))
+        storage = self.metadata.setdefault("storage", STORAGE_FLOAT)
+        if storage not in (STORAGE_RAW, STORAGE_FLOAT):
+            raise RecordingError(f"{self.path}: unknown storage {storage!r}")
+        if storage == STORAGE_RAW and (
+            self.metadata.get("gyro_sensitivity_dps") is None
+            or self.metadata.get("accel_sensitivity_g") is None
+        ):
+            raise RecordingError(
+                f"{self.path}: raw_int16 storage needs gyro_sensitivity_dps and "
+                "accel_sensitivity_g in the metadata"
+            )
+        self.fsync_interval_s = fsync_interval_s
+        self.samples = 0
+        self.gaps = 0
+        self.lost_samples = 0
+        self._last_index: int | None = None
+        self._last_sync = time.monotonic()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._fh: BinaryIO | None = open(self.path, "xb")  # noqa: SIM115
+        except FileExistsError:
+            raise RecordingError(
+                f"{self.path}: exists already; recordings are never overwritten"
+            ) from None
+        header = json.dumps(self.metadata, sort_keys=True, default=str).encode()
+        self._fh.write(
+            _PREAMBLE + struct.pack("<I", len(header)) + header
+            + struct.pack("<I", zlib.crc32(header))
+        )
+        self._sync(force=True)
+
+    @property
+    def storage(self) -> str:
+        return str(self.metadata["storage"])
+
+    def _record(self, kind: bytes, payload: bytes) -> None:
+        if self._fh is None:
+            raise RecordingError(f"{self.path}: writer is closed")
+        self._fh.write(_REC.pack(kind, len(payload), zlib.crc32(payload)) + payload)
+        self._sync()
+
+    def _sync(self, force: bool = False) -> None:
+        assert self._fh is not None
+        self._fh.flush()
+        now = time.monotonic()
+        if force or now - self._last_sync >= self.fsync_interval_s:
+            os.fsync(self._fh.fileno())
+            self._last_sync = now
+
+    def write(self, batch: Batch, reasons: Mapping[int, str] | None = None) -> None:
+        """Append a batch; each hole in the sample index becomes a gap record first.
+
+        ``reasons`` maps the index after a hole to the reason stored with the gap
+        (default ``"source"``).
+        """
+        n = len(batch)
+        if n == 0:
+            return
+        first = int(batch.index[0])
+        if self._last_index is not None and first <= self._last_index:
+            raise RecordingError(
+                f"{self.path}: sample index {first} does not follow {self._last_index}"
+            )
+        for at, lost in gaps_of(batch, self._last_index):
+            self.write_gap(at, lost, (reasons or {}).get(at, "source"))
+        if self.storage == STORAGE_RAW:
+            if batch.raw is None:
+                raise RecordingError(f"{self.path}: raw_int16 storage but batch has no raw counts")
+            samples = np.ascontiguousarray(batch.raw, dtype="<i2").tobytes()
+        else:
+            samples = np.ascontiguousarray(batch.values, dtype="<f8").tobytes()
+        payload = b"".join((
+            struct.pack("<I", n),
+            np.ascontiguousarray(batch.index, dtype="<i8").tobytes(),
+            np.ascontiguousarray(batch.t_s, dtype="<f8").tobytes(),
+            np.ascontiguousarray(batch.temp_c, dtype="<f4").tobytes(),
+            samples,
+        ))
+        self._record(b"D", payload)
+        self.samples += n
+        self._last_index = int(batch.index[-1])
+
+    def write_gap(self, at_index: int, lost: int, reason: str) -> None:
+        """Record ``lost`` samples missing before ``at_index`` (explicit gap)."""
+        self._record(b"G", struct.pack("<qq", at_index, lost) + reason.encode())
+        self.gaps += 1
+        self.lost_samples += lost
+
+    def close(self) -> None:
+        if self._fh is None:
+            return
+        end = {
+            "samples": self.samples, "gaps": self.gaps, "lost_samples": self.lost_samples,
+            "stopped_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
+        self._record(b"E", json.dumps(end).encode())
+        self._sync(force=True)
+        self._fh.close()
+        self._fh = None
+
+    def __enter__(self) -> NativeWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class NativeReader:
+    """Reads ``.imbr`` files; tolerant of a crashed writer's truncated tail."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.damage: str | None = None
+        self.end: dict[str, Any] | None = None
+        self.gaps: list[GapRecord] = []
+        try:
+            self._fh: BinaryIO = open(self.path, "rb")  # noqa: SIM115
+        except OSError as exc:
+            raise RecordingError(f"{self.path}: cannot open recording: {exc.strerror}") from None
+        pre = self._fh.read(len(_PREAMBLE))
+        if pre[:4] != MAGIC:
+            raise RecordingError(f"{self.path}: not an imubench native recording (bad magic)")
+        (version,) = struct.unpack("<H", pre[4:6])
+        if version != VERSION:
+            raise RecordingError(f"{self.path}: format version {version} is not supported")
+        raw_len = self._fh.read(4)
+        if len(raw_len) < 4:
+            raise RecordingError(f"{self.path}: truncated header")
+        (hlen,) = struct.unpack("<I", raw_len)
+        header = self._fh.read(hlen)
+        crc = self._fh.read(4)
+        if len(header) < hlen or len(crc) < 4 or struct.unpack("<I", crc)[0] != zlib.crc32(header):
+            raise RecordingError(f"{self.path}: header damaged (byte offset {len(_PREAMBLE)})")
+        self.metadata: dict[str, Any] = json.loads(header)
+        storage = self.metadata.get("storage")
+        if storage not in (STORAGE_RAW, STORAGE_FLOAT):
+            raise RecordingError(f"{self.path}: header field 'storage' is {storage!r}")
+        self.storage = storage
+        self._scale = None
+        if storage == STORAGE_RAW:
+            g = float(self.metadata["gyro_sensitivity_dps"])
+            a = float(self.metadata["accel_sensitivity_g"])
+            self._scale = np.array([g, g, g, a, a, a])
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def __enter__(self) -> NativeReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def batches(self) -> Iterator[Batch]:
+        """Yield the data records as Batches (gap records are collected in ``gaps``)."""
+        fh = self._fh
+        while True:
+            offset = fh.tell()
+            head = fh.read(_REC.size)
+            if not head:
+                return
+            if len(head) < _REC.size:
+                self.damage = f"truncated record header at byte {offset}"
+                return
+            kind, length, crc = _REC.unpack(head)
+            payload = fh.read(length)
+            if len(payload) < length:
+                self.damage = f"truncated record at byte {offset}"
+                return
+            if zlib.crc32(payload) != crc:
+                self.damage = f"CRC mismatch in record at byte {offset}"
+                return
+            if kind == b"D":
+                yield self._decode(payload, offset)
+            elif kind == b"G":
+                at, lost = struct.unpack_from("<qq", payload)
+                self.gaps.append(GapRecord(at, lost, payload[16:].decode(errors="replace")))
+            elif kind == b"E":
+                self.end = json.loads(payload)
+            else:
+                self.damage = f"unknown record kind {kind!r} at byte {offset}"
+                return
+
+    def _decode(self, payload: bytes, offset: int) -> Batch:
+        (n,) = struct.unpack_from("<I", payload)
+        width = 2 if self.storage == STORAGE_RAW else 8
+        expected = 4 + n * (8 + 8 + 4 + 6 * width)
+        if len(payload) != expected:
+            raise RecordingError(
+                f"{self.path}: data record at byte {offset} has {len(payload)} bytes, "
+                f"expected {expected} for {n} samples"
+            )
+        pos = 4
+        index = np.frombuffer(payload, "<i8", n, pos).astype(np.int64)
+        pos += 8 * n
+        t_s = np.frombuffer(payload, "<f8", n, pos).astype(np.float64)
+        pos += 8 * n
+        temp = np.frombuffer(payload, "<f4", n, pos).astype(np.float64)
+        pos += 4 * n
+        if self._scale is not None:
+            raw = np.frombuffer(payload, "<i2", 6 * n, pos).reshape(n, 6).astype(np.int16)
+            values = raw * self._scale
+        else:
+            raw = None
+            values = np.frombuffer(payload, "<f8", 6 * n, pos).reshape(n, 6).astype(np.float64)
+        return Batch(index=index, t_s=t_s, values=values, temp_c=temp, raw=raw)

@@ -1,0 +1,246 @@
+"""Pytest fixtures that provide real MQTT brokers over TCP (never a mock).
+
+- ``mqtt_broker`` (session): ``(host, port, kind)`` of a running broker. ``kind`` is
+  ``"mosquitto"`` for the machine's mosquitto on 127.0.0.1:1883 when it answers MQTT,
+  ``"private-mosquitto"`` for a mosquitto started on a free port with its own config, or
+  ``"embedded"`` for imubench's own broker in a thread.
+- ``private_mosquitto`` (function): a factory ``private_mosquitto(config="", port=None)``
+  that starts a mosquitto with the given extra configuration on a free port (or ``port``)
+  and returns a ``MosquittoProcess`` (``host``, ``port``, ``dir``, ``kill()``,
+  ``restart()``, ``stop()``). Skips when no mosquitto binary is installed.
+- ``embedded_broker`` (function): a factory ``embedded_broker(**kwargs)`` that starts an
+  ``EmbeddedBroker`` in a thread on a free port and returns it (``.address``).
+
+Import them in a conftest with ``from mqtt_fixtures import *``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pwd
+import shutil
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from imubench.mqtt.broker import EmbeddedBroker
+
+__all__ = [
+    "MosquittoProcess",
+    "embedded_broker",
+    "find_mosquitto",
+    "free_port",
+    "mqtt_broker",
+    "private_mosquitto",
+    "speaks_mqtt",
+    "unique_prefix",
+]
+
+LOCALHOST = "127.0.0.1"
+
+
+def find_mosquitto() -> str | None:
+    """Path of the mosquitto broker binary (often in /usr/sbin, outside a user's PATH)."""
+    found = shutil.which("mosquitto")
+    if found:
+        return found
+    for candidate in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto"):
+        if os.access(candidate, os.X_OK):
+            return candidate
+    return None
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((LOCALHOST, 0))
+        return sock.getsockname()[1]
+
+
+def unique_prefix(name: str = "test") -> str:
+    """A topic prefix no other test run uses: ``imubench-test/<name>/<random>``."""
+    return f"imubench-test/{name}/{uuid.uuid4().hex[:12]}"
+
+
+def speaks_mqtt(host: str, port: int, timeout_s: float = 1.0) -> bool:
+    """True when ``host:port`` accepts an anonymous MQTT 3.1.1 CONNECT (CONNACK code 0)."""
+    client_id = b"imubench-probe-" + uuid.uuid4().hex[:8].encode()
+    body = b"\x00\x04MQTT\x04\x02\x00\x05" + len(client_id).to_bytes(2, "big") + client_id
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s) as sock:
+            sock.settimeout(timeout_s)
+            sock.sendall(bytes([0x10, len(body)]) + body)
+            reply = sock.recv(4)
+            sock.sendall(b"\xe0\x00")  # DISCONNECT
+    except OSError:
+        return False
+    return reply == b"\x20\x02\x00\x00"
+
+
+def _user_name() -> str:
+    return pwd.getpwuid(os.geteuid()).pw_name
+
+
+def _wait_listening(host: str, port: int, proc: subprocess.Popen[bytes], timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"mosquitto exited with code {proc.returncode} at start-up")
+        with contextlib.suppress(OSError), socket.create_connection((host, port), timeout=0.2):
+            return
+        time.sleep(0.02)
+    raise RuntimeError(f"mosquitto did not listen on {host}:{port} within {timeout_s} s")
+
+
+class MosquittoProcess:
+    """A private mosquitto broker in a temp directory, listening on 127.0.0.1:``port``.
+
+    ``config`` is appended to ``listener <port> 127.0.0.1``; it may refer to files in
+    ``dir`` (write them before calling ``start``) e.g. a password file or certificates.
+    """
+
+    def __init__(
+        self,
+        binary: str,
+        directory: Path,
+        config: str = "",
+        port: int | None = None,
+        allow_anonymous: bool = True,
+    ) -> None:
+        self.binary = binary
+        self.dir = directory
+        self.host = LOCALHOST
+        self.port = port or free_port()
+        self.config_path = directory / "mosquitto.conf"
+        self.log_path = directory / "mosquitto.log"
+        lines = [
+            f"listener {self.port} {self.host}",
+            f"allow_anonymous {'true' if allow_anonymous else 'false'}",
+            "persistence false",
+            f"log_dest file {self.log_path}",
+            "log_type all",
+            # Run as the invoking user: as root mosquitto would switch to user 'mosquitto',
+            # which cannot read pytest's private temp directories.
+            f"user {_user_name()}",
+            config,
+        ]
+        self.config_path.write_text("\n".join(lines) + "\n")
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def start(self, timeout_s: float = 5.0) -> MosquittoProcess:
+        """Start (or restart) the broker on the same port; return self."""
+        if self.proc is not None and self.proc.poll() is None:
+            return self
+        self.proc = subprocess.Popen(
+            [self.binary, "-c", str(self.config_path)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        try:
+            _wait_listening(self.host, self.port, self.proc, timeout_s)
+        except RuntimeError as exc:
+            err = self.proc.stderr.read().decode(errors="replace") if self.proc.stderr else ""
+            log = self.log_path.read_text() if self.log_path.exists() else ""
+            self.kill()
+            raise RuntimeError(f"{exc}\nstderr: {err}\nlog: {log[-2000:]}") from None
+        return self
+
+    def kill(self) -> None:
+        """SIGKILL the broker (clients see the TCP connection drop) and reap it."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+            self.proc.wait(5)
+
+    def stop(self) -> None:
+        """Terminate the broker politely (SIGTERM), SIGKILL after 5 s."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.kill()
+
+    def restart(self, timeout_s: float = 5.0) -> MosquittoProcess:
+        """Kill and start again on the same port."""
+        self.kill()
+        return self.start(timeout_s)
+
+    def log_text(self) -> str:
+        """The broker's log so far (for assertion messages)."""
+        return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+
+
+@pytest.fixture(scope="session")
+def mqtt_broker() -> Iterator[tuple[str, int, str]]:
+    """A real MQTT broker for the session: system mosquitto, private mosquitto, or embedded."""
+    if speaks_mqtt(LOCALHOST, 1883):
+        yield LOCALHOST, 1883, "mosquitto"
+        return
+    binary = find_mosquitto()
+    if binary is not None:
+        with tempfile.TemporaryDirectory(prefix="imubench-mosquitto-") as tmp:
+            broker = MosquittoProcess(binary, Path(tmp))
+            try:
+                broker.start()
+            except RuntimeError:
+                broker = None  # fall through to the embedded broker
+            if broker is not None:
+                try:
+                    yield broker.host, broker.port, "private-mosquitto"
+                finally:
+                    broker.stop()
+                return
+    embedded = EmbeddedBroker(LOCALHOST, 0)
+    host, port = embedded.start_in_thread()
+    try:
+        yield host, port, "embedded"
+    finally:
+        embedded.stop_thread()
+
+
+@pytest.fixture
+def private_mosquitto(tmp_path: Path) -> Iterator[Callable[..., MosquittoProcess]]:
+    """Factory: ``private_mosquitto(config="", port=None, allow_anonymous=True, start=True)``."""
+    binary = find_mosquitto()
+    if binary is None:
+        pytest.skip("no mosquitto binary installed (apt-get install mosquitto)")
+    started: list[MosquittoProcess] = []
+
+    def make(
+        config: str = "", port: int | None = None, allow_anonymous: bool = True, start: bool = True
+    ) -> MosquittoProcess:
+        directory = tmp_path / f"mosquitto-{len(started)}"
+        directory.mkdir()
+        broker = MosquittoProcess(binary, directory, config, port, allow_anonymous)
+        started.append(broker)
+        return broker.start() if start else broker
+
+    yield make
+    for broker in started:
+        broker.kill()
+
+
+@pytest.fixture
+def embedded_broker() -> Iterator[Callable[..., EmbeddedBroker]]:
+    """Factory: ``embedded_broker(**kwargs)`` -> a started thread-hosted EmbeddedBroker."""
+    started: list[EmbeddedBroker] = []
+
+    def make(**kwargs: Any) -> EmbeddedBroker:
+        kwargs.setdefault("port", 0)
+        broker = EmbeddedBroker(LOCALHOST, **kwargs)
+        broker.start_in_thread()
+        started.append(broker)
+        return broker
+
+    yield make
+    for broker in started:
+        broker.stop_thread()

@@ -1,0 +1,194 @@
+"""sim:// source, ``imubench acquire`` / ``imubench sim``, and the acceptance runs of the
+drivers issue (items 1-3) on the simulator with its 400 kHz bus timing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imubench.commands import acquire as acquire_cmd
+from imubench.commands import sim as sim_cmd
+from imubench.errors import SourceError
+from imubench.recording import load_recording
+from imubench.sources.registry import open_source
+
+
+def drain(uri: str):
+    src = open_source(uri)
+    batches = []
+    with src:
+        batches = list(src)
+    index = np.concatenate([b.index for b in batches])
+    gx = np.concatenate([b.raw[:, 0] for b in batches]).astype(np.int64) & 0xFFFF
+    return src, index, gx
+
+
+def check_identity(index: np.ndarray, gx: np.ndarray) -> None:
+    """Counting signal: raw gyro X = chip sample number mod 2^16, so a constant offset
+    to the delivered index proves no duplicate, no reorder and a right index per gap."""
+    assert np.all(np.diff(index) > 0)
+    assert len(np.unique((gx - index) & 0xFFFF)) == 1
+
+
+@pytest.mark.parametrize("duration_s", [10.0, pytest.param(60.0, marks=pytest.mark.slow)])
+def test_acceptance_1_lsm6dsl_3330hz_on_400khz(duration_s: float) -> None:
+    src, index, gx = drain(
+        f"sim://lsm6dsl?odr_hz=3330&bus_khz=400&counting=1&duration_s={duration_s:g}"
+    )
+    n = round(3330 * duration_s)
+    assert src.counters["overruns"] == 0 and src.counters["lost_samples"] == 0
+    assert len(index) == n and np.array_equal(index, np.arange(n))
+    check_identity(index, gx)
+    payload_fraction = 12 * len(index) / (src.elapsed_s * 400e3 / 9)
+    assert payload_fraction >= 0.85
+
+
+def test_acceptance_2_6660hz_refused_or_degraded() -> None:
+    with pytest.raises(SourceError, match=r"6660 Hz.*at most 44,444 B/s.*3330 Hz"):
+        open_source("sim://lsm6dsl?odr_hz=6660&bus_khz=400&duration_s=1")
+    src, index, _ = drain(
+        "sim://lsm6dsl?odr_hz=6660&bus_khz=400&duration_s=1&on_overbudget=degrade&counting=1"
+    )
+    assert src.info.odr_hz == 3330 and src.info.config["degraded_from_hz"] == 6660
+    assert len(index) == 3330 and src.counters["lost_samples"] == 0
+
+
+def test_acceptance_3_faults_every_sample_accounted(tmp_path: Path) -> None:
+    uri = (
+        "sim://lsm6dsl?odr_hz=104&bus_khz=400&nack_rate=1e-3&nack_burst=3"
+        "&reset_every_s=10&overrun_at_s=25&watermark_s=0.25&counting=1&seed=7"
+    )
+    out = tmp_path / "faults.imbr"
+    stats_path = tmp_path / "stats.json"
+    src = open_source(acquire_cmd.add_duration(uri, 60))
+    stats = acquire_cmd.record(src, out)
+    stats_path.write_text(json.dumps(stats))
+    n = 104 * 60
+    assert stats["samples"] + stats["lost_samples"] == n
+    assert stats["overruns"] == 1 and stats["io_errors"] > 0 and stats["retries"] > 0
+    injected = src.sim_bus.faults.injected  # type: ignore[attr-defined]
+    assert injected["resets"] == 6 and injected["nacks"] == stats["io_errors"]
+    assert src.stream.counters["chip_resets"] >= 5
+    rec = load_recording(out)
+    assert len(rec) == stats["samples"]
+    assert sum(g.lost for g in rec.gaps) == stats["lost_samples"] > 0
+    reasons = {g.reason for g in rec.gaps}
+    assert reasons == {"chip reset", "fifo overrun"}
+    # every hole in the recorded index is one recorded gap of the same size
+    holes = {
+        int(a): int(b)
+        for a, b in zip(
+            rec.index[1:][np.diff(rec.index) > 1],
+            np.diff(rec.index)[np.diff(rec.index) > 1] - 1,
+            strict=True,
+        )
+    }
+    assert all(holes.get(g.at_index, g.lost) == g.lost for g in rec.gaps)
+    check_identity(rec.index, rec.raw[:, 0].astype(np.int64) & 0xFFFF)
+
+
+@pytest.mark.xfail(
+    reason="known weakness: with a 3.75 % crystal error and chip resets every "
+    "7 s the host-time sizing of reset gaps can be off by one sample",
+    strict=False,
+)
+def test_crystal_error_keeps_index_exact_across_resets() -> None:
+    src, index, gx = drain(
+        "sim://lsm6dsm?odr_hz=104&crystal_ppm=37500&reset_every_s=7"
+        "&watermark_s=0.25&counting=1&duration_s=40"
+    )
+    check_identity(index, gx)
+    assert len(index) + src.counters["lost_samples"] == 104 * 40
+    # the actual rate is 107.9 Hz: the nominal-period index runs ahead of time by 3.75 %
+    assert src.counters["gaps"] == 5
+
+
+def test_sim_uri_errors_name_the_parameter() -> None:
+    with pytest.raises(SourceError, match=r"unknown parameter.*odr"):
+        open_source("sim://lsm6dsl?odr=104")
+    with pytest.raises(SourceError, match="chip 'lsm6ds9'"):
+        open_source("sim://lsm6ds9")
+    with pytest.raises(SourceError, match="gyro ODR 3330"):
+        open_source("sim://lsm6ds3h?odr_hz=3330").open()
+    with pytest.raises(SourceError, match="nack_rate"):
+        open_source("sim://lsm6dsl?nack_rate=2")
+
+
+def test_wall_clock_source_paces_and_closes_promptly() -> None:
+    import time
+
+    src = open_source("sim://lsm6dsl?odr_hz=104&seed=1&clock=wall")
+    t0 = time.monotonic()
+    with src:
+        b1 = src.read()
+        b2 = src.read()
+    elapsed = time.monotonic() - t0
+    assert b1 is not None and b2 is not None
+    assert b2.index[0] == b1.index[-1] + 1
+    assert 5 <= len(b1) <= 30  # about watermark_s = 0.1 s of data per batch
+    assert elapsed < 2.0
+
+
+def test_cli_acquire_and_sim(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from imubench.cli import main
+
+    out = tmp_path / "a.imbr"
+    stats = tmp_path / "a.json"
+    assert (
+        main(
+            [
+                "acquire",
+                "sim://lsm6dsl?odr_hz=52&bus_khz=100",
+                "--duration-s",
+                "20",
+                "--out",
+                str(out),
+                "--stats-json",
+                str(stats),
+            ]
+        )
+        == 0
+    )
+    s = json.loads(stats.read_text())
+    assert set(s) >= {
+        "samples",
+        "gaps",
+        "lost_samples",
+        "overruns",
+        "bus_bytes",
+        "bus_utilization",
+        "io_errors",
+        "retries",
+        "bad_frames",
+        "reconnects",
+    }
+    assert s["samples"] == 52 * 20 and 0 < s["bus_utilization"] < 0.05
+    rec = load_recording(out)
+    assert rec.metadata["chip"] == "lsm6dsl" and rec.rate_hz == 52
+    assert np.allclose(rec.values[:, 5], round(1 / 0.061e-3) * 0.061e-3)  # raw storage
+    out2 = tmp_path / "s.imbr"
+    assert (
+        main(
+            [
+                "sim",
+                "--chip",
+                "lsm6ds3h",
+                "--odr-hz",
+                "104",
+                "--duration-s",
+                "30",
+                "--seed",
+                "3",
+                "--out",
+                str(out2),
+            ]
+        )
+        == 0
+    )
+    rec2 = load_recording(out2)
+    assert len(rec2) == 3120 and rec2.metadata["chip"] == "lsm6ds3h"
+    assert "3120 samples" in capsys.readouterr().out
+    assert sim_cmd.build_uri  # the command builds a sim:// URI (documented)

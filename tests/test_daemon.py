@@ -1,0 +1,125 @@
+"""``imubench run`` end to end, as a real subprocess (issue 2, acceptance 2).
+
+Simulated LSM6DSL in real time -> recording + OADEV -> embedded MQTT broker; an external
+subscriber (``mosquitto_sub``, else an aiomqtt client) must see a snapshot per second for
+all six channels; SIGTERM must end it within 2 s with exit 0 and a recording that
+converts to CSV with every sample in order.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mqtt_fixtures import free_port
+
+from imubench.recording import load_recording
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def start_daemon(tmp_path: Path, port: int, extra: str = "") -> tuple[subprocess.Popen, Path]:
+    cfg = tmp_path / "daemon.toml"
+    cfg.write_text(
+        (REPO / "config" / "quickstart.toml").read_text()
+        .replace("port = 1883", f"port = {port}")
+        .replace('path = "recordings/', f'path = "{tmp_path}/recordings/')
+        + extra
+    )
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "imubench.cli", "run", "--config", str(cfg)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path,
+    )
+    return proc, cfg
+
+
+def wait_for_line(proc: subprocess.Popen, needle: str, timeout_s: float) -> str:
+    end = time.monotonic() + timeout_s
+    assert proc.stdout is not None
+    while time.monotonic() < end:
+        line = proc.stdout.readline()
+        if needle in line:
+            return line
+        if not line and proc.poll() is not None:
+            break
+    raise AssertionError(f"daemon never printed {needle!r}")
+
+
+@pytest.mark.skipif(shutil.which("mosquitto_sub") is None, reason="mosquitto_sub not installed")
+def test_quickstart_daemon_end_to_end(tmp_path: Path) -> None:
+    port = free_port()
+    proc, _ = start_daemon(tmp_path, port)
+    try:
+        line = wait_for_line(proc, "embedded MQTT broker listening", 30)
+        assert f":{port}" in line
+        sub = subprocess.run(
+            ["mosquitto_sub", "-h", "127.0.0.1", "-p", str(port), "-t",
+             "imubench/bench1/imu0/allan", "-C", "4", "-W", "30"],
+            capture_output=True, text=True, timeout=40,
+        )
+        snaps = [json.loads(s) for s in sub.stdout.splitlines()]
+        assert len(snaps) == 4
+        for s in snaps:
+            assert s["statistic"] == "oadev"
+            assert set(s["channels"]) == {"gx", "gy", "gz", "ax", "ay", "az"}
+            for ch in s["channels"].values():
+                assert len(ch["tau_s"]) == len(ch["dev"]) == len(ch["n"]) >= 1
+                assert ch["units"] in ("dps", "g")
+        stamps = [time.mktime(time.strptime(s["time"][:19], "%Y-%m-%dT%H:%M:%S")) for s in snaps]
+        assert stamps[-1] - stamps[0] <= 4.0  # at least one per second
+        assert snaps[-1]["samples"] > snaps[0]["samples"]
+        recs = list((tmp_path / "recordings").glob("*.imbr"))
+        assert len(recs) == 1
+        size1 = recs[0].stat().st_size
+        time.sleep(1.5)
+        assert recs[0].stat().st_size > size1  # the recording grows
+        status = subprocess.run(
+            ["mosquitto_sub", "-h", "127.0.0.1", "-p", str(port), "-t",
+             "imubench/bench1/imu0/status", "-C", "1", "-W", "5"],
+            capture_output=True, text=True, timeout=10,
+        )
+        assert json.loads(status.stdout)["state"] == "online"  # retained
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(timeout=10)
+        assert time.monotonic() - t0 < 2.0
+        assert rc == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    rec = load_recording(recs[0])
+    assert rec.complete and rec.damage is None
+    out = tmp_path / "all.csv"
+    subprocess.run([sys.executable, "-m", "imubench.cli", "convert", str(recs[0]), str(out)],
+                   check=True, capture_output=True, timeout=60)
+    csv = load_recording(out)
+    np.testing.assert_array_equal(csv.index, np.arange(len(csv)))  # every sample, in order
+    assert len(csv) == len(rec) > 104 * 3
+
+
+def test_daemon_stops_on_duration_and_resumes_state(tmp_path: Path) -> None:
+    port = free_port()
+    extra = "\n[run]\nduration_s = 1.0\n"
+    text = (REPO / "config" / "quickstart.toml").read_text().replace(
+        'memory = "bounded"', f'memory = "bounded"\nstate_path = "{tmp_path}/state.npz"'
+    ).replace("clock=wall", "clock=virtual")
+    cfg_text = text.replace("port = 1883", f"port = {port}").replace(
+        'path = "recordings/', f'path = "{tmp_path}/recordings/') + extra
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(cfg_text)
+    for expected in ("samples", "resumed Allan state"):
+        proc = subprocess.run([sys.executable, "-m", "imubench.cli", "run", "--config", str(cfg)],
+                              capture_output=True, text=True, timeout=60, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert expected in proc.stdout
+    assert "stopped after 104 samples" in proc.stdout

@@ -1,0 +1,128 @@
+"""Native recordings and CSV: round trips, gaps, crash tolerance, clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imubench.batch import Batch
+from imubench.cli import main
+from imubench.errors import RecordingError
+from imubench.recording import load_recording, open_writer
+
+SENS = np.array([8.75e-3] * 3 + [0.061e-3] * 3)
+
+
+def make_batches(n: int = 1000, hole_at: int = 400, lost: int = 7, seed: int = 0) -> list[Batch]:
+    rng = np.random.default_rng(seed)
+    idx = np.arange(n, dtype=np.int64)
+    idx[hole_at:] += lost
+    raw = rng.integers(-2000, 2000, size=(n, 6)).astype(np.int16)
+    temp = 25 + rng.normal(size=n) * 0.01
+    out = []
+    for lo in range(0, n, 128):
+        sl = slice(lo, lo + 128)
+        out.append(Batch(idx[sl], idx[sl] / 104.0, raw[sl] * SENS, temp[sl], raw[sl]))
+    return out
+
+
+def meta(**kw: object) -> dict[str, object]:
+    return {"chip": "lsm6dsl", "odr_hz": 104.0, "gyro_sensitivity_dps": 8.75e-3,
+            "accel_sensitivity_g": 0.061e-3, **kw}
+
+
+def test_native_round_trip_raw_keeps_counts_and_gaps(tmp_path: Path) -> None:
+    batches = make_batches()
+    path = tmp_path / "r.imbr"
+    with open_writer(path, meta(storage="raw_int16")) as w:
+        for b in batches:
+            w.write(b)
+    rec = load_recording(path)
+    ref = Batch.concat(batches)
+    assert rec.complete and rec.damage is None
+    np.testing.assert_array_equal(rec.raw, ref.raw)
+    np.testing.assert_array_equal(rec.index, ref.index)
+    np.testing.assert_allclose(rec.values, ref.values, rtol=0, atol=0)
+    assert [(g.at_index, g.lost) for g in rec.gaps] == [(407, 7)]
+    gx = rec.channel("gx")
+    assert len(gx) == 1007 and np.isnan(gx[400:407]).all() and not np.isnan(gx[:400]).any()
+    assert rec.metadata["chip"] == "lsm6dsl" and rec.rate_hz == 104.0
+
+
+def test_truncated_tail_of_a_crashed_writer_keeps_earlier_data(tmp_path: Path) -> None:
+    path = tmp_path / "crash.imbr"
+    w = open_writer(path, meta(storage="raw_int16"))
+    for b in make_batches(hole_at=999, lost=0):
+        w.write(b)
+    w._fh.flush()  # type: ignore[union-attr]  # simulate a crash: no close, no end record
+    size = path.stat().st_size
+    with open(path, "r+b") as fh:
+        fh.truncate(size - 100)  # the last record is cut in the middle
+    rec = load_recording(path)
+    assert not rec.complete
+    assert rec.damage and "truncated record" in rec.damage
+    assert len(rec) == 1000 - 104  # 7 full records of 128 samples + none of the last 104
+
+
+def test_csv_round_trip_and_convert_cli(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    src = tmp_path / "a.imbr"
+    with open_writer(src, meta(storage="raw_int16")) as w:
+        for b in make_batches():
+            w.write(b)
+    assert main(["convert", str(src), str(tmp_path / "a.csv")]) == 0
+    assert main(["convert", str(tmp_path / "a.csv"), str(tmp_path / "b.imbr")]) == 0
+    a, c, b = (load_recording(tmp_path / n) for n in ("a.imbr", "a.csv", "b.imbr"))
+    np.testing.assert_array_equal(c.index, a.index)
+    np.testing.assert_allclose(c.values, a.values, rtol=1e-8)
+    np.testing.assert_array_equal(b.index, a.index)
+    assert [(g.at_index, g.lost) for g in c.gaps] == [(407, 7)]
+    header = (tmp_path / "a.csv").read_text().splitlines()
+    assert "t,gx,gy,gz,ax,ay,az,temp,index" in header
+    assert "1000 samples, 1 gaps" in capsys.readouterr().out
+
+
+def test_csv_subset_of_columns_and_rate_inference(tmp_path: Path) -> None:
+    p = tmp_path / "s.csv"
+    t = np.arange(50) / 10.0
+    t[30:] += 0.2  # two lost samples
+    p.write_text("t,gz,temp\n" + "".join(f"{v:.3f},{i * 0.01},{20 + i * 0.001}\n"
+                                          for i, v in enumerate(t)))
+    rec = load_recording(p)
+    assert rec.rate_hz == pytest.approx(10.0)
+    assert rec.channels == ["gz", "temp"]
+    assert rec.lost_samples == 2
+    assert np.isnan(rec.channel("gx")).all()
+
+
+@pytest.mark.parametrize(
+    ("text", "where"),
+    [
+        ("t,gx\n0,1\n0.1,abc\n", ":3: column 'gx': 'abc' is not a number"),
+        ("t,gx,bogus\n0,1,2\n", ":1: bad CSV header"),
+        ("t,gx\n0,1\n0.1\n", ":3: 1 fields, header has 2"),
+    ],
+)
+def test_csv_errors_name_file_line_and_column(tmp_path: Path, text: str, where: str) -> None:
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(RecordingError) as err:
+        load_recording(p)
+    assert str(p) + where in str(err.value)
+
+
+def test_never_overwrites_and_rejects_unknown_suffix(tmp_path: Path) -> None:
+    p = tmp_path / "x.imbr"
+    open_writer(p, meta()).close()
+    with pytest.raises(RecordingError, match="exists already"):
+        open_writer(p, meta())
+    with pytest.raises(RecordingError, match="unknown recording suffix"):
+        open_writer(tmp_path / "x.dat", meta())
+
+
+def test_not_a_recording(tmp_path: Path) -> None:
+    p = tmp_path / "junk.imbr"
+    p.write_bytes(b"hello world")
+    with pytest.raises(RecordingError, match="bad magic"):
+        load_recording(p)

@@ -1,0 +1,70 @@
+"""The ``imubench allan`` subcommand on one-column text input."""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imubench.commands import allan as cmd
+
+
+def _run(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="imubench")
+    sub = parser.add_subparsers()
+    cmd.register(sub)
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+def test_allan_json_matches_nbs14(reference_dir: Path, tmp_path: Path) -> None:
+    y = np.loadtxt(reference_dir / "allantools-stable32/nbs14/nbs14_1000point_frequency.txt")
+    src = tmp_path / "y.txt.gz"
+    with gzip.open(src, "wt") as fh:
+        fh.write("# NBS14 1000 point\n")
+        fh.write("\n".join(repr(float(v)) for v in y))
+    out = tmp_path / "o.json"
+    rc = _run(
+        [
+            "allan",
+            str(src),
+            "--stat",
+            "oadev",
+            "--data-type",
+            "freq",
+            "--taus",
+            "1,10,100",
+            "--alpha",
+            "0",
+            "--json",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert d["stat"] == "oadev" and d["m"] == [1, 10, 100]
+    np.testing.assert_allclose(d["dev"], [2.922319e-01, 9.159953e-02, 3.241343e-02], rtol=1e-6)
+    assert d["alpha"] == [0, 0, 0]
+
+
+def test_allan_table_and_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = tmp_path / "x.txt"
+    src.write_text("1\n2\n# c\n3\nnan\n" + "\n".join(str(v) for v in range(40)) + "\n")
+    assert _run(["allan", str(src), "--stat", "mdev", "--alpha", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "mdev" in out and "tau_s" in out
+    bad = tmp_path / "bad.txt"
+    bad.write_text("1\nabc\n")
+    assert _run(["allan", str(bad), "--stat", "adev"]) == 2
+    assert "bad.txt:2" in capsys.readouterr().err
+    assert _run(["allan", str(src), "--stat", "adev", "--taus", "weekly"]) == 2
+
+
+def test_parse_taus() -> None:
+    assert cmd.parse_taus("octave") == "octave"
+    assert cmd.parse_taus("5") == 5
+    assert cmd.parse_taus("1,10.5") == [1.0, 10.5]
