@@ -167,3 +167,32 @@ def test_impossible_configuration_is_refused() -> None:
     _, _, _, dev = rig("lsm6ds3h")
     with pytest.raises(ConfigurationError, match="gyro ODR 3330"):
         dev.configure(ImuConfig(odr_hz=3330))
+
+
+def test_unequal_gyro_and_accel_odr_direct_reads_and_fifo_refusal() -> None:
+    """Gyro 208 Hz, accelerometer 52 Hz: configure writes each ODR code (§3.1, §3.2) and
+    the outputs update at their own rates; FIFO streaming refuses with a message that
+    names both rates (a Batch has one sample index for the six channels)."""
+    import numpy as np
+    from lsm6ds_sim.model import NoiseModel
+    from lsm6ds_sim.physics import SensorPhysics
+
+    clock = SimClock()
+    physics = SensorPhysics(NoiseModel.quiet().with_all(white=0.05), seed=1)
+    bus = SimI2CBus(clock)
+    bus.attach(0x6A, SimChip("lsm6dsl", clock, physics))
+    dev = LSM6DS(bus, "lsm6dsl", 0x6A, sleep=clock.sleep, monotonic=clock.now)
+    cfg = ImuConfig(odr_hz=208, accel_odr_hz=52)
+    writes = dict(dev.config_writes(cfg))
+    assert writes[0x10] >> 4 == 3 and writes[0x11] >> 4 == 5  # CTRL1_XL 52 Hz, CTRL2_G 208 Hz
+    dev.configure(cfg)
+    rows = []
+    for _ in range(208):
+        clock.sleep(1 / 208)
+        rows.append(dev.read_outputs_raw())
+    raw = np.array(rows)
+    gyro_updates = np.count_nonzero(np.any(np.diff(raw[:, 1:4], axis=0) != 0, axis=1))
+    accel_updates = np.count_nonzero(np.any(np.diff(raw[:, 4:7], axis=0) != 0, axis=1))
+    assert gyro_updates >= 200 and 50 <= accel_updates <= 52
+    with pytest.raises(ConfigurationError, match="gyro at 208 Hz and accelerometer at 52 Hz"):
+        FifoStream(dev, cfg)

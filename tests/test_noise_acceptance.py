@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import allantools
 import numpy as np
 import pytest
+import scipy.stats
 from lsm6ds_sim import noise as nz
 from lsm6ds_sim.model import NoiseModel
 from lsm6ds_sim.physics import quantize, simulate
@@ -142,6 +143,14 @@ def _check(name: str, hours: float) -> Outcome:
         )
     pooled = np.mean(np.concatenate([o.inside[o.valid] for o in outs]))
     assert pooled >= 0.80, f"{name}: {pooled:.0%} of (recording, tau) pairs inside"
+    # the issue's criterion itself (>= 80 % of valid taus inside the 90 % interval) must
+    # hold in at least 4 of the 5 recordings (one correct recording in 5 may miss it by
+    # chance: the measured single-recording pass rate is 78-100 % depending on the term)
+    passing = [seed for seed, o in zip(SEEDS, outs, strict=True) if o.fraction >= 0.80]
+    assert len(passing) >= 4, (
+        f"{name}: the 80 % criterion holds only for seeds {passing}: "
+        + ", ".join(f"{o.fraction:.0%}" for o in outs)
+    )
     return outs[0]
 
 
@@ -213,19 +222,45 @@ def test_markov_peak_formula_and_textbook_value() -> None:
 
 
 def _markov_peak(hours: float) -> None:
+    """The Gauss-Markov ADEV peak measured by allantools.oadev (independent estimator) on
+    41 log-spaced taus from 0.5 to 5 tau_c plus tau = 1.89 tau_c. Expected: the IEEE 952
+    C.6 maximum, height 0.437 q_c sqrt(tau_c) at 1.89 tau_c. Checked: the ADEV at
+    1.89 tau_c is inside its 90 % interval (smaller EDF of white and random-walk FM, as
+    for the acceptance table) in at least 3 of 5 recordings (a correct generator misses
+    that with probability ~1.5 %: over 40 seeds of 30 min the AVAR ratio there was
+    1.002 +- 0.160, an EDF of 78 against Greenhall's 87); the mean AVAR ratio over the
+    five recordings is 1 within its Student-t 90 % interval; the pooled peak, located
+    by a quadratic fit of log ADEV vs log tau around the maximum, is within 10 % of
+    1.89 tau_c. (The maximum of one recording's curve is biased up and wanders by +-40 %
+    on the flat top in 30 min, so it is not used per recording.)"""
     sigma, tau_c = 0.5, 10.0
     n = round(hours * 3600 * RATE_HZ)
     model = NoiseModel.single_term("gx", markov_sigma=sigma, markov_tau=tau_c)
-    y = quantize(simulate(model, n, RATE_HZ, seed=SEEDS[0])["gx"], LSB_DPS)
-    ms = np.unique(np.round(np.geomspace(0.5 * tau_c, 5 * tau_c, 41) * RATE_HZ).astype(int))
-    taus, adev, _, _ = allantools.oadev(y, rate=RATE_HZ, data_type="freq", taus=ms / RATE_HZ)
-    i = int(np.argmax(adev))
+    m_peak = round(1.89 * tau_c * RATE_HZ)
+    grid = np.round(np.geomspace(0.5 * tau_c, 5 * tau_c, 41) * RATE_HZ).astype(int)
+    ms = np.unique(np.append(grid, m_peak))
+    k = int(np.searchsorted(ms, m_peak))
     q_c = sigma * math.sqrt(2.0 / tau_c)
     height = 0.437 * q_c * math.sqrt(tau_c)
-    lo, hi = allantools.confidence_interval(adev[i], _edf(0, int(ms[i]), n + 1), ci=0.90)
-    assert lo <= height <= hi, f"peak ADEV {adev[i]:.4f}, expected {height:.4f}"
-    # the maximum of a noisy, flat-topped curve: accept the analytic tau within +-35 %
-    assert 0.65 * 1.89 * tau_c <= taus[i] <= 1.35 * 1.89 * tau_c, f"peak at {taus[i]:.1f} s"
+    edf = min(_edf(a, m_peak, n + 1) for a in (0, -2))
+    avars, inside = [], []
+    for seed in SEEDS:
+        y = quantize(simulate(model, n, RATE_HZ, seed=seed)["gx"], LSB_DPS)
+        taus, adev, _, _ = allantools.oadev(y, rate=RATE_HZ, data_type="freq", taus=ms / RATE_HZ)
+        avars.append(adev**2)
+        lo, hi = allantools.confidence_interval(adev[k], edf, ci=0.90)
+        inside.append(lo <= height <= hi)
+    assert sum(inside) >= 3, f"ADEV(1.89 tau_c) inside its 90 % interval for {inside}"
+    # pooled: mean AVAR ratio at the peak over the independent recordings, inside its
+    # Student-t 90 % interval (uses the recordings' own spread, not an EDF model)
+    ratio = np.array(avars)[:, k] / height**2
+    half = scipy.stats.t.ppf(0.95, len(SEEDS) - 1) * ratio.std(ddof=1) / math.sqrt(len(SEEDS))
+    assert abs(ratio.mean() - 1.0) <= half, f"AVAR(1.89 tau_c) / expected: {ratio}"
+    pooled = np.sqrt(np.mean(avars, axis=0))
+    i = int(np.argmax(pooled))
+    near = slice(max(i - 8, 0), i + 9)
+    c2, c1, _ = np.polyfit(np.log(taus[near]), np.log(pooled[near]), 2)
+    assert math.exp(-c1 / (2 * c2)) == pytest.approx(1.89 * tau_c, rel=0.10)
 
 
 def test_markov_adev_peak_30min() -> None:

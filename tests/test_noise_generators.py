@@ -78,7 +78,8 @@ def test_flicker_matches_direct_kasdin_walter_convolution() -> None:
     for k in range(1, taps):  # Kasdin & Walter (1992) recursion for alpha = 1
         h[k] = h[k - 1] * (k - 0.5) / k
     direct = 0.3 * np.convolve(w, h)[:n]
-    np.testing.assert_allclose(y, direct, rtol=1e-9, atol=1e-12)
+    # single-precision FFT convolution: error within 1e-5 of the output rms (docstring)
+    assert np.max(np.abs(y - direct)) < 1e-5 * np.std(direct)
 
 
 def test_seed_determinism_and_independence() -> None:

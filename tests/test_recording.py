@@ -126,3 +126,27 @@ def test_not_a_recording(tmp_path: Path) -> None:
     p.write_bytes(b"hello world")
     with pytest.raises(RecordingError, match="bad magic"):
         load_recording(p)
+
+
+@pytest.mark.parametrize("suffix", [".imbr", ".csv"])
+def test_lost_samples_count_gaps_before_first_and_after_last_sample(
+    tmp_path: Path, suffix: str
+) -> None:
+    """A stream that starts after lost samples and ends in a gap (a finite acquisition
+    whose last samples were lost) keeps every lost sample in ``Recording.lost_samples``."""
+    batches = make_batches()  # indices 0..1006 with 7 lost before index 407
+    shifted = [
+        Batch(b.index + 5, b.t_s, b.values, b.temp_c, b.raw, lost_before=5 if i == 0 else 0)
+        for i, b in enumerate(batches)
+    ]
+    path = tmp_path / f"r{suffix}"
+    storage = {"storage": "raw_int16"} if suffix == ".imbr" else {}
+    with open_writer(path, meta(**storage)) as w:
+        for b in shifted:
+            w.write(b, {})
+        w.write_gap(1012 + 30, 30, "chip reset")  # indices 1012..1041 lost at the end
+    rec = load_recording(path)
+    assert (int(rec.index[0]), int(rec.index[-1])) == (5, 1011)
+    assert rec.lost_samples == 5 + 7 + 30
+    assert len(rec) + rec.lost_samples == 1042  # every index below the end accounted for
+    assert sum(g.lost for g in rec.gaps) == rec.lost_samples

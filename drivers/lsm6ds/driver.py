@@ -46,7 +46,8 @@ class ImuConfig:
     """What :meth:`LSM6DS.configure` programs.
 
     Attributes:
-        odr_hz: output data rate of gyro and accelerometer, Hz (§4.1 table value).
+        odr_hz: output data rate of the gyro (and of the accelerometer unless
+            ``accel_odr_hz`` is given), Hz (§4.1 table value).
         fs_dps: gyro full scale, dps (125, 250, 500, 1000, 2000).
         fs_g: accelerometer full scale, g (2, 4, 8, 16).
         high_performance: keep XL_HM_MODE / G_HM_MODE = 0 (high-performance on, §4.3).
@@ -56,12 +57,20 @@ class ImuConfig:
     """
 
     odr_hz: float = 104.0
+    accel_odr_hz: float | None = None
+    """Accelerometer ODR when it differs from the gyro's, Hz (None: the same). Direct
+    output reads support it; :class:`lsm6ds.stream.FifoStream` refuses it (see there)."""
     fs_dps: float = 250.0
     fs_g: float = 2.0
     high_performance: bool = True
     gyro_lpf1: bool = False
     bdu: bool = True
     timestamp: bool = True
+
+    @property
+    def odr_xl_hz(self) -> float:
+        """Accelerometer ODR, Hz."""
+        return self.odr_hz if self.accel_odr_hz is None else self.accel_odr_hz
 
     @property
     def gyro_sensitivity_dps(self) -> float:
@@ -251,7 +260,7 @@ class LSM6DS:
         """The exact (register, value) writes :meth:`configure` issues, in order."""
         m = self.map
         try:
-            odr_xl = m.odr_code(cfg.odr_hz, "accel")
+            odr_xl = m.odr_code(cfg.odr_xl_hz, "accel")
             odr_g = m.odr_code(cfg.odr_hz, "gyro")
             fs_xl = accel_fs_code(cfg.fs_g)
             fs_g = gyro_fs_code(cfg.fs_dps)

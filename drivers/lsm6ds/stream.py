@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lsm6ds.driver import LSM6DS, ImuConfig
-from lsm6ds.errors import BusBudgetError, DriverIOError, LSM6DSError
+from lsm6ds.errors import BusBudgetError, ConfigurationError, DriverIOError, LSM6DSError
 from lsm6ds.registers import DECIMATION, FIFO_DEPTH_WORDS, FIFO_MODES, ODR_HZ
 
 TICK_S = 25e-6
@@ -115,6 +115,15 @@ class FifoStream:
         self.on_overbudget = on_overbudget
         self.verify_every_s = verify_every_s
         self.degraded_from_hz: float | None = None
+        if cfg.odr_xl_hz != cfg.odr_hz:
+            raise ConfigurationError(
+                f"{dev.chip}: gyro at {cfg.odr_hz:g} Hz and accelerometer at "
+                f"{cfg.odr_xl_hz:g} Hz: FIFO streaming needs one ODR for both, because a "
+                "Batch carries the six channels on one sample index (the slower sensor "
+                "would be decimated in the FIFO pattern, §9.4, and its missing samples "
+                "could only be filled by repeats); set accel_odr_hz equal to odr_hz, or "
+                "decimate the faster sensor afterwards"
+            )
         self.cfg, self.ts_decimation = self._plan(cfg)
         self.odr_hz = self.cfg.odr_hz
         slot_words = 6
@@ -140,9 +149,9 @@ class FifoStream:
         self._last_raw_ticks = 0
         self._epoch_t_ref = 0.0
         self._tick_s_est = TICK_S
-        self._drift_ref: tuple[float, float] | None = None
-        self._drift_cur: tuple[float, float] | None = None
-        self._drift_sum: tuple[float, float] = (0.0, 0.0)
+        self._drift_cur: tuple[float, float] | None = None  # this epoch: (host s, ticks)
+        self._drift_sum: tuple[float, float] = (0.0, 0.0)  # finished epochs, summed
+        self._drift_raw = 0  # last raw 24-bit counter read this epoch
         self._last_sample_host_t: float | None = None
         self._pending_gap_reason: str | None = None
         self._last_verify_t = 0.0
@@ -201,6 +210,8 @@ class FifoStream:
                 offset += 3
         self._gyro_idx = gyro
         self._accel_idx = accel
+        # columns of one pattern's words holding gx gy gz ax ay az of slot 0, 1, ...
+        self._body_cols = np.concatenate([gyro, accel], axis=1).reshape(-1)
         self.ticks_per_slot = 1.0 / (self.odr_hz * TICK_S)
 
     @property
@@ -245,7 +256,7 @@ class FifoStream:
         if new_epoch and self.ts_decimation:
             self._epoch_t_ref = self.dev.reset_timestamp()
             self._last_ticks = None
-            self._drift_ref = None
+            self._drift_raw = 0
             if self._drift_cur is not None:  # bank the finished epoch's baseline
                 self._drift_sum = (
                     self._drift_sum[0] + self._drift_cur[0],
@@ -300,6 +311,8 @@ class FifoStream:
             if not dev.config_intact():
                 self._recover_chip_reset()
                 return None, 0
+            if self.ts_decimation:
+                self._measure_drift()
         status = dev.read_block("FIFO_STATUS1", 4)
         t_status = dev.monotonic()
         diff_mask = (1 << dev.map.fifo_diff_bits) - 1
@@ -344,14 +357,12 @@ class FifoStream:
 
     def _decode(self, words: np.ndarray, t_newest: float, temp_c: float) -> StreamChunk:
         n_pat, d = len(words), self.pattern_slots
-        gyro = words[:, self._gyro_idx]  # (P, d, 3)
-        accel = words[:, self._accel_idx]
-        raw = np.concatenate([gyro, accel], axis=2).reshape(n_pat * d, 6).astype(np.int16)
+        raw = np.take(words, self._body_cols, axis=1).reshape(n_pat * d, 6)
         gaps: list[tuple[int, int, str]] = []
         if self.ts_decimation:
             ts_w = words[:, self._ts_offset : self._ts_offset + 2].astype(np.int64) & 0xFFFF
             raw_ticks = ((ts_w[:, 0] & 0xFF) << 8) | ((ts_w[:, 0] >> 8) << 16) | (ts_w[:, 1] >> 8)
-            start_slots, ticks = self._pattern_start_slots(raw_ticks, t_newest, n_pat, gaps)
+            start_slots, ticks = self._pattern_start_slots(raw_ticks, gaps)
         else:
             start_slots = self._pattern_start_slots_host(n_pat, t_newest, gaps)
         index = (start_slots[:, None] + np.arange(d)).reshape(-1)
@@ -371,8 +382,38 @@ class FifoStream:
             index=index.astype(np.int64), raw=raw, t_s=np.asarray(t_s), temp_c=temp_c, gaps=gaps
         )
 
+    def _measure_drift(self) -> None:
+        """Estimate the sensor clock against the host clock: read the timestamp counter
+        (TIMESTAMP0-2, §7-8) at a known host time (the transfer's midpoint) and compare
+        with the epoch origin (host time of the 0xAA counter reset, tick 0). The tick
+        period is total host seconds / total ticks over every epoch's baseline, so after
+        a second of data the error is ~(25 us + transfer jitter) / baseline; a crystal
+        running 3.75 % fast (107.9 Hz for 104) is then known to ~1e-5.
+        """
+        t0 = self.dev.monotonic()
+        raw = self.dev.read_timestamp_ticks()
+        t_read = 0.5 * (t0 + self.dev.monotonic())
+        prev_ticks = self._drift_cur[1] if self._drift_cur is not None else 0.0
+        ticks = prev_ticks + ((raw - self._drift_raw) % TICKS_WRAP)
+        span_t = t_read - self._epoch_t_ref
+        if span_t <= 0 or ticks <= 0 or abs(span_t / (ticks * TICK_S) - 1.0) > 0.1:
+            return  # counter reset under us (a chip reset the next poll will see)
+        self._drift_raw = raw
+        self._drift_cur = (span_t, float(ticks))
+        tot_t, tot_k = self._drift_sum[0] + span_t, self._drift_sum[1] + ticks
+        if tot_k * TICK_S >= 0.5:
+            est = tot_t / tot_k
+            if abs(est / TICK_S - 1.0) < 0.1:
+                self._tick_s_est = est
+
+    @property
+    def measured_odr_hz(self) -> float:
+        """The output data rate measured against the host clock, Hz (the nominal ODR
+        until the first drift measurement; needs the timestamp, ``timestamp=True``)."""
+        return 1.0 / (self.ticks_per_slot * self._tick_s_est)
+
     def _pattern_start_slots(
-        self, raw_ticks: np.ndarray, t_newest: float, n_pat: int, gaps: list[tuple[int, int, str]]
+        self, raw_ticks: np.ndarray, gaps: list[tuple[int, int, str]]
     ) -> tuple[np.ndarray, np.ndarray]:
         """Slot index and unwrapped ticks of each pattern start (timestamps mod 2^24)."""
         d = self.pattern_slots
@@ -382,20 +423,6 @@ class FifoStream:
         ticks = base + np.cumsum(deltas)
         if self._last_ticks is None:  # new epoch: pattern 0 ticks = its raw value
             ticks = ticks - ticks[0] + int(raw_ticks[0])
-        # drift: host seconds per tick over all epochs' baselines (each >= 2 s counts)
-        newest_ticks = int(ticks[-1]) + (d - 1) * self.ticks_per_slot
-        if self._drift_ref is None:
-            self._drift_ref = (t_newest, newest_ticks)
-        else:
-            t0, k0 = self._drift_ref
-            span_t, span_k = t_newest - t0, newest_ticks - k0
-            tot_t, tot_k = self._drift_sum[0] + span_t, self._drift_sum[1] + span_k
-            if span_k > 2.0 / TICK_S:
-                self._drift_cur = (span_t, span_k)
-            if tot_k > 5.0 / TICK_S:
-                est = tot_t / tot_k
-                if abs(est / TICK_S - 1.0) < 0.1:
-                    self._tick_s_est = est
         slots_rel = np.rint((ticks - ticks[0]) / self.ticks_per_slot).astype(np.int64)
         if self._next_index is None:
             first = 0

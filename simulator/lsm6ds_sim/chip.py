@@ -120,6 +120,9 @@ class _Config:
     pos_table: np.ndarray = field(default_factory=lambda: np.zeros((1, 4), dtype=np.int64))
     slot_offset: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
     pattern_words: int = 0
+    word_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    """Columns of a (patterns, slots x 12) word table that the FIFO holds, in order."""
+    bdu: bool = False
     fifo_ratio: Fraction = Fraction(1)  # f_fifo / f_base, exact
 
 
@@ -167,7 +170,8 @@ class SimChip:
             "fifo_underflow_words": 0,
         }
         self.sim_reserved_log: list[tuple[int, int]] = []
-        self._temp_glitch_c = 0.0
+        self._temp_glitches: list[tuple[int, int, float]] = []
+        """Pending glitches: (first base sample, last base sample, degC)."""
         self._a = {name: reg.address for name, reg in self.map.registers.items()}
         self._power_on()
 
@@ -211,9 +215,18 @@ class SimChip:
         """Lose the FIFO's content as an overrun would, setting OVER_RUN."""
         self.fifo.drop_all()
 
-    def sim_temp_glitch(self, delta_c: float) -> None:
-        """Add ``delta_c`` to the temperature output of the next sample only."""
-        self._temp_glitch_c += delta_c
+    def sim_temp_glitch(
+        self, delta_c: float, duration_s: float = 0.0, at_s: float | None = None
+    ) -> None:
+        """Temperature glitch: add ``delta_c`` (degC) to the temperature output of the
+        samples produced from ``at_s`` (default now) for ``duration_s`` seconds (at least
+        the next sample)."""
+        t0 = self.clock.now() if at_s is None else at_s
+        self.sim_advance_to(t0)
+        k0 = self._k_last + 1
+        f = self._cfg.base * self._f_scale
+        k1 = max(k0, math.floor((t0 + duration_s) * f)) if f else k0
+        self._temp_glitches.append((k0, k1, float(delta_c)))
 
     def sim_trigger_fifo(self) -> None:
         """The trigger event of the continuous-to-FIFO and bypass-to-continuous modes."""
@@ -254,6 +267,7 @@ class SimChip:
         )
         c.timer_en = bool(self._bits("TIMER_EN"))
         c.timer_hr = bool(self._bits("TIMER_HR"))
+        c.bdu = bool(self._bits("BDU"))
         self._build_pattern(c)
         if c.base and c.fifo_odr:
             c.fifo_ratio = Fraction(round(c.fifo_odr * 10)) / Fraction(round(c.base * 10))
@@ -298,6 +312,7 @@ class SimChip:
         pos_table = np.where(present, slot_offset[:, None] + 3 * rank, -1)
         c.pattern_slots = slots
         c.pos_table = pos_table
+        c.word_cols = np.nonzero(np.repeat(present, 3, axis=1).reshape(-1))[0]
         c.slot_offset = slot_offset
         c.pattern_words = int(counts.sum() * 3)
 
@@ -320,56 +335,69 @@ class SimChip:
         c = self._cfg
         n = k1 - k0 + 1
         dt = 1.0 / (c.base * self._f_scale)
+        # row 0: the sample before k0 (the FIFO may need it); rows 1..n: k0..k1
         if self.sim_stuck_output:
-            rows = np.broadcast_to(self._held, (n, 7)).copy()
+            rows = np.broadcast_to(self._held, (n + 1, 7)).copy()
         else:
             true = self.physics.generate(n, dt)
-            f = np.empty((n, 7))
-            f[:, 0] = true.temp_c
-            f[:, 1:4] = true.gyro_dps
-            f[:, 4:7] = true.accel_g
-            f[:, 0] -= self.map.temp_zero_c
-            f[:, 0] *= self.map.temp_lsb_per_c
-            if self._temp_glitch_c:
-                f[0, 0] += self._temp_glitch_c * self.map.temp_lsb_per_c
-                self._temp_glitch_c = 0.0
-            f[:, 1:4] *= 1.0 / c.gyro_sens
+            f = np.empty((n + 1, 7))
+            f[0] = self._held
+            v = f[1:]
+            v[:, 0] = true.temp_c
+            v[:, 1:4] = true.gyro_dps
+            v[:, 4:7] = true.accel_g
+            v[:, 0] -= self.map.temp_zero_c
+            v[:, 0] *= self.map.temp_lsb_per_c
+            if self._temp_glitches:
+                self._apply_temp_glitches(v[:, 0], k0, k1)
+            v[:, 1:4] *= 1.0 / c.gyro_sens
             if c.st_g:
-                f[:, 1:4] += c.st_g * self.sim_self_test_gyro_lsb
+                v[:, 1:4] += c.st_g * self.sim_self_test_gyro_lsb
             if c.st_xl:
-                f[:, 4:7] += c.st_xl * self.sim_self_test_accel_g
-            f[:, 4:7] *= 1.0 / c.accel_sens
-            np.rint(f, out=f)
-            np.clip(f, -32768, 32767, out=f)  # saturation at full scale (int16)
+                v[:, 4:7] += c.st_xl * self.sim_self_test_accel_g
+            v[:, 4:7] *= 1.0 / c.accel_sens
+            np.rint(v, out=v)
+            np.maximum(v, -32768.0, out=v)  # saturation at full scale (int16)
+            np.minimum(v, 32767.0, out=v)
             rows = f.astype(np.int64)
             if self.sim_counting:
-                rows[:, 1] = (np.arange(k0, k1 + 1) & 0xFFFF).astype(np.uint16).view(np.int16)
+                rows[1:, 1] = (np.arange(k0, k1 + 1) & 0xFFFF).astype(np.uint16).view(np.int16)
             for cols, odr in ((slice(1, 4), c.odr_g), (slice(4, 7), c.odr_xl)):
                 ratio = round(c.base / odr) if odr else 0
                 if ratio == 1:
                     continue
-                k = np.arange(k0, k1 + 1)
-                fresh = (k % ratio == 0) if ratio else np.zeros(n, dtype=bool)
-                idx = np.maximum.accumulate(np.where(fresh, np.arange(n), -1))
-                held = rows[:, cols].copy()
-                rows[:, cols] = np.where(
-                    idx[:, None] >= 0, held[np.maximum(idx, 0)], self._held[cols]
-                )
-        prev = self._held.copy()
+                # a slower sensor holds its last sample between its own updates
+                k = np.arange(k0 - 1, k1 + 1)
+                fresh = (k % ratio == 0) if ratio else np.zeros(n + 1, dtype=bool)
+                fresh[0] = True
+                idx = np.maximum.accumulate(np.where(fresh, np.arange(n + 1), 0))
+                rows[:, cols] = rows[idx, cols]
         self._held = rows[-1].copy()
         self.sim_stats["samples"] += n
-        self._update_outputs(rows[-1])
+        self._update_outputs(self._held)
         if c.fifo_odr > 0 and self.fifo.accepting:
-            self._fill_fifo(k0, k1, np.vstack([prev[None, :], rows]))
+            self._fill_fifo(k0, k1, rows)
+
+    def _apply_temp_glitches(self, temp_lsb: np.ndarray, k0: int, k1: int) -> None:
+        """Add the pending glitches overlapping base samples ``k0..k1`` (in LSB)."""
+        keep = []
+        for g0, g1, delta_c in self._temp_glitches:
+            lo, hi = max(g0, k0), min(g1, k1)
+            if lo <= hi:
+                temp_lsb[lo - k0 : hi - k0 + 1] += delta_c * self.map.temp_lsb_per_c
+            if g1 > k1:
+                keep.append((g0, g1, delta_c))
+        self._temp_glitches = keep
 
     def _update_outputs(self, row: np.ndarray) -> None:
         c = self._cfg
         data = row.astype(np.int16).tobytes()  # temp, gx, gy, gz, ax, ay, az (LE)
-        bdu = bool(self._bits("BDU"))
-        for pair in range(7):
-            if bdu and pair in self._bdu_locked:
-                continue
-            self._out[2 * pair : 2 * pair + 2] = data[2 * pair : 2 * pair + 2]
+        if c.bdu and self._bdu_locked:
+            for pair in range(7):
+                if pair not in self._bdu_locked:
+                    self._out[2 * pair : 2 * pair + 2] = data[2 * pair : 2 * pair + 2]
+        else:
+            self._out[:] = data
         self._status |= 0x04 | (0x02 if c.odr_g else 0) | (0x01 if c.odr_xl else 0)
 
     def _fill_fifo(self, k0: int, k1: int, src: np.ndarray) -> None:
@@ -377,36 +405,46 @@ class SimChip:
         ``src[0]`` is the sample before ``k0``, ``src[i]`` sample ``k0 - 1 + i``."""
         c = self._cfg
         r = c.fifo_ratio
-        j_due = math.floor(k1 * r)
+        j_due = (k1 * r.numerator) // r.denominator
         j_from = max(self._j_last + 1, self._slot0)
         self._j_last = max(self._j_last, j_due)
-        if j_due < j_from:
+        if j_due < j_from or c.pattern_words == 0:
             return
-        j = np.arange(j_from, j_due + 1, dtype=np.int64)
-        kb = (j * r.denominator) // r.numerator  # latest base sample at slot time
-        idx = np.clip(kb - (k0 - 1), 0, len(src) - 1)
-        m = len(j)
-        sets = np.zeros((m, 4, 3), dtype=np.int64)
-        sets[:, 0] = src[idx, 1:4]
-        sets[:, 1] = src[idx, 4:7]
+        # slots j_from..j_due, laid out on whole patterns: `lead` slots before j_from
+        S = c.pattern_slots
+        lead = (j_from - self._slot0) % S
+        m = j_due - j_from + 1
+        n_pat = -(-(lead + m) // S)
+        j = np.arange(j_from - lead, j_from - lead + n_pat * S, dtype=np.int64)
+        # latest base sample at each slot time
+        idx = j - (k0 - 1) if r == 1 else (j * r.denominator) // r.numerator - (k0 - 1)
+        np.maximum(idx, 0, out=idx)
+        np.minimum(idx, len(src) - 1, out=idx)
+        vals = np.zeros((n_pat * S, 12), dtype=np.uint16)  # gyro, accel, DS3, DS4 words
+        vals[:, 0:6] = np.take(src, idx, axis=0)[:, 1:7]  # two's complement wraps
         if c.ds4_timestamp:
             ticks = (j * round(TIMESTAMP_HZ * 10)) // round(c.fifo_odr * 10) - self._ts_origin
             if not c.timer_en:
-                ticks = np.zeros_like(ticks)
+                ticks[:] = 0
             if not c.timer_hr:
-                ticks = ticks // 256
+                ticks //= 256
             ticks &= 0xFFFFFF
-            sets[:, 3, 0] = ((ticks >> 8) & 0xFF) | (((ticks >> 16) & 0xFF) << 8)
-            sets[:, 3, 1] = (ticks & 0xFF) << 8
+            vals[:, 9] = ((ticks >> 8) & 0xFF) | (((ticks >> 16) & 0xFF) << 8)
+            vals[:, 10] = (ticks & 0xFF) << 8
         elif c.ds4_temp:
-            sets[:, 3, 0] = src[idx, 0]
-        slot = (j - self._slot0) % c.pattern_slots
-        present = c.pos_table[slot] >= 0
-        words = sets[present].reshape(-1).astype(np.uint16).view(np.int16)
-        start = c.pos_table[slot][present]
-        pos = (start[:, None] + np.arange(3)).reshape(-1).astype(np.uint16)
-        self.fifo.push(words, pos)
-        self.fifo.next_pattern_pos = int(c.slot_offset[(j_due + 1 - self._slot0) % c.pattern_slots])
+            vals[:, 9] = np.take(src[:, 0], idx)
+        # pattern order (§9.4): the words present in each slot, slot after slot
+        words = np.take(vals.reshape(n_pat, S * 12), c.word_cols, axis=1).reshape(-1)
+        first = int(c.slot_offset[lead])
+        n_words = (
+            ((lead + m) // S) * c.pattern_words
+            + int(c.slot_offset[(lead + m) % S])
+            - first
+        )
+        words = words[first : first + n_words]
+        pos = ((first + np.arange(n_words)) % c.pattern_words).astype(np.uint16)
+        self.fifo.push(words.view(np.int16), pos)
+        self.fifo.next_pattern_pos = int(c.slot_offset[(j_due + 1 - self._slot0) % S])
 
     # ---------------------------------------------------------------- register access
     def _ctrl3(self) -> int:

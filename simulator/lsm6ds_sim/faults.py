@@ -12,9 +12,12 @@ transaction. Faults:
   ``OSError(ETIMEDOUT)``.
 - spontaneous chip reset every ``reset_every_s`` (registers back to reset values).
 - one forced FIFO overrun at ``overrun_at_s``.
-- stuck output from ``stuck_output_at_s`` for ``stuck_output_for_s``.
-- temperature glitches: ``temp_glitch_rate`` per second, each adds ``temp_glitch_c`` to
-  the temperature output of one sample.
+- stuck output from ``stuck_output_at_s`` for ``stuck_output_for_s``: the sensor's
+  outputs (registers and FIFO, all six axes and the temperature) repeat the last sample
+  for that interval, as a hung ADC would (the timestamp keeps counting).
+- temperature glitches: Poisson events at ``temp_glitch_rate`` per second; each adds
+  ``+-temp_glitch_c`` (sign drawn at random) to the temperature output for
+  ``temp_glitch_s`` seconds (at least one sample): a spike on OUT_TEMP.
 
 Random draws come from a generator seeded by ``seed`` only, so a run is reproducible.
 """
@@ -46,6 +49,7 @@ class FaultPlan:
     stuck_output_for_s: float = 0.0
     temp_glitch_rate: float = 0.0
     temp_glitch_c: float = 5.0
+    temp_glitch_s: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -55,6 +59,7 @@ class FaultPlan:
             "reset_every_s",
             "stuck_output_for_s",
             "temp_glitch_rate",
+            "temp_glitch_s",
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"FaultPlan.{name}={getattr(self, name)} must be >= 0")
@@ -92,6 +97,7 @@ class FaultInjector:
             "resets": 0,
             "overruns": 0,
             "temp_glitches": 0,
+            "stuck_outputs": 0,
         }
         self.reset_times_s: list[float] = []
 
@@ -130,21 +136,18 @@ class FaultInjector:
             self._overrun_pending = False
             self.injected["overruns"] += 1
         if p.stuck_output_at_s is not None:
-            stuck = p.stuck_output_at_s <= now_s < p.stuck_output_at_s + p.stuck_output_for_s
-            if stuck != self._stuck_output_state:
-                chip.sim_advance_to(
-                    min(
-                        now_s,
-                        p.stuck_output_at_s
-                        if stuck
-                        else p.stuck_output_at_s + p.stuck_output_for_s,
-                    )
-                )
-                chip.sim_stuck_output = stuck
-                self._stuck_output_state = stuck
+            start, end = p.stuck_output_at_s, p.stuck_output_at_s + p.stuck_output_for_s
+            if self._stuck_output_state is None and start <= now_s:
+                chip.sim_advance_to(start)
+                chip.sim_stuck_output = True
+                self._stuck_output_state = True
+                self.injected["stuck_outputs"] += 1
+            if self._stuck_output_state and end <= now_s:
+                chip.sim_advance_to(end)
+                chip.sim_stuck_output = False
+                self._stuck_output_state = False
         while self._next_glitch_s <= now_s:
-            chip.sim_advance_to(self._next_glitch_s)
             sign = 1.0 if self._rng.random() < 0.5 else -1.0
-            chip.sim_temp_glitch(sign * p.temp_glitch_c)
+            chip.sim_temp_glitch(sign * p.temp_glitch_c, p.temp_glitch_s, self._next_glitch_s)
             self.injected["temp_glitches"] += 1
             self._next_glitch_s = self._draw_glitch(self._next_glitch_s)

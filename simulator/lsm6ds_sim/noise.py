@@ -36,6 +36,7 @@ The analytic functions are :func:`avar_white` ... :func:`avar_sine`.
 from __future__ import annotations
 
 import abc
+import functools
 import math
 
 import numpy as np
@@ -56,6 +57,23 @@ TERM_IDS: dict[str, int] = {
 
 FLICKER_MAX_TAPS: int = 1 << 22
 """Cap on the flicker filter length (4.2 M samples: 11.2 h at 104 Hz)."""
+
+FLICKER_MAX_BLOCK_RATIO: int = 3
+"""Largest overlap-save block, in filter lengths: a block of ``nfft = taps - 1 + block``
+FFT points yields ``block`` samples, so long streams cost 4/3 FFT points per sample at
+the cap, and a record of ``taps`` samples is served by one block of ``2 taps``."""
+
+
+@functools.lru_cache(maxsize=4)
+def _kasdin_walter_spectrum(taps: int, nfft: int) -> np.ndarray:
+    """rfft (complex64, read-only) of the Kasdin-Walter alpha = 1 impulse response
+    ``h_0 = 1, h_k = h_{k-1} (k - 1/2) / k`` (k < taps), zero-padded to ``nfft``; shared by
+    every channel with the same length (it holds no random state)."""
+    k = np.arange(1, taps, dtype=np.float64)
+    h = np.concatenate([[1.0], np.cumprod((k - 0.5) / k)])
+    spectrum = scipy.fft.rfft(h, nfft).astype(np.complex64)
+    spectrum.flags.writeable = False
+    return spectrum
 
 
 def term_rng(seed: int, channel_index: int, term: str, sub: int = 0) -> np.random.Generator:
@@ -107,31 +125,46 @@ class FlickerNoise(TermGenerator):
     duration hint (``SensorPhysics(duration_hint_s=...)``), capped at
     :data:`FLICKER_MAX_TAPS`.
 
-    Streaming: FFT overlap-save in fixed internal blocks of ``block`` samples carrying the
-    last ``taps - 1`` white samples; outputs are served from the current block, so the
-    result never depends on how callers chunk their requests.
+    Streaming: FFT overlap-save in fixed internal blocks of ``block = nfft - taps + 1``
+    samples (``block`` about the expected record length ``length_hint``, between ``taps``
+    and :data:`FLICKER_MAX_BLOCK_RATIO` x ``taps``) carrying the last
+    ``taps - 1`` white samples; outputs are served from the current block, so the result
+    never depends on how callers chunk their requests. The white samples are drawn in
+    float64 (the same stream as ever); the convolution runs in single precision
+    (float32 / complex64 FFTs, 3-4x faster than double): its rounding error is about
+    1e-6 of the output's rms, a white floor 120 dB below the term, far below an int16
+    LSB (tested against the direct FIR sum).
     """
 
-    def __init__(self, coefficient: float, rng: np.random.Generator, taps: int) -> None:
+    def __init__(
+        self,
+        coefficient: float,
+        rng: np.random.Generator,
+        taps: int,
+        length_hint: int | None = None,
+    ) -> None:
         self.coefficient = float(coefficient)
         self.rng = rng
         self.taps = max(2, min(int(taps), FLICKER_MAX_TAPS))
         L = self.taps
-        k = np.arange(1, L, dtype=np.float64)
-        self.h = np.concatenate([[1.0], np.cumprod((k - 0.5) / k)])
-        self.nfft = scipy.fft.next_fast_len(max(2 * L, 1 << 12), real=True)
+        want = L if length_hint is None else int(length_hint)
+        want = min(max(want, L), FLICKER_MAX_BLOCK_RATIO * L)
+        self.nfft = scipy.fft.next_fast_len(max(L - 1 + want, 1 << 12), real=True)
         self.block = self.nfft - L + 1
-        self.H = scipy.fft.rfft(self.h, self.nfft)
-        self.history = np.zeros(L - 1)
-        self.buffer = np.empty(0)
+        self.H = _kasdin_walter_spectrum(L, self.nfft)
+        self.history = np.zeros(L - 1, dtype=np.float32)
+        self.buffer = np.empty(0, dtype=np.float32)
         self.pos = 0
 
     def _next_block(self) -> None:
         w = self.rng.standard_normal(self.block)
-        x = np.concatenate([self.history, w])
-        y = scipy.fft.irfft(scipy.fft.rfft(x, self.nfft) * self.H, self.nfft)
-        self.buffer = y[self.taps - 1 : self.taps - 1 + self.block] * self.coefficient
-        self.history = x[len(x) - (self.taps - 1) :] if self.taps > 1 else np.zeros(0)
+        x = np.empty(self.nfft, dtype=np.float32)
+        x[: self.taps - 1] = self.history
+        x[self.taps - 1 :] = w
+        y = scipy.fft.irfft(scipy.fft.rfft(x) * self.H, self.nfft)
+        self.buffer = y[self.taps - 1 :]
+        self.buffer *= np.float32(self.coefficient)
+        self.history = x[len(x) - (self.taps - 1) :].copy()
         self.pos = 0
 
     def generate(self, n: int, dt_s: float, t_s: np.ndarray) -> np.ndarray:

@@ -77,13 +77,24 @@ class TrueSamples:
 class ChannelNoise:
     """The sum of the noise terms of one channel (zero-mean terms plus ramp)."""
 
-    def __init__(self, cm: ChannelModel, seed: int, channel_index: int, flicker_taps: int):
+    def __init__(
+        self,
+        cm: ChannelModel,
+        seed: int,
+        channel_index: int,
+        flicker_taps: int,
+        flicker_length: int | None = None,
+    ):
         self.terms: list[TermGenerator] = []
         i = channel_index
         if cm.white > 0:
             self.terms.append(WhiteNoise(cm.white, term_rng(seed, i, "white")))
         if cm.flicker > 0:
-            self.terms.append(FlickerNoise(cm.flicker, term_rng(seed, i, "flicker"), flicker_taps))
+            self.terms.append(
+                FlickerNoise(
+                    cm.flicker, term_rng(seed, i, "flicker"), flicker_taps, flicker_length
+                )
+            )
         if cm.random_walk > 0:
             self.terms.append(RandomWalk(cm.random_walk, term_rng(seed, i, "random_walk")))
         if cm.ramp != 0:
@@ -220,6 +231,8 @@ class SensorPhysics:
         self.noise_block = int(noise_block)
         self._const = np.zeros(6)
         self._const_key: tuple[bytes, bytes] | None = None
+        self._thermal: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._thermal_key: tuple[bytes, bytes] | None = None
         self._buf = np.empty((0, 6))
         self._buf_pos = 0
         self._buf_dt: float | None = None
@@ -314,8 +327,11 @@ class SensorPhysics:
             raise ModelError(f"generate: need n >= 0 and dt_s > 0, got n={n}, dt_s={dt_s}")
         if self._noise is None:
             taps = math.ceil(self.duration_hint_s / dt_s)
+            # one flicker FFT block for the whole hinted record, with room for the
+            # look-ahead and a reader that runs a little past the end
+            length = taps + taps // 32 + 2 * self.noise_block
             self._noise = {
-                ch: ChannelNoise(self.model[ch], self.seed, CHANNELS.index(ch), taps)
+                ch: ChannelNoise(self.model[ch], self.seed, CHANNELS.index(ch), taps, length)
                 for ch in self.noisy_channels
             }
         t = self._times(n, dt_s)
@@ -323,11 +339,11 @@ class SensorPhysics:
         noise = self._take_noise(n, dt_s)
         out = np.empty((n, 6))
         out[:] = self._constant_part()
-        for i, ch in enumerate(CHANNELS):
-            cm = self.model[ch]
-            if cm.temp_coeff or cm.temp_coeff2 or cm.scale_temp_coeff or cm.scale_temp_coeff2:
-                u = self._rate if i < 3 else self._force
-                out[:, i] += self._thermal_part(cm, i % 3, u, temp)
+        thermal = self._thermal_coefficients()
+        if thermal is not None:
+            ref, lin, quad = thermal
+            dT = temp[:, None] - ref
+            out += dT * (lin + dT * quad)
         if noise is not None:
             out += noise
         for i, ch in enumerate(CHANNELS):
@@ -335,6 +351,26 @@ class SensorPhysics:
                 out[:, i] = self._filters[ch].apply(out[:, i], dt_s)
         self.samples_generated += n
         return TrueSamples(gyro_dps=out[:, :3], accel_g=out[:, 3:], temp_c=temp)
+
+    def _thermal_coefficients(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(6,) temp_ref, linear and quadratic temperature coefficients of each channel at
+        the current input, None if all are zero: the output gains
+        ``(scale_temp_coeff dT + scale_temp_coeff2 dT^2) x + temp_coeff dT + temp_coeff2 dT^2``
+        = ``lin dT + quad dT^2`` with dT = T - temp_ref and x the sensed input."""
+        key = (self._rate.tobytes(), self._force.tobytes())
+        if self._thermal_key != key:
+            ref, lin, quad = np.empty(6), np.zeros(6), np.zeros(6)
+            for i, ch in enumerate(CHANNELS):
+                cm = self.model[ch]
+                ref[i] = cm.temp_ref
+                if cm.temp_coeff or cm.temp_coeff2 or cm.scale_temp_coeff or cm.scale_temp_coeff2:
+                    x = self._sensed(cm, i % 3, self._rate if i < 3 else self._force)
+                    lin[i] = cm.scale_temp_coeff * x + cm.temp_coeff
+                    quad[i] = cm.scale_temp_coeff2 * x + cm.temp_coeff2
+            any_term = bool(np.any(lin) or np.any(quad))
+            self._thermal = (ref, lin, quad) if any_term else None
+            self._thermal_key = key
+        return self._thermal
 
     def _constant_part(self) -> np.ndarray:
         """(6,) noise-free output at temp_ref: sensitivity, nonlinearity, cross-axis, bias."""
@@ -360,17 +396,6 @@ class SensorPhysics:
         cross = (cm.cross_x, cm.cross_y, cm.cross_z)
         x = u[axis] + cm.nonlinearity * u[axis] ** 2
         return float(x + sum(cross[j] * u[j] for j in range(3) if j != axis))
-
-    def _thermal_part(
-        self, cm: ChannelModel, axis: int, u: np.ndarray, temp_c: np.ndarray
-    ) -> np.ndarray:
-        """Temperature terms: (scale_temp_coeff dT + scale_temp_coeff2 dT^2) x
-        + temp_coeff dT + temp_coeff2 dT^2, dT = T - temp_ref."""
-        dT = temp_c - cm.temp_ref
-        x = self._sensed(cm, axis, u)
-        return (cm.scale_temp_coeff * dT + cm.scale_temp_coeff2 * dT**2) * x + (
-            cm.temp_coeff * dT + cm.temp_coeff2 * dT**2
-        )
 
 
 def simulate(

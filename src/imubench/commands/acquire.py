@@ -4,7 +4,9 @@ The source is any registered URI (``sim://``, ``i2c://``, ``sensortile://``, ...
 hole in the sample index is written as an explicit gap with its reason (FIFO overrun,
 chip reset, ...). The stats JSON holds the source counters (``samples``, ``gaps``,
 ``lost_samples``, ``overruns``, ``bus_bytes``, ``io_errors``, ``retries``, ``bad_frames``,
-``reconnects``) plus ``bus_utilization``, ``expected_samples`` and ``duration_s``.
+``reconnects``) plus ``bus_utilization``, ``expected_samples``, ``duration_s`` (source
+seconds elapsed) and, for chips streaming with timestamps, ``measured_odr_hz`` (the ODR
+measured against the host clock: a crystal error shows here).
 """
 
 from __future__ import annotations
@@ -62,6 +64,9 @@ def record(src: Source, out: Path) -> dict[str, Any]:
     if n_total is not None:
         stats["expected_samples"] = n_total
     stats["duration_s"] = float(getattr(src, "elapsed_s", 0.0))
+    measured = getattr(src, "measured_odr_hz", None)
+    if measured is not None:
+        stats["measured_odr_hz"] = float(measured)
     return stats
 
 

@@ -83,9 +83,17 @@ class Recording:
 
     @property
     def lost_samples(self) -> int:
-        if len(self.index) < 2:
-            return 0
-        return int(self.index[-1] - self.index[0] + 1 - len(self.index))
+        """Samples lost: the holes between recorded samples, plus the gap records that lie
+        before the first or after the last recorded sample (a stream that started or
+        ended in a gap, e.g. a chip reset just before the end of ``acquire``)."""
+        if not len(self.index):
+            return sum(g.lost for g in self.gaps)
+        first, last = int(self.index[0]), int(self.index[-1])
+        inside = last - first + 1 - len(self.index)
+        outside = sum(
+            g.lost for g in self.gaps if g.at_index <= first or g.at_index - g.lost > last
+        )
+        return int(inside + outside)
 
     def _dense(self, column: np.ndarray) -> np.ndarray:
         if not len(self.index):

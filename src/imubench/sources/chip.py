@@ -7,12 +7,19 @@ URIs (parameters of both unless marked)::
               &bus_khz=0&nack_rate=0&nack_burst=1&reset_every_s=0&overrun_at_s=
               &crystal_ppm=0&addr=0x6a&duration_s=&watermark_s=0.1&timestamp=1
               &on_overbudget=refuse|degrade&counting=0&stuck_bus_at_s=&stuck_bus_for_s=0
+              &temperature=PROFILE&stuck_output_at_s=&stuck_output_for_s=0
+              &temp_glitch_rate=0&temp_glitch_c=5&temp_glitch_s=0
     i2c:///dev/i2c-1?addr=0x6a&chip=lsm6dsl&odr_hz=104&fs_dps=250&fs_g=2&bus_khz=400
               &duration_s=&watermark_s=0.1&timestamp=1&on_overbudget=refuse
 
 ``bus_khz=0`` or absent means no bus timing model on ``sim://`` (and no budget check);
 ``nack_rate`` is per transaction; ``reset_every_s`` resets the chip periodically;
-``overrun_at_s`` forces one FIFO overrun; ``counting=1`` makes raw gyro X count samples
+``overrun_at_s`` forces one FIFO overrun; ``temperature`` is a die-temperature profile
+(``25``, ``ramp:20:0.01[:40]``, ``steps:0=20,600=30``, ``sine:25:5:3600``,
+``replay:FILE.csv[:t_s:temp_c]``; URL-quote it) acting on the model's temperature terms;
+``stuck_output_at_s``/``_for_s`` freeze every output (registers and FIFO repeat the last
+sample); ``temp_glitch_rate`` (per s) adds +-``temp_glitch_c`` degC spikes lasting
+``temp_glitch_s`` to the temperature output; ``counting=1`` makes raw gyro X count samples
 (test signal). ``duration_s`` makes the stream finite: it ends after the sample of index
 ``round(odr_hz * duration_s) - 1`` and every index below that is either delivered or
 counted lost. ``clock=wall`` paces :meth:`read` to real time in batches of about
@@ -39,6 +46,7 @@ from imubench.sources.registry import SourceURI, register_source
 
 _COMMON = {
     "odr_hz",
+    "accel_odr_hz",
     "fs_dps",
     "fs_g",
     "addr",
@@ -60,6 +68,11 @@ SIM_PARAMS = _COMMON | {
     "counting",
     "stuck_bus_at_s",
     "stuck_bus_for_s",
+    "stuck_output_at_s",
+    "stuck_output_for_s",
+    "temp_glitch_rate",
+    "temp_glitch_c",
+    "temp_glitch_s",
     "temperature",
 }
 I2C_PARAMS = _COMMON | {"chip"}
@@ -103,6 +116,10 @@ class ChipSource(Source):
         except LSM6DSError as exc:
             raise SourceError(f"source {uri!r}: {exc}") from None
         cfg = self.stream.cfg
+        self._sensitivity = np.array(
+            [cfg.gyro_sensitivity_dps] * 3 + [cfg.accel_sensitivity_g] * 3
+        )
+        """dps or g per LSB of gx gy gz ax ay az."""
         self.bus_hz = bus_hz
         self.duration_s = duration_s
         self.n_total = round(cfg.odr_hz * duration_s) if duration_s is not None else None
@@ -152,6 +169,12 @@ class ChipSource(Source):
         if self._start_host is None:
             return 0.0
         return self.dev.monotonic() - self._start_host
+
+    @property
+    def measured_odr_hz(self) -> float | None:
+        """ODR measured against the host clock from the chip's timestamp counter, Hz
+        (None without timestamps): a crystal error shows here (107.9 for 104)."""
+        return self.stream.measured_odr_hz if self.stream.ts_decimation else None
 
     @property
     def bus_utilization(self) -> float:
@@ -227,10 +250,7 @@ class ChipSource(Source):
         raw = chunk.raw[keep]
         if self._t0_host is None:
             self._t0_host = float(chunk.t_s[0])
-        cfg = self.stream.cfg
-        values = np.empty((len(index), 6))
-        values[:, :3] = raw[:, :3] * cfg.gyro_sensitivity_dps
-        values[:, 3:] = raw[:, 3:] * cfg.accel_sensitivity_g
+        values = raw * self._sensitivity
         lost_before = int(index[0]) - self._delivered_to - 1
         self._delivered_to = int(index[-1])
         return Batch(
@@ -238,7 +258,7 @@ class ChipSource(Source):
             t_s=chunk.t_s[keep] - self._t0_host,
             values=values,
             temp_c=np.full(len(index), chunk.temp_c),
-            raw=raw.astype(np.int16),
+            raw=raw.astype(np.int16, copy=False),
             lost_before=max(0, lost_before),
             meta={"gaps": [g for g in gaps if g[0] <= int(index[-1])]},
         )
@@ -251,6 +271,7 @@ def _common(uri: SourceURI, default_bus_khz: float) -> dict[str, Any]:
     fs_g = uri.get_float("fs_g", 2.0)
     cfg = ImuConfig(
         odr_hz=odr,
+        accel_odr_hz=uri.get_float("accel_odr_hz"),
         fs_dps=fs_dps,
         fs_g=fs_g,  # type: ignore[arg-type]
         timestamp=uri.get_bool("timestamp", True),
@@ -273,9 +294,43 @@ def _common(uri: SourceURI, default_bus_khz: float) -> dict[str, Any]:
     }
 
 
+SIM_NOISE_BLOCK = 1 << 14
+"""Samples of noise the physics generates ahead per block on ``sim://`` (amortises the
+per-call cost of the FIFO read loop; the values do not depend on it)."""
+
+
+def _sim_physics(
+    uri: SourceURI, seed: int, model_path: str | None, duration_s: float | None
+) -> Any:
+    """The sensor physics behind a ``sim://`` chip: ``model=`` noise model (quiet without
+    one), ``temperature=`` profile (25 degC without one), flicker exact over the whole
+    ``duration_s`` (default hint 3 h for an endless stream)."""
+    from lsm6ds_sim.physics import DEFAULT_DURATION_HINT_S, SensorPhysics
+
+    model = None
+    if model_path:
+        from lsm6ds_sim.model import load_model
+
+        try:
+            model = load_model(model_path)
+        except Exception as exc:  # ModelError and file errors, reported with the URI
+            raise SourceError(f"source URI {uri.text!r}: model {model_path!r}: {exc}") from None
+    profile = uri.get_str("temperature")
+    try:
+        return SensorPhysics(
+            model,
+            seed=seed,
+            temperature=profile or None,
+            duration_hint_s=duration_s or DEFAULT_DURATION_HINT_S,
+            noise_block=SIM_NOISE_BLOCK,
+        )
+    except Exception as exc:  # ConfigError of a malformed profile, missing replay file
+        raise SourceError(f"source URI {uri.text!r}: temperature={profile!r}: {exc}") from None
+
+
 def build_sim(uri: SourceURI) -> ChipSource:
     """The ``sim://`` source: SimChip + SimI2CBus + the real driver."""
-    from lsm6ds_sim.chip import SimChip, default_physics
+    from lsm6ds_sim.chip import SimChip
     from lsm6ds_sim.clock import SimClock
     from lsm6ds_sim.faults import FaultPlan
     from lsm6ds_sim.i2c import SimI2CBus
@@ -291,20 +346,7 @@ def build_sim(uri: SourceURI) -> ChipSource:
     clock_mode = uri.get_choice("clock", ("virtual", "wall"), "virtual")
     clock = SimClock(clock_mode)
     model_path = uri.get_str("model")
-    if model_path:
-        try:
-            from lsm6ds_sim.model import load_model
-            from lsm6ds_sim.physics import SensorPhysics
-        except ImportError as exc:
-            raise SourceError(
-                f"source URI {uri.text!r}: model= needs the sensor physics module ({exc})"
-            ) from None
-        try:
-            physics = SensorPhysics(load_model(model_path), seed=seed)
-        except Exception as exc:  # ModelError and file errors, reported with the URI
-            raise SourceError(f"source URI {uri.text!r}: model {model_path!r}: {exc}") from None
-    else:
-        physics = default_physics(seed)
+    physics = _sim_physics(uri, seed, model_path, common["duration_s"])
     try:
         plan = FaultPlan(
             nack_rate=uri.get_float("nack_rate", 0.0),  # type: ignore[arg-type]
@@ -313,6 +355,11 @@ def build_sim(uri: SourceURI) -> ChipSource:
             overrun_at_s=uri.get_float("overrun_at_s"),
             stuck_bus_at_s=uri.get_float("stuck_bus_at_s"),
             stuck_bus_for_s=uri.get_float("stuck_bus_for_s", 0.0),  # type: ignore[arg-type]
+            stuck_output_at_s=uri.get_float("stuck_output_at_s"),
+            stuck_output_for_s=uri.get_float("stuck_output_for_s", 0.0),  # type: ignore[arg-type]
+            temp_glitch_rate=uri.get_float("temp_glitch_rate", 0.0),  # type: ignore[arg-type]
+            temp_glitch_c=uri.get_float("temp_glitch_c", 5.0),  # type: ignore[arg-type]
+            temp_glitch_s=uri.get_float("temp_glitch_s", 0.0),  # type: ignore[arg-type]
             seed=seed,  # type: ignore[arg-type]
         )
     except ValueError as exc:
