@@ -3,13 +3,14 @@
 Deviations within 1e-4 relative (2e-3 for the OCXO ``*_octave`` runs, made by Stable32 on
 frequency ratios near 1.0, see the README), term counts exact (Theo1: as Stable32 prints
 them, 5 significant digits). CI limits are checked when engineer B's EDF/CI (and, for the
-bias-corrected files, bias) modules are importable: within 1e-3 given Stable32's alpha.
+bias-corrected files, bias) modules are importable: within 1e-3 given Stable32's alpha,
+and within 1e-2 with our own noise identification wherever our alpha equals Stable32's (the
+rows where it does not are listed exactly in ``OWN_ALPHA_DIFFERS``).
 """
 
 from __future__ import annotations
 
 import gzip
-import importlib.util
 import re
 from dataclasses import dataclass
 from decimal import ROUND_HALF_UP, Decimal
@@ -23,10 +24,6 @@ import imubench.stats as st
 SET = "allantools-stable32"
 
 
-def _has(mod: str) -> bool:
-    return importlib.util.find_spec(f"imubench.stats.{mod}") is not None
-
-
 @dataclass(frozen=True)
 class Case:
     rel: str  # reference file relative to SET
@@ -36,11 +33,12 @@ class Case:
     bias: bool  # Stable32 applied a bias correction in this run
     rtol: float = 1e-4
     ci_rtol: float = 1e-3
+    has_ci: bool = True  # the file carries Min/Max Sigma (CIs were on in that run)
 
 
 CASES = [
     *[
-        Case(f"phasedat/phase_dat_{s}.txt", s, "phasedat", 1.0, False)
+        Case(f"phasedat/phase_dat_{s}.txt", s, "phasedat", 1.0, False, has_ci=False)
         for s in ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
     ],
     *[
@@ -49,19 +47,28 @@ CASES = [
     ],
     Case("phasedat/phase_dat_htotdev_octave.txt", "htotdev", "phasedat", 1.0, True),
     Case("phasedat/phase_dat_htotdev_octave_nobias.txt", "htotdev", "phasedat", 1.0, False),
+    Case("phasedat/phase_dat_mtotdev.txt", "mtotdev", "phasedat", 1.0, False, has_ci=False),
     *[
         Case(f"phasedat/phase_dat_mtotdev{s}.txt", "mtotdev", "phasedat", 1.0, False)
-        for s in ("", "_decade", "_octave", "_octave_alpha0")
+        for s in ("_decade", "_octave", "_octave_alpha0")
     ],
+    Case("phasedat/phase_dat_ttotdev_all.txt", "ttotdev", "phasedat", 1.0, False, has_ci=False),
     *[
         Case(f"phasedat/phase_dat_ttotdev_{s}.txt", "ttotdev", "phasedat", 1.0, False)
-        for s in ("all", "decade", "octave")
+        for s in ("decade", "octave")
     ],
-    Case("phasedat/phase_dat_theo1.txt", "theo1", "phasedat", 1.0, True),
-    Case("phasedat/phase_dat_theo1_alpha0.txt", "theo1", "phasedat", 1.0, False),
-    Case("phasedat/phase_dat_theo1_alpha0_decade.txt", "theo1", "phasedat", 1.0, False),
+    Case("phasedat/phase_dat_theo1.txt", "theo1", "phasedat", 1.0, True, has_ci=False),
+    Case("phasedat/phase_dat_theo1_alpha0.txt", "theo1", "phasedat", 1.0, False, has_ci=False),
+    Case(
+        "phasedat/phase_dat_theo1_alpha0_decade.txt",
+        "theo1",
+        "phasedat",
+        1.0,
+        False,
+        has_ci=False,
+    ),
     *[
-        Case(f"ocxo/stable32_{s}_alltau.txt", s, "ocxo", 1.0, False)
+        Case(f"ocxo/stable32_{s}_alltau.txt", s, "ocxo", 1.0, False, has_ci=False)
         for s in ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
     ],
     *[
@@ -69,15 +76,16 @@ CASES = [
         for s in ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev")
     ],
     Case("ocxo/totdev_octave.txt", "totdev", "ocxo", 1.0, True, rtol=2e-3, ci_rtol=5e-3),
+    Case("Keysight53230A_ti_noise_floor/tic_adev.txt", "adev", "tic", 1.0, False, has_ci=False),
     *[
         Case(f"Keysight53230A_ti_noise_floor/tic_{s}.txt", s, "tic", 1.0, False)
-        for s in ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
+        for s in ("oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
     ],
     *[
-        Case(f"pink_frequency/{s}.txt", s, "pink", 1.0 / 42.0, False)
+        Case(f"pink_frequency/{s}.txt", s, "pink", 1.0 / 42.0, False, has_ci=False)
         for s in ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev")
     ],
-    Case("pink_frequency/totdev_alpha0.txt", "totdev", "pink", 1.0 / 42.0, False),
+    Case("pink_frequency/totdev_alpha0.txt", "totdev", "pink", 1.0 / 42.0, False, has_ci=False),
     Case("pink_frequency/s32_oadev_octave.txt", "oadev", "pink", 1.0, False),
 ]
 
@@ -140,8 +148,6 @@ S32_153_BIASED = {"phasedat/phase_dat_mtotdev.txt", "phasedat/phase_dat_ttotdev_
 
 @pytest.mark.parametrize("case", CASES, ids=[c.rel for c in CASES])
 def test_stable32_deviation_and_counts(reference_dir: Path, case: Case) -> None:
-    if case.bias and not _has("bias"):
-        pytest.skip("bias-corrected reference needs imubench.stats.bias (engineer B)")
     rows, _ = read_stable32(reference_dir / SET / case.rel)
     assert rows.shape[0] >= 5
     data, dtype = load_data(reference_dir, case.data)
@@ -168,27 +174,27 @@ def test_stable32_deviation_and_counts(reference_dir: Path, case: Case) -> None:
     np.testing.assert_allclose(dev, rows[:, 5], rtol=case.rtol)
 
 
-_EDF_KNOWN = pytest.mark.xfail(
-    reason="MTOT/TTOT EDF at the longest tau differs ~1.5e-3 and HTOT EDF at the two "
-    "longest taus ~3e-3..7e-3 from Stable32 (edf.py): open",
-    strict=False,
-)
-CI_CASES = [
-    pytest.param(c, marks=_EDF_KNOWN, id=c.rel)
-    if c.stat in ("mtotdev", "ttotdev", "htotdev")
-    else pytest.param(c, id=c.rel)
-    for c in CASES
-    if c.stat != "theo1"
-]
+# Rows whose Stable32 limits we do not reproduce to ci_rtol even with Stable32's alpha:
+# HTOT at flicker PM (alpha 1, commented rows of the file). SP 1065's HTOT EDF covers white
+# FM..RWFM only; for alpha 1 edf.py uses the simple flicker-PM formula, as Stable32's help
+# says, and its limits differ by 2.6e-3 (AF 128) and 1.4e-2 (AF 256): Stable32's exact
+# flicker-PM HTOT EDF is unpublished. Asserted to still differ, so the entry cannot go stale.
+CI_KNOWN_DIFFERS = {
+    ("phasedat/phase_dat_htotdev_octave.txt", 128),
+    ("phasedat/phase_dat_htotdev_octave.txt", 256),
+}
+
+CI_CASES = [pytest.param(c, id=c.rel) for c in CASES if c.has_ci]
+
+
+def _ci_rel_err(res: st.StatResult, rows: np.ndarray) -> np.ndarray:
+    return np.maximum(np.abs(res.ci_low / rows[:, 4] - 1.0), np.abs(res.ci_high / rows[:, 6] - 1.0))
 
 
 @pytest.mark.parametrize("case", CI_CASES)
 def test_stable32_ci_given_alpha(reference_dir: Path, case: Case) -> None:
-    if not (_has("edf") and _has("ci")) or (case.bias and not _has("bias")):
-        pytest.skip("CI limits need engineer B's edf/ci (and bias) modules")
     rows, _ = read_stable32(reference_dir / SET / case.rel)
-    if not np.any(rows[:, 4] > 0):
-        pytest.skip("this Stable32 run has no confidence intervals")
+    assert np.all(rows[:, 4] > 0), "a file listed with CIs has a row without them"
     data, dtype = load_data(reference_dir, case.data)
     res = st.compute(
         case.stat,
@@ -199,8 +205,71 @@ def test_stable32_ci_given_alpha(reference_dir: Path, case: Case) -> None:
         alpha=rows[:, 3].astype(int),
         bias_correction=case.bias,
     )
-    np.testing.assert_allclose(res.ci_low, rows[:, 4], rtol=case.ci_rtol)
-    np.testing.assert_allclose(res.ci_high, rows[:, 6], rtol=case.ci_rtol)
+    known = np.array([(case.rel, int(m)) in CI_KNOWN_DIFFERS for m in rows[:, 0]])
+    err = _ci_rel_err(res, rows)
+    assert np.all(err[~known] <= case.ci_rtol), dict(zip(rows[~known, 0], err[~known], strict=True))
+    assert np.all(err[known] > case.ci_rtol), "a known CI difference is gone: update the list"
+
+
+# Rows where our noise identification (compute() with alpha=None) gives another alpha than
+# the file: (file, AF) -> (ours, Stable32's). Two causes, nothing else:
+# * "fixed": Stable32 was told the alpha (README: the phasedat *_octave runs used alpha 0,
+#   the HTOT nobias run alpha 2 on white FM, the _alpha0 MTOT run alpha 0), so the file's
+#   column is not a noise identification at all;
+# * "last": the longest AF of a run, where 3 to 9 frequency averages remain and both tools
+#   fall back to the B1 ratio; Stable32 keeps the previous tau's alpha there (every such row
+#   below equals the row before it in the file) while our B1 decides from 3..9 points.
+_FIXED0 = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
+OWN_ALPHA_DIFFERS: dict[tuple[str, int], tuple[int, int]] = {
+    **{(f"phasedat/phase_dat_{s}_octave.txt", 128): (1, 0) for s in _FIXED0},  # fixed
+    ("phasedat/phase_dat_mtotdev_octave_alpha0.txt", 128): (1, 0),  # fixed
+    **{  # fixed: alpha 2 forced on white FM data
+        ("phasedat/phase_dat_htotdev_octave_nobias.txt", m): (a, 2)
+        for m, a in ((1, 0), (2, 0), (4, 0), (8, 0), (16, 0), (32, 0), (64, 0), (128, 1), (256, 0))
+    },
+    ("phasedat/phase_dat_htotdev_octave.txt", 256): (0, 1),  # last
+    ("phasedat/phase_dat_mtotdev_octave.txt", 256): (0, 1),  # last
+    ("phasedat/phase_dat_ttotdev_octave.txt", 256): (0, 1),  # last
+    ("phasedat/phase_dat_mtotdev_decade.txt", 200): (0, 1),  # last
+    ("phasedat/phase_dat_ttotdev_decade.txt", 200): (0, 1),  # last
+    ("ocxo/adev_octave.txt", 2048): (-1, -2),  # last
+    ("ocxo/hdev_octave.txt", 2048): (-1, -2),  # last
+    **{(f"ocxo/{s}_octave.txt", 4096): (-1, 0) for s in ("oadev", "mdev", "tdev", "ohdev")},
+    ("Keysight53230A_ti_noise_floor/tic_oadev.txt", 8192): (0, 1),  # last
+    ("Keysight53230A_ti_noise_floor/tic_mdev.txt", 8192): (0, 1),  # last
+    ("Keysight53230A_ti_noise_floor/tic_tdev.txt", 8192): (0, 1),  # last
+    ("Keysight53230A_ti_noise_floor/tic_ohdev.txt", 8192): (0, 1),  # last
+    ("Keysight53230A_ti_noise_floor/tic_hdev.txt", 8192): (-1, 1),  # last
+    ("pink_frequency/s32_oadev_octave.txt", 2048): (1, 0),  # last
+}
+
+
+@pytest.mark.parametrize("case", CI_CASES)
+def test_stable32_ci_own_noise_id(reference_dir: Path, case: Case) -> None:
+    """Acceptance 1: CI limits within 1e-2 with our own noise identification."""
+    rows, _ = read_stable32(reference_dir / SET / case.rel)
+    data, dtype = load_data(reference_dir, case.data)
+    res = st.compute(
+        case.stat,
+        data,
+        case.rate,
+        dtype,
+        afs=rows[:, 0].astype(np.int64),
+        bias_correction=case.bias,
+    )
+    theirs = rows[:, 3].astype(int)
+    differs = {
+        (case.rel, int(m)): (int(a), int(b))
+        for m, a, b in zip(rows[:, 0], res.alpha, theirs, strict=True)
+        if a != b
+    }
+    expected = {k: v for k, v in OWN_ALPHA_DIFFERS.items() if k[0] == case.rel}
+    assert differs == expected
+    same = res.alpha == theirs
+    same &= ~np.array([(case.rel, int(m)) in CI_KNOWN_DIFFERS for m in rows[:, 0]])
+    err = _ci_rel_err(res, rows)
+    tol = max(1e-2, case.ci_rtol)
+    assert np.all(err[same] <= tol), dict(zip(rows[same, 0], err[same], strict=True))
 
 
 def test_gzip_reader_smoke(tmp_path: Path) -> None:

@@ -13,71 +13,36 @@ NIST SP 1065 (W. J. Riley, Handbook of Frequency Stability Analysis, 2008), tau 
 * STDVAR / OSTDVAR: sample variance (N-1 denominator) of the m-sample frequency averages,
   non-overlapping / overlapping (SP 1065 eq. (1) applied to averages).
 
-Sums are taken in blocks (``BLOCK`` terms) with in-place float64 operations so peak memory
-stays at about one block beyond the phase array.
+Each tau is one compiled pass over the phase (``_kernels``): no temporaries, so peak memory
+stays at the phase array plus O(1).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from imubench.stats import _kernels as _k
 from imubench.stats.prep import PhaseData
 
-BLOCK = 1 << 15
+_NO_GAPS = np.zeros(0, dtype=np.int64)
 
 Kernel = tuple[float, int, int]
 
 
-def _blocked_sumsq(
-    pd: PhaseData,
-    count: int,
-    lags: tuple[int, ...],
-    coefs: tuple[float, ...],
-    span: int,
-    step: int = 1,
-) -> tuple[float, int]:
-    """sum over k < count of (sum_j coefs[j] * x[k*step + lags[j]])^2, skipping gapped spans.
-
-    ``span`` is the phase-point extent of a term (its points are k*step .. k*step + span).
-    Returns (sum of squares, number of valid terms).
-    """
-    x = pd.x
-    total = 0.0
-    valid = 0
-    buf = np.empty(min(BLOCK, max(count, 1)))
-    tmp = np.empty_like(buf)
-    for k0 in range(0, count, BLOCK):
-        k1 = min(count, k0 + BLOCK)
-        start = k0 * step
-        stop = (k1 - 1) * step + 1
-        d = buf[: k1 - k0]
-        np.multiply(x[start + lags[0] : stop + lags[0] : step], coefs[0], out=d)
-        for lag, c in zip(lags[1:], coefs[1:], strict=True):
-            seg = x[start + lag : stop + lag : step]
-            if c == 1.0:
-                d += seg
-            elif c == -1.0:
-                d -= seg
-            else:
-                np.multiply(seg, c, out=tmp[: k1 - k0])
-                d += tmp[: k1 - k0]
-        if pd.gap_prefix is not None:
-            a = np.arange(k0, k1, dtype=np.int64) * step
-            ok = pd.span_ok(a, a + span)
-            dd = d[ok]
-            valid += int(ok.sum())
-            total += float(np.dot(dd, dd))
-        else:
-            valid += k1 - k0
-            total += float(np.dot(d, d))
-    return total, valid
+def _sumsq(pd: PhaseData, m: int, step: int, count: int, order: int) -> tuple[float, int]:
+    """Sum of squared order-2/3 differences at lag m over ``count`` terms (compiled loop)."""
+    if count <= 0:
+        return 0.0, 0
+    gp = _NO_GAPS if pd.gap_prefix is None else pd.gap_prefix
+    s, ok = _k.sumsq_diff(pd.x, m, step, count, order, gp, pd.gap_end_offset)
+    return float(s), int(ok)
 
 
 def avar(pd: PhaseData, m: int) -> Kernel:
     """Non-overlapping Allan variance, SP 1065 eq. (7) on phase decimated by m."""
     n_dec = (pd.n_phase - 1) // m + 1
     count = n_dec - 2
-    s, ok = _blocked_sumsq(pd, count, (0, m, 2 * m), (1.0, -2.0, 1.0), 2 * m, step=m)
+    s, ok = _sumsq(pd, m, m, count, 2)
     tau = m * pd.tau0_s
     return _norm(s, ok, 2.0 * tau * tau), ok, count - ok
 
@@ -85,7 +50,7 @@ def avar(pd: PhaseData, m: int) -> Kernel:
 def oavar(pd: PhaseData, m: int) -> Kernel:
     """Overlapping Allan variance, SP 1065 eq. (11)."""
     count = pd.n_phase - 2 * m
-    s, ok = _blocked_sumsq(pd, count, (2 * m, m, m, 0), (1.0, -1.0, -1.0, 1.0), 2 * m)
+    s, ok = _sumsq(pd, m, 1, count, 2)
     tau = m * pd.tau0_s
     return _norm(s, ok, 2.0 * tau * tau), ok, count - ok
 
@@ -94,7 +59,7 @@ def hvar(pd: PhaseData, m: int) -> Kernel:
     """Non-overlapping Hadamard variance (1/6 normalisation), SP 1065 eq. (18)."""
     n_dec = (pd.n_phase - 1) // m + 1
     count = n_dec - 3
-    s, ok = _blocked_sumsq(pd, count, (0, m, 2 * m, 3 * m), (1.0, -3.0, 3.0, -1.0), 3 * m, step=m)
+    s, ok = _sumsq(pd, m, m, count, 3)
     tau = m * pd.tau0_s
     return _norm(s, ok, 6.0 * tau * tau), ok, count - ok
 
@@ -102,35 +67,26 @@ def hvar(pd: PhaseData, m: int) -> Kernel:
 def ohvar(pd: PhaseData, m: int) -> Kernel:
     """Overlapping Hadamard variance (1/6 normalisation), SP 1065 eq. (19)."""
     count = pd.n_phase - 3 * m
-    s, ok = _blocked_sumsq(pd, count, (0, m, 2 * m, 3 * m), (1.0, -3.0, 3.0, -1.0), 3 * m)
+    s, ok = _sumsq(pd, m, 1, count, 3)
     tau = m * pd.tau0_s
     return _norm(s, ok, 6.0 * tau * tau), ok, count - ok
 
 
-def phase_prefix(pd: PhaseData) -> np.ndarray:
-    """S[k] = sum(x[:k]) (length N + 1), for m-sample phase averages in O(1)."""
-    s = np.empty(pd.n_phase + 1)
-    s[0] = 0.0
-    np.cumsum(pd.x, out=s[1:])
-    return s
-
-
-def mvar(pd: PhaseData, m: int, prefix: np.ndarray | None = None) -> Kernel:
-    """Modified Allan variance, SP 1065 eq. (15), via the phase prefix sum S.
-
-    The inner sum over m second differences equals S[j+3m] - 3 S[j+2m] + 3 S[j+m] - S[j].
-    """
-    s_arr = phase_prefix(pd) if prefix is None else prefix
+def mvar(pd: PhaseData, m: int) -> Kernel:
+    """Modified Allan variance, SP 1065 eq. (15): the inner sum of m second differences
+    slides by one term per output term (``_kernels.mvar_sum``), one pass per tau."""
     count = pd.n_phase - 3 * m + 1
-    sub = PhaseData(s_arr, pd.tau0_s, pd.gap_prefix, pd.gap_end_offset)
-    s, ok = _blocked_sumsq(sub, count, (3 * m, 2 * m, m, 0), (1.0, -3.0, 3.0, -1.0), 3 * m - 1)
+    if count <= 0:
+        return float("nan"), 0, 0
+    gp = _NO_GAPS if pd.gap_prefix is None else pd.gap_prefix
+    s, ok = _k.mvar_sum(pd.x, m, gp, pd.gap_end_offset)
     tau = m * pd.tau0_s
-    return _norm(s, ok, 2.0 * m * m * tau * tau), ok, count - ok
+    return _norm(float(s), int(ok), 2.0 * m * m * tau * tau), int(ok), count - int(ok)
 
 
-def tvar(pd: PhaseData, m: int, prefix: np.ndarray | None = None) -> Kernel:
+def tvar(pd: PhaseData, m: int) -> Kernel:
     """Time variance TVAR = tau^2 / 3 * MVAR (SP 1065 eq. (17)), in seconds^2."""
-    v, ok, skipped = mvar(pd, m, prefix)
+    v, ok, skipped = mvar(pd, m)
     tau = m * pd.tau0_s
     return tau * tau / 3.0 * v, ok, skipped
 

@@ -67,7 +67,6 @@ def _raw(
     if stat == "theo1":
         v, nn, sk = _theo.theo1var(pd, ms, progress)
         return v, nn.astype(np.int64), sk.astype(np.int64)
-    prefix = _allan.phase_prefix(pd) if stat in ("mdev", "tdev") else None
     xe = _total.extended_phase(pd) if stat == "totdev" else None
     work = np.cumsum(
         ms.astype(np.float64) ** 2
@@ -79,9 +78,9 @@ def _raw(
         if stat in _SIMPLE:
             r = _SIMPLE[stat](pd, m)
         elif stat == "mdev":
-            r = _allan.mvar(pd, m, prefix)
+            r = _allan.mvar(pd, m)
         elif stat == "tdev":
-            r = _allan.tvar(pd, m, prefix)
+            r = _allan.tvar(pd, m)
         elif stat == "totdev":
             r = _total.totvar(pd, m, xe)
         elif stat == "mtotdev":
@@ -123,12 +122,13 @@ class _Confidence:
             except ImportError as exc:
                 self.notes.append(f"imubench.stats.{name} unavailable ({exc})")
 
-    def alpha(self, x: np.ndarray, m: int, var_stat: str) -> int:
+    def alpha(self, x: np.ndarray, m: int, data_type: str, var_stat: str) -> int:
+        """Stable32's rule: identify on the series the user supplied (phase or freq)."""
         mod = self.mods.get("noise_id")
         if mod is None:
             return ALPHA_UNKNOWN
         try:
-            return int(mod.identify_alpha(x, m, "phase", var_stat))
+            return int(mod.identify_alpha(x, m, data_type, var_stat))
         except Exception as exc:  # noise ID may legitimately fail at the longest taus
             self.notes.append(f"noise id failed at m={m}: {exc}")
             return ALPHA_UNKNOWN
@@ -181,10 +181,41 @@ def compute(
     if not 0.0 < confidence < 1.0:
         raise StatsError(f"confidence must be in (0, 1), got {confidence!r}")
     pd, drift = to_phase(data, rate, data_type, remove_drift)
-    n_freq = pd.n_phase - 1
-    tau0 = pd.tau0_s
     if stat == "theoh":
         return _theoh(pd, drift, data_type, rate, taus, confidence, alpha, max_af, afs, progress)
+    return _compute_pd(
+        stat,
+        pd,
+        drift,
+        data_type,
+        rate,
+        taus,
+        confidence,
+        alpha,
+        bias_correction,
+        max_af,
+        afs,
+        progress,
+    )
+
+
+def _compute_pd(
+    stat: str,
+    pd: PhaseData,
+    drift: float | None,
+    data_type: str,
+    rate: float,
+    taus: str | int | Sequence[float] | np.ndarray,
+    confidence: float,
+    alpha: int | Sequence[int] | np.ndarray | None,
+    bias_correction: bool,
+    max_af: float | None,
+    afs: Sequence[int] | np.ndarray | None,
+    progress: Progress | None,
+) -> StatResult:
+    """:func:`compute` on prepared phase data; noise ID uses the user's ``data_type``."""
+    n_freq = pd.n_phase - 1
+    tau0 = pd.tau0_s
     if afs is not None:
         ms = np.unique(np.asarray(afs, dtype=np.int64))
         if ms.size == 0 or ms[0] < 1 or ms[-1] > _max_af(stat, n_freq, max_af or n_freq):
@@ -215,7 +246,7 @@ def compute(
     var = var_raw.copy()
     for k, m in enumerate(ms):
         m = int(m)
-        a = int(fixed[k]) if fixed is not None else conf.alpha(xn, m, var_stat)
+        a = int(fixed[k]) if fixed is not None else conf.alpha(xn, m, data_type, var_stat)
         alphas[k] = a
         if bias_correction and stat in BIAS_STATS:
             f = conf.bias(var_stat, a, m, pd.n_phase)
@@ -289,15 +320,26 @@ def _theoh(
         )
     m_av = ms_all[ms_all <= k]
     m_br = ms_all[(0.75 * ms_all > k) & (ms_all % 2 == 0)]
-    kw: dict[str, Any] = {"confidence": confidence, "alpha": alpha, "progress": progress}
     if alpha is not None and np.ndim(alpha):
         raise StatsError("theoh takes a single alpha (or None), not one per tau")
-    raw = pd.x if pd.gap_prefix is None else _noise_phase(pd)
-    parts = []
-    if m_av.size:
-        parts.append(compute("oadev", raw, rate, "phase", afs=m_av, **kw))
-    if m_br.size:
-        parts.append(compute("theobr", raw, rate, "phase", afs=m_br, **kw))
+    parts = [
+        _compute_pd(
+            name,
+            pd,
+            drift,
+            data_type,
+            rate,
+            taus,
+            confidence,
+            alpha,
+            True,
+            max_af,
+            sel,
+            progress,
+        )
+        for name, sel in (("oadev", m_av), ("theobr", m_br))
+        if sel.size
+    ]
     if not parts:
         raise StatsError(f"theoh: no averaging factor fits {n_freq} samples")
 

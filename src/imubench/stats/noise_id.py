@@ -41,6 +41,7 @@ import math
 import numpy as np
 
 from imubench.errors import StatsError
+from imubench.stats import _kernels as _k
 
 __all__ = [
     "LAG1_MIN_POINTS",
@@ -127,18 +128,13 @@ def lag1_acf(z: np.ndarray) -> float:
     r1 = sum_{i} (z_i - zbar)(z_{i+1} - zbar) / sum_i (z_i - zbar)^2, the sums running over
     finite values (pairs with a NaN are skipped).
     """
-    z = np.asarray(z, dtype=float)
-    finite = np.isfinite(z)
-    if finite.sum() < 3:
-        raise StatsError(f"lag-1 ACF needs at least 3 finite points, got {int(finite.sum())}")
-    n = int(finite.sum())
-    zc = z - np.nanmean(z)
-    num_terms = zc[:-1] * zc[1:]
-    num = np.nansum(num_terms)
-    den = np.nansum(zc * zc)
-    if den == 0.0:
+    z = np.ascontiguousarray(z, dtype=float)
+    r1, n = _k.lag1_r1(z)
+    if n < 3:
+        raise StatsError(f"lag-1 ACF needs at least 3 finite points, got {int(n)}")
+    if not np.isfinite(r1):
         raise StatsError("lag-1 ACF: the series is constant (zero variance); no noise to identify")
-    return float(num / den) * (n - 1) / n
+    return float(r1) * (n - 1) / n
 
 
 def lag1_alpha(x: np.ndarray, m: int, data_type: str, dmin: int = 0, dmax: int = 2) -> int:
@@ -212,15 +208,16 @@ def _mvar(x: np.ndarray, m: int) -> float:
     n = x.size
     if n < 3 * m + 1:
         raise StatsError(f"MVAR at m={m} needs >= {3 * m + 1} phase points, got {n}")
-    s = np.concatenate(([0.0], np.cumsum(np.nan_to_num(x))))
-    bad = np.concatenate(([0], np.cumsum(~np.isfinite(x))))
-    j = np.arange(n - 3 * m + 1)
-    # sum_{i=j}^{j+m-1} (x_{i+2m} - 2 x_{i+m} + x_i)
-    t = (s[j + 3 * m] - s[j + 2 * m]) - 2.0 * (s[j + 2 * m] - s[j + m]) + (s[j + m] - s[j])
-    ok = (bad[j + 3 * m] - bad[j]) == 0
-    if not ok.any():
+    bad = ~np.isfinite(x)
+    if bad.any():
+        gp = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(bad, out=gp[1:])
+        s, ok = _k.mvar_sum(np.where(bad, 0.0, x), m, gp, 1)
+    else:
+        s, ok = _k.mvar_sum(np.ascontiguousarray(x, dtype=float), m, np.zeros(0, np.int64), 1)
+    if ok == 0:
         raise StatsError(f"MVAR at m={m}: every term touches a gap")
-    return float(np.mean(t[ok] ** 2) / (2.0 * m**2 * m**2))
+    return float(s / ok / (2.0 * m**2 * m**2))
 
 
 def analysis_terms(stat: str, m: int, n_phase: int) -> int:
@@ -291,7 +288,12 @@ def b1_alpha(x: np.ndarray, m: int, data_type: str, n_terms: int | None = None) 
 
 
 def _points_at_tau(x: np.ndarray, m: int, data_type: str) -> int:
-    return int(np.isfinite(_series_at_tau(x, m, data_type)).sum())
+    """Finite points of :func:`_series_at_tau` without forming it (a freq average is finite
+    when both decimated phase points around it are)."""
+    fd = np.isfinite(x[::m])
+    if data_type == "phase":
+        return int(np.count_nonzero(fd))
+    return int(np.count_nonzero(fd[1:] & fd[:-1]))
 
 
 def identify_alpha(x: np.ndarray, m: int, data_type: str, stat: str) -> int:

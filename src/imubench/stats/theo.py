@@ -27,7 +27,10 @@ import numpy as np
 import scipy.fft
 
 from imubench.errors import StatsError
+from imubench.stats import _kernels as _k
 from imubench.stats.prep import PhaseData
+
+_NO_ROWS = np.zeros(0, dtype=np.bool_)
 
 FFT_MIN_LAGS = 48  # use an FFT autocorrelation when at least this many m share an a
 
@@ -46,43 +49,65 @@ def theo1_sums(
         return _theo1_sums_gaps(pd, ms)
     order = np.argsort(ms)
     srt = ms[order]
-    x = pd.x
-    n = x.size
     sums = np.zeros(srt.size)
-    amax = int(srt[-1] // 2)
-    cs = np.empty(n + 1)
-    for a in range(1, amax + 1):
-        k0 = int(np.searchsorted(srt, 2 * a))
-        sel = srt[k0:]
-        d = x[: n - a] - x[a:]
-        cs[0] = 0.0
-        np.cumsum(d * d, out=cs[1 : n - a + 1])
-        rows = n - sel
-        lags = sel - a
-        total = cs[n - a]
-        sq = cs[rows] + (total - cs[lags])
-        if sel.size >= FFT_MIN_LAGS:
-            nfft = scipy.fft.next_fast_len(int(n - a + lags.max() + 1), real=True)
-            f = scipy.fft.rfft(d, nfft)
-            ac = scipy.fft.irfft(f.real * f.real + f.imag * f.imag, nfft)
-            cross = ac[lags]
-        else:
-            cross = np.array(
-                [np.dot(d[:r], d[lag : lag + r]) for r, lag in zip(rows, lags, strict=True)]
-            )
-        sums[k0:] += (sq - 2.0 * cross) / a
-        if progress is not None and a % 256 == 0:
-            progress(a / amax)
+    a_split = _fft_a_limit(srt, pd.n_phase)
+    if a_split > 1:
+        _theo1_fft_part(pd.x, srt, a_split, sums, progress)
+    sums += _k.theo1_direct(pd.x, srt, a_split, _NO_ROWS)
     out = np.empty_like(sums)
     out[order] = sums
     rows_all = pd.n_phase - ms
     return out, rows_all, np.zeros_like(rows_all)
 
 
+def _fft_a_limit(srt: np.ndarray, n: int) -> int:
+    """Smallest a from which the direct sums are cheaper than one FFT autocorrelation.
+
+    For a given a every m >= 2a needs one O(N) pass directly, against one FFT pair of
+    about N log2 N work for all of them: FFT below the first a where fewer than
+    :data:`FFT_MIN_LAGS` averaging factors still need it."""
+    a = 1
+    while a <= int(srt[-1]) // 2:
+        if srt.size - int(np.searchsorted(srt, 2 * a)) < FFT_MIN_LAGS:
+            return a
+        a += 1
+    return a
+
+
+def _theo1_fft_part(
+    x: np.ndarray,
+    srt: np.ndarray,
+    a_split: int,
+    sums: np.ndarray,
+    progress: Callable[[float], None] | None,
+) -> None:
+    """Add the a < a_split terms: per a, windowed sums of D_a^2 from a prefix sum and the
+    lag-(m-a) autocorrelation of D_a from one FFT, for every m >= 2a at once."""
+    n = x.size
+    cs = np.empty(n + 1)
+    d = np.empty(n)
+    for a in range(1, a_split):
+        k0 = int(np.searchsorted(srt, 2 * a))
+        sel = srt[k0:]
+        da = d[: n - a]
+        np.subtract(x[: n - a], x[a:], out=da)
+        cs[0] = 0.0
+        np.cumsum(da * da, out=cs[1 : n - a + 1])
+        rows = n - sel
+        lags = sel - a
+        total = cs[n - a]
+        sq = cs[rows] + (total - cs[lags])
+        nfft = scipy.fft.next_fast_len(int(n - a + lags.max() + 1), real=True)
+        f = scipy.fft.rfft(da, nfft)
+        ac = scipy.fft.irfft(f.real * f.real + f.imag * f.imag, nfft)
+        sums[k0:] += (sq - 2.0 * ac[lags]) / a
+        if progress is not None and a % 64 == 0:
+            progress(a / a_split)
+
+
 def _theo1_sums_gaps(pd: PhaseData, ms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Direct evaluation skipping rows i whose span i..i+m touches a gap."""
-    x = pd.x
-    n = x.size
+    n = pd.n_phase
     sums = np.zeros(ms.size)
     used = np.zeros(ms.size, dtype=np.int64)
     skipped = np.zeros(ms.size, dtype=np.int64)
@@ -90,15 +115,10 @@ def _theo1_sums_gaps(pd: PhaseData, ms: np.ndarray) -> tuple[np.ndarray, np.ndar
         m = int(m)
         rows = n - m
         i = np.arange(rows, dtype=np.int64)
-        ok = pd.span_ok(i, i + m)
+        ok = np.asarray(pd.span_ok(i, i + m))
         used[k] = int(ok.sum())
         skipped[k] = rows - used[k]
-        s = 0.0
-        for a in range(1, m // 2 + 1):
-            e = x[:rows] - x[a : a + rows] + x[m:] - x[m - a : m - a + rows]
-            e = e[ok]
-            s += float(np.dot(e, e)) / a
-        sums[k] = s
+        sums[k] = _k.theo1_direct(pd.x, np.array([m], dtype=np.int64), 1, ok)[0]
     return sums, used, skipped
 
 

@@ -21,15 +21,14 @@ for phase.dat): no bias correction here, it is applied by the caller.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
+from imubench.stats import _kernels as _k
 from imubench.stats.allan import ohvar
 from imubench.stats.prep import PhaseData
 
 Kernel = tuple[float, int, int]
-CHUNK_ELEMS = 1 << 21
+_NO_GAPS = np.zeros(0, dtype=np.int64)
 
 
 def extended_phase(pd: PhaseData) -> np.ndarray:
@@ -48,63 +47,26 @@ def totvar(pd: PhaseData, m: int, xe: np.ndarray | None = None) -> Kernel:
     n = pd.n_phase
     if xe is None:
         xe = extended_phase(pd)
-    o = n - 2
     count = n - 2
-    d = xe[o + 1 - m : o + n - 1 - m] + xe[o + 1 + m : o + n - 1 + m]
-    d -= 2.0 * xe[o + 1 : o + n - 1]
-    if pd.gap_prefix is not None:
-        i = np.arange(1, n - 1, dtype=np.int64)
-        ok = pd.span_ok(np.maximum(0, i - m), np.minimum(n - 1, i + m))
-        d = d[ok]
-    valid = int(d.size)
+    gp = _NO_GAPS if pd.gap_prefix is None else pd.gap_prefix
+    s, valid = _k.totvar_sum(xe, n, m, gp, pd.gap_end_offset)
+    valid = int(valid)
     tau = m * pd.tau0_s
-    var = float(np.dot(d, d)) / (2.0 * tau * tau * valid) if valid else float("nan")
+    var = float(s) / (2.0 * tau * tau * valid) if valid else float("nan")
     return var, valid, count - valid
 
 
-def _reflect_index(m: int) -> np.ndarray:
-    r = np.arange(3 * m, dtype=np.int64)
-    return np.concatenate([r[::-1], r, r[::-1]])
-
-
-def _subseq_meansq(
-    series: np.ndarray, m: int, starts: np.ndarray, progress: Callable[[int], None] | None
-) -> np.ndarray:
-    """Per subsequence start i: mean over the 6m terms of (second difference of m-sums)^2.
+def _subseq_meansq_sum(series: np.ndarray, m: int, starts: np.ndarray) -> float:
+    """Sum over subsequence starts i of mean_j z_j^2 / m^2 (``_kernels.subseq_meansq_sum``).
 
     Each subsequence series[i:i+3m] is detrended by the half-means slope, reflected to 9m
     points (uninverted, even), and z_j = C[j] - 2 C[j+m] + C[j+2m] with C the m-point moving
-    sums, j = 0..6m-1. Returns mean_j z_j^2 / m^2.
+    sums, j = 0..6m-1.
     """
-    n3 = 3 * m
-    h1 = n3 // 2
-    h2 = n3 - h1  # ceil(3m/2): separation of the two half means, in samples
-    p = np.empty(series.size + 1)
-    p[0] = 0.0
-    np.cumsum(series, out=p[1:])
-    rel = _reflect_index(m)
-    relf = rel.astype(np.float64)
-    out = np.empty(starts.size)
-    chunk = max(1, CHUNK_ELEMS // (9 * m))
-    for c0 in range(0, starts.size, chunk):
-        st = starts[c0 : c0 + chunk]
-        mean1 = (p[st + h1] - p[st]) / h1
-        mean2 = (p[st + n3] - p[st + h2]) / (n3 - h2)
-        slope = (mean2 - mean1) / h2
-        xs = series[st[:, None] + rel[None, :]]
-        xs -= slope[:, None] * relf[None, :]
-        cs = np.zeros((st.size, 9 * m + 1))
-        np.cumsum(xs, axis=1, out=cs[:, 1:])
-        z = cs[:, 3 * m : 9 * m] - cs[:, 0 : 6 * m]
-        z -= 3.0 * cs[:, 2 * m : 8 * m]
-        z += 3.0 * cs[:, m : 7 * m]
-        out[c0 : c0 + chunk] = np.einsum("ij,ij->i", z, z) / (6.0 * m * m * m)
-        if progress is not None:
-            progress(st.size)
-    return out
+    return float(_k.subseq_meansq_sum(series, m, starts))
 
 
-def mtotvar(pd: PhaseData, m: int, progress: Callable[[int], None] | None = None) -> Kernel:
+def mtotvar(pd: PhaseData, m: int) -> Kernel:
     """MTOTVAR, SP 1065 eq. (27) (no bias correction)."""
     n = pd.n_phase
     count = n - 3 * m + 1
@@ -113,19 +75,19 @@ def mtotvar(pd: PhaseData, m: int, progress: Callable[[int], None] | None = None
         starts = starts[pd.span_ok(starts, starts + 3 * m - 1)]
     if starts.size == 0:
         return float("nan"), 0, count
-    msq = _subseq_meansq(pd.x, m, starts, progress)
+    msq = _subseq_meansq_sum(pd.x, m, starts)
     tau = m * pd.tau0_s
-    return float(msq.sum()) / (2.0 * tau * tau * starts.size), int(starts.size), count - starts.size
+    return msq / (2.0 * tau * tau * starts.size), int(starts.size), count - starts.size
 
 
-def ttotvar(pd: PhaseData, m: int, progress: Callable[[int], None] | None = None) -> Kernel:
+def ttotvar(pd: PhaseData, m: int) -> Kernel:
     """TTOTVAR = tau^2 / 3 * MTOTVAR, SP 1065 eq. (29) (with tau^2, see allantools note)."""
-    v, ok, skipped = mtotvar(pd, m, progress)
+    v, ok, skipped = mtotvar(pd, m)
     tau = m * pd.tau0_s
     return tau * tau / 3.0 * v, ok, skipped
 
 
-def htotvar(pd: PhaseData, m: int, progress: Callable[[int], None] | None = None) -> Kernel:
+def htotvar(pd: PhaseData, m: int) -> Kernel:
     """HTOTVAR, SP 1065 eq. (30) (no bias correction); m = 1 gives OHVAR as Stable32."""
     if m == 1:
         return ohvar(pd, 1)
@@ -136,6 +98,6 @@ def htotvar(pd: PhaseData, m: int, progress: Callable[[int], None] | None = None
         starts = starts[pd.span_ok(starts, starts + 3 * m)]
     if starts.size == 0:
         return float("nan"), 0, count
-    msq = _subseq_meansq(y, m, starts, progress)
-    # msq = mean_j (z_j / m)^2 with z on frequency sums; Hadamard 1/6 normalisation
-    return float(msq.sum()) / (6.0 * starts.size), int(starts.size), count - starts.size
+    msq = _subseq_meansq_sum(y, m, starts)
+    # msq = sum_i mean_j (z_j / m)^2 with z on frequency sums; Hadamard 1/6 normalisation
+    return msq / (6.0 * starts.size), int(starts.size), count - starts.size

@@ -1,0 +1,328 @@
+"""Compiled (numba) inner loops of the batch statistics: one pass over the data, no temporaries.
+
+Each function is the loop form of a formula documented in the module that calls it
+(``allan``, ``total``, ``theo``, ``noise_id``); they are kept here so that the numerical
+modules stay readable and the JIT cost is paid once (``cache=True`` stores the machine code
+beside this file, so tests and later runs load it instead of compiling).
+
+Gaps: ``gp`` is :attr:`PhaseData.gap_prefix` (an empty array when there are none) and
+``goff`` its ``gap_end_offset``; a term over phase points a..b is used only when
+``gp[b + goff] - gp[a] == 0``.
+
+Sums use reassociation (``fastmath`` without the no-NaN/no-inf assumptions) so the compiler
+keeps several partial sums in SIMD lanes, which is also better conditioned than one running
+sum; the result agrees with a pairwise sum to a few ulps of the total.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_FM = {"reassoc", "contract", "nsz", "arcp"}
+
+
+@njit(cache=True, fastmath=_FM)
+def _ok(gp: np.ndarray, goff: int, a: int, b: int) -> bool:
+    return gp.size == 0 or gp[b + goff] - gp[a] == 0
+
+
+@njit(cache=True, fastmath=_FM)
+def sumsq_diff(
+    x: np.ndarray, m: int, step: int, count: int, order: int, gp: np.ndarray, goff: int
+) -> tuple[float, int]:
+    """Sum over k < count of D_k^2, D_k the order-2 or order-3 difference at lag m.
+
+    order 2: x[a] - 2 x[a+m] + x[a+2m] (Allan, SP 1065 eqs. (7), (11));
+    order 3: x[a] - 3 x[a+m] + 3 x[a+2m] - x[a+3m] (Hadamard, eqs. (18), (19));
+    a = k * step. Returns (sum of squares, number of gap-free terms).
+    """
+    s = 0.0
+    valid = 0
+    span = order * m
+    if gp.size == 0:
+        if step == 1:  # contiguous views: the compiler vectorises the loop (about 4x)
+            x0, x1, x2 = x[:count], x[m : m + count], x[2 * m : 2 * m + count]
+            if order == 2:
+                for a in range(count):
+                    d = x0[a] - 2.0 * x1[a] + x2[a]
+                    s += d * d
+            else:
+                x3 = x[3 * m : 3 * m + count]
+                for a in range(count):
+                    d = x0[a] - 3.0 * x1[a] + 3.0 * x2[a] - x3[a]
+                    s += d * d
+        elif order == 2:
+            for k in range(count):
+                a = k * step
+                d = x[a] - 2.0 * x[a + m] + x[a + 2 * m]
+                s += d * d
+        else:
+            for k in range(count):
+                a = k * step
+                d = x[a] - 3.0 * x[a + m] + 3.0 * x[a + 2 * m] - x[a + 3 * m]
+                s += d * d
+        return s, count
+    for k in range(count):
+        a = k * step
+        if gp[a + span + goff] - gp[a] != 0:
+            continue
+        if order == 2:
+            d = x[a] - 2.0 * x[a + m] + x[a + 2 * m]
+        else:
+            d = x[a] - 3.0 * x[a + m] + 3.0 * x[a + 2 * m] - x[a + 3 * m]
+        s += d * d
+        valid += 1
+    return s, valid
+
+
+@njit(cache=True, fastmath=_FM)
+def _d2(x: np.ndarray, m: int, i: int) -> float:
+    return x[i + 2 * m] - 2.0 * x[i + m] + x[i]
+
+
+@njit(cache=True, fastmath=_FM)
+def _d3(x: np.ndarray, m: int, j: int) -> float:
+    """w_{j+1} - w_j of :func:`mvar_sum`: d_{j+m} - d_j, a third difference at lag m."""
+    return x[j + 3 * m] - 3.0 * x[j + 2 * m] + 3.0 * x[j + m] - x[j]
+
+
+@njit(cache=True, fastmath=_FM)
+def mvar_sum(x: np.ndarray, m: int, gp: np.ndarray, goff: int) -> tuple[float, int]:
+    """sum_j w_j^2, w_j = sum_{i=j}^{j+m-1} x[i+2m] - 2 x[i+m] + x[i], j = 0..N-3m
+    (SP 1065 eq. (15)).
+
+    w slides by one term per j: w_{j+1} = w_j + (x[j+3m] - 3 x[j+2m] + 3 x[j+m] - x[j]),
+    so each tau costs one pass; rounding grows like sqrt(N) ulps of a second difference,
+    far below what a prefix sum of the phase would lose. The j range is cut into four
+    segments slid side by side (independent dependency chains), each starting from its
+    own exactly summed window.
+    """
+    n = x.size
+    count = n - 3 * m + 1
+    if gp.size != 0 or count < 64:
+        w = 0.0
+        for i in range(m):
+            w += _d2(x, m, i)
+        s = 0.0
+        valid = 0
+        for j in range(count):
+            if gp.size == 0 or gp[j + 3 * m - 1 + goff] - gp[j] == 0:
+                s += w * w
+                valid += 1
+            if j + 1 < count:
+                w += _d3(x, m, j)
+        return s, valid
+    seg = count // 4
+    w0 = 0.0
+    w1 = 0.0
+    w2 = 0.0
+    w3 = 0.0
+    for i in range(m):
+        w0 += _d2(x, m, i)
+        w1 += _d2(x, m, seg + i)
+        w2 += _d2(x, m, 2 * seg + i)
+        w3 += _d2(x, m, 3 * seg + i)
+    s = 0.0
+    for t in range(seg - 1):
+        s += w0 * w0 + w1 * w1 + w2 * w2 + w3 * w3
+        w0 += _d3(x, m, t)
+        w1 += _d3(x, m, seg + t)
+        w2 += _d3(x, m, 2 * seg + t)
+        w3 += _d3(x, m, 3 * seg + t)
+    s += w0 * w0 + w1 * w1 + w2 * w2 + w3 * w3
+    for j in range(4 * seg - 1, count - 1):  # tail of the last segment
+        w3 += _d3(x, m, j)
+        s += w3 * w3
+    return s, count
+
+
+@njit(cache=True, fastmath=_FM)
+def totvar_sum(xe: np.ndarray, n: int, m: int, gp: np.ndarray, goff: int) -> tuple[float, int]:
+    """sum_{i=1}^{N-2} (x*[i-m] - 2 x*[i] + x*[i+m])^2 on TOTVAR's reflected phase x*
+    (x[0] at index N-2 of ``xe``); with gaps, terms whose span clipped to 0..N-1 has one
+    are skipped."""
+    o = n - 2
+    s = 0.0
+    if gp.size == 0:
+        c = n - 2
+        x0 = xe[o + 1 - m : o + 1 - m + c]
+        x1 = xe[o + 1 : o + 1 + c]
+        x2 = xe[o + 1 + m : o + 1 + m + c]
+        for i in range(c):
+            d = x0[i] - 2.0 * x1[i] + x2[i]
+            s += d * d
+        return s, c
+    valid = 0
+    for i in range(1, n - 1):
+        a = max(0, i - m)
+        b = min(n - 1, i + m)
+        if gp[b + goff] - gp[a] != 0:
+            continue
+        d = xe[o + i - m] - 2.0 * xe[o + i] + xe[o + i + m]
+        s += d * d
+        valid += 1
+    return s, valid
+
+
+@njit(cache=True, fastmath=_FM)
+def _local_prefix(series: np.ndarray, s: int, n3: int, v: np.ndarray) -> None:
+    """v[t] = sum_{u<t} (series[s+u] - series[s]), t = 0..n3, as four independent running
+    sums (one per quarter, side by side) joined by their end values."""
+    x0 = series[s]
+    q = n3 // 4
+    v[0] = 0.0
+    if q < 8:
+        for t in range(n3):
+            v[t + 1] = v[t] + (series[s + t] - x0)
+        return
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    for t in range(q):
+        a0 += series[s + t] - x0
+        a1 += series[s + q + t] - x0
+        a2 += series[s + 2 * q + t] - x0
+        a3 += series[s + 3 * q + t] - x0
+        v[t + 1] = a0
+        v[q + t + 1] = a1
+        v[2 * q + t + 1] = a2
+        v[3 * q + t + 1] = a3
+    for t in range(4 * q, n3):
+        a3 += series[s + t] - x0
+        v[t + 1] = a3
+    o1 = v[q]
+    o2 = o1 + v[2 * q]
+    o3 = o2 + v[3 * q]
+    for t in range(q + 1, 2 * q + 1):
+        v[t] += o1
+    for t in range(2 * q + 1, 3 * q + 1):
+        v[t] += o2
+    for t in range(3 * q + 1, n3 + 1):
+        v[t] += o3
+
+
+@njit(cache=True, fastmath=_FM)
+def subseq_meansq_sum(series: np.ndarray, m: int, starts: np.ndarray) -> float:
+    """sum over starts of mean_j z_j^2 / m^2 for MTOT / HTOT (see ``total._subseq_meansq_sum``).
+
+    Per start s, v = series[s:s+3m] - series[s] (a constant cancels in z) with local prefix
+    V, slope b = (mean of last h1 - mean of first h1) / h2 with h1 = floor(3m/2),
+    h2 = ceil(3m/2); e = [rev v, v, rev v] - b * rel (rel the reflected index 0..3m-1) has
+    the prefix C[k] = V[3m] - V[3m-k] (region A, k <= 3m), V[3m] + V[k-3m] (B, k <= 6m),
+    3 V[3m] - V[9m-k] (C, k <= 9m), minus b R[k] (R the prefix of rel); then
+    z_j = C[j+3m] - 3 C[j+2m] + 3 C[j+m] - C[j], j = 0..6m-1, and the start adds
+    sum_j z_j^2 / (6m m^2). For j in [p m, (p+1) m) the term C[j + q m] lies in region
+    (p+q) // 3, so each of the six sub-ranges is a branch-free loop over forward views
+    (V and its reverse); the ramp part b * g_j, g_j the same difference of R, is shared.
+    O(m) per start, vectorised.
+    """
+    n3 = 3 * m
+    h1 = n3 // 2
+    h2 = n3 - h1
+    r = np.empty(3 * n3 + 1)  # prefix sum of rel on the 9m grid
+    r[0] = 0.0
+    for k in range(3 * n3):
+        if k < n3:
+            rel = n3 - 1 - k
+        elif k < 2 * n3:
+            rel = k - n3
+        else:
+            rel = 3 * n3 - 1 - k
+        r[k + 1] = r[k] + rel
+    g = np.empty(2 * n3)
+    for j in range(2 * n3):
+        g[j] = r[j + n3] - 3.0 * r[j + 2 * m] + 3.0 * r[j + m] - r[j]
+    vv = np.empty((2, n3 + 1))  # row 0: V; row 1: its reverse, vv[1, t] = V[3m - t]
+    total = 0.0
+    for s in starts:
+        _local_prefix(series, s, n3, vv[0])
+        for t in range(n3 + 1):
+            vv[1, t] = vv[0, n3 - t]
+        b = ((vv[0, n3] - vv[0, h2]) - vv[0, h1]) / (h1 * h2)
+        v3 = vv[0, n3]
+        acc = 0.0
+        for p in range(6):
+            c0, s0, w0 = _term(vv, v3, n3, m, p, 0, -1.0)
+            c1, s1, w1 = _term(vv, v3, n3, m, p, 1, 3.0)
+            c2, s2, w2 = _term(vv, v3, n3, m, p, 2, -3.0)
+            c3, s3, w3 = _term(vv, v3, n3, m, p, 3, 1.0)
+            const = c0 + c1 + c2 + c3
+            gp_ = g[p * m : (p + 1) * m]
+            for i in range(m):
+                z = const + s0 * w0[i] + s1 * w1[i] + s2 * w2[i] + s3 * w3[i] - b * gp_[i]
+                acc += z * z
+        total += acc / (6.0 * m * m * m)
+    return total
+
+
+@njit(cache=True, fastmath=_FM)
+def _term(
+    vv: np.ndarray, v3: float, n3: int, m: int, p: int, q: int, coef: float
+) -> tuple[float, float, np.ndarray]:
+    """coef * C[j + q m] for j in [p m, (p+1) m) as (constant, sign, view of V or rev V)."""
+    k0 = (p + q) * m
+    reg = (p + q) // 3
+    if reg == 0:  # C[k] = V[3m] - V[3m - k]
+        return coef * v3, -coef, vv[1, k0 : k0 + m]
+    if reg == 1:  # C[k] = V[3m] + V[k - 3m]
+        return coef * v3, coef, vv[0, k0 - n3 : k0 - n3 + m]
+    return coef * 3.0 * v3, -coef, vv[1, k0 - 2 * n3 : k0 - 2 * n3 + m]  # 3 V[3m] - V[9m-k]
+
+
+@njit(cache=True, fastmath=_FM)
+def theo1_direct(x: np.ndarray, ms: np.ndarray, a_lo: int, ok: np.ndarray) -> np.ndarray:
+    """Per m in ``ms``: sum_{a=a_lo}^{m/2} (1/a) sum_i (x_i - x_{i+a} + x_{i+m} - x_{i+m-a})^2
+    over rows i = 0..N-m-1 (SP 1065 eq. (31) with a = m/2 - d). ``ok`` is empty (all rows)
+    or, with a single m, one flag per row (False: the span i..i+m has a gap). Squares of
+    exact differences: no cancellation."""
+    out = np.zeros(ms.size)
+    for k in range(ms.size):
+        m = ms[k]
+        rows = x.size - m
+        total = 0.0
+        for a in range(a_lo, m // 2 + 1):
+            s = 0.0
+            x0, xa = x[:rows], x[a : a + rows]
+            xm, xma = x[m : m + rows], x[m - a : m - a + rows]
+            if ok.size == 0:
+                for i in range(rows):
+                    e = x0[i] - xa[i] + xm[i] - xma[i]
+                    s += e * e
+            else:
+                for i in range(rows):
+                    if ok[i]:
+                        e = x0[i] - xa[i] + xm[i] - xma[i]
+                        s += e * e
+            total += s / a
+        out[k] = total
+    return out
+
+
+@njit(cache=True, fastmath=_FM)
+def lag1_r1(z: np.ndarray) -> tuple[float, int]:
+    """(r1 without the (n-1)/n factor, n) of the finite values of z, two passes, NaN pairs
+    skipped (Riley & Greenhall 2004, eq. 2)."""
+    n = 0
+    s = 0.0
+    for v in z:
+        if v == v:
+            s += v
+            n += 1
+    if n == 0:
+        return np.nan, 0
+    mean = s / n
+    num = 0.0
+    den = 0.0
+    for i in range(z.size):
+        a = z[i] - mean
+        if a == a:
+            den += a * a
+            if i + 1 < z.size:
+                b = z[i + 1] - mean
+                if b == b:
+                    num += a * b
+    if den == 0.0:
+        return np.nan, n
+    return num / den, n
