@@ -32,6 +32,7 @@ def start_daemon(tmp_path: Path, port: int, extra: str = "") -> tuple[subprocess
         (REPO / "config" / "quickstart.toml").read_text()
         .replace("port = 1883", f"port = {port}")
         .replace('path = "recordings/', f'path = "{tmp_path}/recordings/')
+        .replace("model=config/", f"model={REPO}/config/")
         + extra
     )
     env = dict(os.environ, PYTHONUNBUFFERED="1")
@@ -74,6 +75,15 @@ def test_quickstart_daemon_end_to_end(tmp_path: Path) -> None:
             for ch in s["channels"].values():
                 assert len(ch["tau_s"]) == len(ch["dev"]) == len(ch["n"]) >= 1
                 assert ch["units"] in ("dps", "g")
+                n_tau = len(ch["tau_s"])
+                assert len(ch["ci_low"]) == len(ch["ci_high"]) == len(ch["alpha"]) == n_tau
+            assert set(s["statistics"]) == {"oadev", "mdev", "ohdev"}  # config/quickstart.toml
+            assert s["statistics"]["oadev"] == s["channels"]
+            for name, per_ch in s["statistics"].items():
+                assert set(per_ch) == set(s["channels"]), name
+                gx = per_ch["gx"]
+                ok = [d for d in gx["dev"] if d is not None]
+                assert ok and all(d > 0 for d in ok), name  # a noisy simulated gyro
         stamps = [time.mktime(time.strptime(s["time"][:19], "%Y-%m-%dT%H:%M:%S")) for s in snaps]
         assert stamps[-1] - stamps[0] <= 4.0  # at least one per second
         assert snaps[-1]["samples"] > snaps[0]["samples"]
@@ -114,6 +124,7 @@ def test_daemon_stops_on_duration_and_resumes_state(tmp_path: Path) -> None:
         'memory = "bounded"', f'memory = "bounded"\nstate_path = "{tmp_path}/state.npz"'
     ).replace("clock=wall", "clock=virtual")
     cfg_text = text.replace("port = 1883", f"port = {port}").replace(
+        "model=config/", f"model={REPO}/config/").replace(
         'path = "recordings/', f'path = "{tmp_path}/recordings/') + extra
     cfg = tmp_path / "c.toml"
     cfg.write_text(cfg_text)

@@ -152,25 +152,30 @@ class Daemon:
                               memory=a.memory, scale=scale)
 
     def snapshot_payload(self, source: Source, acq: Acquisition) -> dict[str, Any]:
+        """The ``allan`` MQTT payload (docs/mqtt.md): the first configured statistic in
+        ``statistic``/``channels`` and every configured one under ``statistics``."""
         eng = self.engine
-        stat = self.cfg.allan.stats[0]
-        channels: dict[str, Any] = {}
+        stats = list(self.cfg.allan.stats)
+        per_stat: dict[str, dict[str, Any]] = {s: {} for s in stats}
         if eng is not None and eng.n_samples:
             snap = eng.snapshot()
             for ch, res in zip(CHANNELS, snap, strict=True):  # type: ignore[arg-type]
-                r = res[stat]
-                channels[ch] = {
-                    "tau_s": r.tau_s, "dev": r.dev, "n": r.n, "ci_low": r.ci_low,
-                    "ci_high": r.ci_high, "units": UNITS[ch],
-                }
+                for s in stats:
+                    r = res[s]
+                    per_stat[s][ch] = {
+                        "tau_s": r.tau_s, "dev": r.dev, "n": r.n, "ci_low": r.ci_low,
+                        "ci_high": r.ci_high, "alpha": r.alpha, "edf": r.edf,
+                        "units": UNITS[ch],
+                    }
         return {
             "time": dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds"),
             "station": self.cfg.mqtt.station, "sensor": self.cfg.mqtt.sensor,
             "chip": source.info.chip, "odr_hz": source.info.odr_hz,
             "samples": 0 if eng is None else eng.n_samples,
             "lost_samples": int(source.counters.get("lost_samples", 0)),
-            "statistic": stat, "memory": self.cfg.allan.memory,
-            "channels": channels,
+            "statistic": stats[0], "memory": self.cfg.allan.memory,
+            "channels": per_stat[stats[0]],
+            "statistics": per_stat,
         }
 
     # -- tasks --------------------------------------------------------------------------
@@ -285,7 +290,7 @@ class Daemon:
         )
         from imubench.mqtt.topics import allan_topic
 
-        self.say(f"publishing {cfg.allan.stats[0]} snapshots to "
+        self.say(f"publishing {', '.join(cfg.allan.stats)} snapshots to "
                  f"{allan_topic(cfg.mqtt.station, cfg.mqtt.sensor)}")
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
