@@ -70,6 +70,15 @@ def record(src: Source, out: Path) -> dict[str, Any]:
     return stats
 
 
+def record_uri(uri: str, out: Path, stats_json: Path | None) -> dict[str, Any]:
+    """Open the source ``uri``, record it to ``out`` and write the counters to
+    ``stats_json`` (if given); returns the counters (see :func:`record`)."""
+    stats = record(open_source(uri), out)
+    if stats_json is not None:
+        stats_json.write_text(json.dumps(stats, indent=2, sort_keys=True) + "\n")
+    return stats
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "acquire",
@@ -88,10 +97,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
-    src = open_source(add_duration(args.source, args.duration_s))
-    stats = record(src, args.out)
-    if args.stats_json is not None:
-        args.stats_json.write_text(json.dumps(stats, indent=2, sort_keys=True) + "\n")
+    stats = record_uri(add_duration(args.source, args.duration_s), args.out, args.stats_json)
     print(
         f"{args.out}: {stats['samples']} samples, {stats['gaps']} gaps, "
         f"{stats['lost_samples']} lost, {stats['overruns']} overruns, "

@@ -8,15 +8,13 @@ chip, simulated bus, the real driver, FIFO reads), in virtual time.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from urllib.parse import quote
 
 from lsm6ds.registers import CHIPS
 
-from imubench.commands.acquire import record
+from imubench.commands.acquire import record_uri
 from imubench.errors import SourceError
-from imubench.sources.registry import open_source
 
 
 def build_uri(args: argparse.Namespace) -> str:
@@ -61,10 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
-    src = open_source(build_uri(args))
-    stats = record(src, args.out)
-    if args.stats_json is not None:
-        args.stats_json.write_text(json.dumps(stats, indent=2, sort_keys=True) + "\n")
+    stats = record_uri(build_uri(args), args.out, args.stats_json)
     print(
         f"{args.out}: {stats['samples']} samples from a simulated {args.chip} "
         f"({stats['gaps']} gaps, {stats['lost_samples']} lost)"
