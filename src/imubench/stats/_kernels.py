@@ -20,6 +20,8 @@ import numpy as np
 from numba import njit
 
 _FM = {"reassoc", "contract", "nsz", "arcp"}
+PREFIX_REFRESH = 64  # subseq_meansq_sum: exact local prefix every this many starts
+LAG1_CHUNK = 2048  # series points formed at a time by lag1_r1_diff (a 16 kB scratch)
 
 
 @njit(cache=True, fastmath=_FM)
@@ -203,7 +205,7 @@ def _local_prefix(series: np.ndarray, s: int, n3: int, v: np.ndarray) -> None:
         v[t] += o3
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def subseq_meansq_sum(series: np.ndarray, m: int, starts: np.ndarray) -> float:
     """sum over starts of mean_j z_j^2 / m^2 for MTOT / HTOT (see ``total._subseq_meansq_sum``).
 
@@ -216,7 +218,14 @@ def subseq_meansq_sum(series: np.ndarray, m: int, starts: np.ndarray) -> float:
     sum_j z_j^2 / (6m m^2). For j in [p m, (p+1) m) the term C[j + q m] lies in region
     (p+q) // 3, so each of the six sub-ranges is a branch-free loop over forward views
     (V and its reverse); the ramp part b * g_j, g_j the same difference of R, is shared.
-    O(m) per start, vectorised.
+    Half the z are evaluated: e is even about 3m - 1/2 and 6m - 1/2 and z applies a
+    symmetric filter (window sums with weights 1, -2, 1), so z_j = z_{3m-j} and
+    z_j = z_{9m-j}; each half period j' = 0 .. floor(3m/2) (j = j' and 3m + j') counts
+    twice except j' = 0 (z_0 = z_{3m}, z_{3m} = z_{6m}) and j' = 3m/2 (its own mirror).
+    O(m) per start, vectorised: V of start s + 1 comes from V of start s by the exact
+    identity V_{s+1}[t] = V_s[t+1] - t (series[s+1] - series[s]) (one vectorised pass
+    instead of a serial running sum), recomputed from scratch every
+    :data:`PREFIX_REFRESH` starts and after a skipped start so rounding cannot build up.
     """
     n3 = 3 * m
     h1 = n3 // 2
@@ -235,25 +244,45 @@ def subseq_meansq_sum(series: np.ndarray, m: int, starts: np.ndarray) -> float:
     for j in range(2 * n3):
         g[j] = r[j + n3] - 3.0 * r[j + 2 * m] + 3.0 * r[j + m] - r[j]
     vv = np.empty((2, n3 + 1))  # row 0: V; row 1: its reverse, vv[1, t] = V[3m - t]
+    v = vv[0]
     total = 0.0
-    for s in starts:
-        _local_prefix(series, s, n3, vv[0])
-        for t in range(n3 + 1):
-            vv[1, t] = vv[0, n3 - t]
+    prev = -2
+    for idx in range(starts.size):
+        s = starts[idx]
+        rv = vv[1]
+        if s != prev + 1 or idx % PREFIX_REFRESH == 0:
+            _local_prefix(series, s, n3, v)
+            for t in range(n3 + 1):
+                rv[t] = v[n3 - t]
+        else:  # slide: V_s[t] = V_{s-1}[t+1] - t (series[s] - series[s-1]), exact identity
+            dlt = series[s] - series[s - 1]
+            for t in range(n3):
+                nv = v[t + 1] - t * dlt
+                v[t] = nv
+                rv[n3 - t] = nv
+            v[n3] = v[n3 - 1] + (series[s + n3 - 1] - series[s])
+            rv[0] = v[n3]
+        prev = s
         b = ((vv[0, n3] - vv[0, h2]) - vv[0, h1]) / (h1 * h2)
         v3 = vv[0, n3]
-        acc = 0.0
-        for p in range(6):
+        acc = 0.0  # sum over the half periods j' = 0 .. floor(3m/2) (see docstring)
+        ends = 0.0  # their weight-1 points: j' = 0 and, for even m, j' = 3m/2
+        for p in (0, 1, 3, 4):
             c0, s0, w0 = _term(vv, v3, n3, m, p, 0, -1.0)
             c1, s1, w1 = _term(vv, v3, n3, m, p, 1, 3.0)
             c2, s2, w2 = _term(vv, v3, n3, m, p, 2, -3.0)
             c3, s3, w3 = _term(vv, v3, n3, m, p, 3, 1.0)
             const = c0 + c1 + c2 + c3
             gp_ = g[p * m : (p + 1) * m]
-            for i in range(m):
+            hi = m if p % 3 == 0 else m // 2 + 1
+            for i in range(hi):
                 z = const + s0 * w0[i] + s1 * w1[i] + s2 * w2[i] + s3 * w3[i] - b * gp_[i]
                 acc += z * z
-        total += acc / (6.0 * m * m * m)
+            if p % 3 == 0 or m % 2 == 0:
+                i = 0 if p % 3 == 0 else m // 2
+                z = const + s0 * w0[i] + s1 * w1[i] + s2 * w2[i] + s3 * w3[i] - b * gp_[i]
+                ends += z * z
+        total += (2.0 * acc - ends) / (6.0 * m * m * m)
     return total
 
 
@@ -323,6 +352,151 @@ def lag1_r1(z: np.ndarray) -> tuple[float, int]:
                 b = z[i + 1] - mean
                 if b == b:
                     num += a * b
+    if den == 0.0:
+        return np.nan, n
+    return num / den, n
+
+
+@njit(cache=True, fastmath=_FM)
+def diff_rows_windows(x: np.ndarray, a0: int, buf: np.ndarray, sel: np.ndarray) -> np.ndarray:
+    """Fill row j of ``buf`` with D_a = x[:N-a] - x[a:] (a = a0 + j, zero beyond N - a) and
+    return w[j, k] = (sum_{i<N-m} D_a(i)^2 + sum_{i=m-a}^{N-a-1} D_a(i)^2) / a for
+    m = sel[k] (sorted, all >= 2a): the two window sums of Theo1's expanded square
+    (``theo._theo1_fft_blocks``), each the total minus a short head or tail sum."""
+    nb = buf.shape[0]
+    n = x.size
+    out = np.empty((nb, sel.size))
+    for j in range(nb):
+        a = a0 + j
+        row = buf[j]
+        tot = 0.0
+        for i in range(n - a):
+            d = x[i] - x[i + a]
+            row[i] = d
+            tot += d * d
+        row[n - a :] = 0.0
+        head = 0.0
+        tail = 0.0
+        h = 0
+        for k in range(sel.size):
+            lim = sel[k] - a  # head and tail lengths m - a
+            while h < lim:
+                head += row[h] * row[h]
+                t = row[n - a - 1 - h]
+                tail += t * t
+                h += 1
+            out[j, k] = ((tot - tail) + (tot - head)) / a
+    return out
+
+
+@njit(cache=True, fastmath=_FM)
+def shifted_power_sum(
+    f: np.ndarray, a0: int, wr: np.ndarray, wi: np.ndarray, er: np.ndarray, ei: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """out[k] = sum_j |f[j, k]|^2 / a_j * exp(-2 pi i k a_j / P), a_j = a0 + j.
+
+    The spectrum of sum_j R_j(l - a_j) / a_j, R_j the autocorrelation whose spectrum is
+    |f[j]|^2 (``theo._theo1_fft_blocks``). (er, ei) hold exp(-2 pi i k a0 / P) on entry
+    and are advanced by (wr, wi) = exp(-2 pi i k / P) once per j, so consecutive blocks
+    continue the rotation (rounding drift ~ sqrt(a) ulps of a unit phasor)."""
+    nb, nk = f.shape
+    for k in range(nk):
+        cr = er[k]
+        ci = ei[k]
+        sr = 0.0
+        si = 0.0
+        for j in range(nb):
+            z = f[j, k]
+            pw = (z.real * z.real + z.imag * z.imag) / (a0 + j)
+            sr += pw * cr
+            si += pw * ci
+            cr, ci = cr * wr[k] - ci * wi[k], cr * wi[k] + ci * wr[k]
+        er[k] = cr
+        ei[k] = ci
+        out[k] = complex(sr, si)
+
+
+@njit(cache=True, fastmath=_FM)
+def _z0(x: np.ndarray, m: int, freq: bool, k: int) -> float:
+    """Point k of the series at tau: x[k m] (phase) or (x[(k+1) m] - x[k m]) / m (freq)."""
+    if freq:
+        return (x[(k + 1) * m] - x[k * m]) / m
+    return x[k * m]
+
+
+@njit(cache=True, fastmath=_FM)
+def points_at_tau(x: np.ndarray, m: int, freq: bool, limit: int) -> int:
+    """Finite points of the series at tau (phase decimated by m, or freq averages by m),
+    counted until ``limit`` is reached (the caller only asks whether there are enough)."""
+    k0 = (x.size - 1) // m + 1
+    n = 0
+    for k in range(k0 - 1 if freq else k0):
+        v = _z0(x, m, freq, k)
+        n += v - v == 0.0  # False for NaN and +-inf
+        if n >= limit:
+            break
+    return n
+
+
+@njit(cache=True, fastmath=_FM)
+def _fill_chunk(
+    x: np.ndarray, m: int, freq: bool, d: int, k0: int, cnt: int, buf: np.ndarray
+) -> None:
+    """buf[:cnt] = points k0 .. k0+cnt-1 of the d-times differenced series at tau, by
+    in-place differencing in the order of repeated ``np.diff`` (the same values, bit for
+    bit)."""
+    for j in range(cnt + d):
+        buf[j] = _z0(x, m, freq, k0 + j)
+    for level in range(d):
+        for j in range(cnt + d - level - 1):
+            buf[j] = buf[j + 1] - buf[j]
+
+
+@njit(cache=True, fastmath=_FM)
+def lag1_r1_diff(x: np.ndarray, m: int, freq: bool, d: int) -> tuple[float, int]:
+    """:func:`lag1_r1` of the series at tau differenced d times, formed from the phase
+    chunk by chunk (strided reads into a fixed scratch, no N-sized temporaries): the lag-1
+    noise identification of ``noise_id.lag1_alpha`` in two fused passes per order d."""
+    k0 = (x.size - 1) // m + 1
+    kz = (k0 - 1 if freq else k0) - d
+    if kz <= 0:
+        return np.nan, 0
+    buf = np.empty(LAG1_CHUNK + 4)
+    n = 0
+    s = 0.0
+    for c0 in range(0, kz, LAG1_CHUNK):
+        cnt = min(LAG1_CHUNK, kz - c0)
+        _fill_chunk(x, m, freq, d, c0, cnt, buf)
+        for j in range(cnt):
+            v = buf[j]
+            ok = v == v
+            s += v if ok else 0.0
+            n += ok
+    if n == 0:
+        return np.nan, 0
+    mean = s / n
+    num = 0.0
+    den = 0.0
+    for c0 in range(0, kz, LAG1_CHUNK):
+        cnt = min(LAG1_CHUNK, kz - c0)
+        ext = min(cnt + 1, kz - c0)  # one point of overlap for the last pair of the chunk
+        _fill_chunk(x, m, freq, d, c0, ext, buf)
+        if n == kz:  # no gaps: branch-free sums
+            for j in range(cnt):
+                a = buf[j] - mean
+                den += a * a
+            for j in range(ext - 1):
+                num += (buf[j] - mean) * (buf[j + 1] - mean)
+        else:
+            for j in range(cnt):
+                a = buf[j] - mean
+                if a == a:
+                    den += a * a
+                    if j + 1 < ext:
+                        b = buf[j + 1] - mean
+                        if b == b:
+                            num += a * b
     if den == 0.0:
         return np.nan, n
     return num / den, n

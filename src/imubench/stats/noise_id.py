@@ -103,23 +103,10 @@ def _check(x: np.ndarray, m: int, data_type: str) -> np.ndarray:
         raise StatsError(f"noise identification: data_type={data_type!r} must be 'phase' or 'freq'")
     if int(m) != m or m < 1:
         raise StatsError(f"noise identification: averaging factor m={m} must be an integer >= 1")
-    arr = np.asarray(x, dtype=float)
+    arr = np.ascontiguousarray(x, dtype=float)  # one compiled layout for the kernels
     if arr.ndim != 1:
         raise StatsError(f"noise identification: phase array must be 1-D, got shape {arr.shape}")
     return arr
-
-
-def _series_at_tau(x: np.ndarray, m: int, data_type: str) -> np.ndarray:
-    """Phase decimated by m (phase data), or frequency averaged in groups of m (freq data).
-
-    For frequency data the averages are first differences of the decimated phase divided by
-    m: y_k = (x[(k+1)m] - x[km]) / m (units of x per sample, the scale does not matter to
-    an autocorrelation or a ratio of variances).
-    """
-    xd = x[::m]
-    if data_type == "phase":
-        return xd
-    return np.diff(xd) / m
 
 
 def lag1_acf(z: np.ndarray) -> float:
@@ -130,11 +117,16 @@ def lag1_acf(z: np.ndarray) -> float:
     """
     z = np.ascontiguousarray(z, dtype=float)
     r1, n = _k.lag1_r1(z)
+    return _r1_checked(float(r1), int(n))
+
+
+def _r1_checked(r1: float, n: int) -> float:
+    """r1 (n-1)/n from a kernel's (r1 without the factor, finite points), or a clear error."""
     if n < 3:
-        raise StatsError(f"lag-1 ACF needs at least 3 finite points, got {int(n)}")
+        raise StatsError(f"lag-1 ACF needs at least 3 finite points, got {n}")
     if not np.isfinite(r1):
         raise StatsError("lag-1 ACF: the series is constant (zero variance); no noise to identify")
-    return float(r1) * (n - 1) / n
+    return r1 * (n - 1) / n
 
 
 def lag1_alpha(x: np.ndarray, m: int, data_type: str, dmin: int = 0, dmax: int = 2) -> int:
@@ -147,21 +139,24 @@ def lag1_alpha(x: np.ndarray, m: int, data_type: str, dmin: int = 0, dmax: int =
     Raises :class:`StatsError` when fewer than :data:`LAG1_MIN_POINTS` points remain.
     """
     arr = _check(x, m, data_type)
-    z = _series_at_tau(arr, int(m), data_type)
-    n_ok = int(np.isfinite(z).sum())
-    if n_ok < LAG1_MIN_POINTS:
-        raise StatsError(
-            f"lag-1 noise identification at m={m}: only {n_ok} points at this averaging time "
-            f"(needs >= {LAG1_MIN_POINTS}); use b1_alpha or a smaller averaging factor"
-        )
+    if not 0 <= dmax <= 3:
+        raise StatsError(f"lag-1 noise identification: dmax={dmax} must be 0..3")
+    freq = data_type == "freq"
     d = 0
     while True:
-        r1 = lag1_acf(z)
+        # one fused pass per order d (``_kernels.lag1_r1_diff``): the same values as
+        # lag1_acf(np.diff(z, d)) with z the series at tau, without the temporaries
+        r1_raw, n = _k.lag1_r1_diff(arr, int(m), freq, d)
+        if d == 0 and n < LAG1_MIN_POINTS:
+            raise StatsError(
+                f"lag-1 noise identification at m={m}: only {int(n)} points at this averaging "
+                f"time (needs >= {LAG1_MIN_POINTS}); use b1_alpha or a smaller averaging factor"
+            )
+        r1 = _r1_checked(float(r1_raw), int(n))
         delta = r1 / (1.0 + r1)
         if d >= dmin and (delta < 0.25 or d >= dmax):
             p = -round(2.0 * delta) - 2 * d
             return int(p + 2 if data_type == "phase" else p)
-        z = np.diff(z)
         d += 1
 
 
@@ -287,15 +282,6 @@ def b1_alpha(x: np.ndarray, m: int, data_type: str, n_terms: int | None = None) 
     return 1 if rn > boundary else 2
 
 
-def _points_at_tau(x: np.ndarray, m: int, data_type: str) -> int:
-    """Finite points of :func:`_series_at_tau` without forming it (a freq average is finite
-    when both decimated phase points around it are)."""
-    fd = np.isfinite(x[::m])
-    if data_type == "phase":
-        return int(np.count_nonzero(fd))
-    return int(np.count_nonzero(fd[1:] & fd[:-1]))
-
-
 def identify_alpha(x: np.ndarray, m: int, data_type: str, stat: str) -> int:
     """Noise exponent alpha that ``stat`` should use at averaging factor m (Stable32's rule).
 
@@ -307,7 +293,7 @@ def identify_alpha(x: np.ndarray, m: int, data_type: str, stat: str) -> int:
     arr = _check(x, m, data_type)
     name = _canonical(stat)
     dmax = 3 if name in {"hvar", "ohvar", "htotvar"} else 2
-    if _points_at_tau(arr, int(m), data_type) >= LAG1_MIN_POINTS:
+    if _k.points_at_tau(arr, int(m), data_type == "freq", LAG1_MIN_POINTS) >= LAG1_MIN_POINTS:
         alpha = lag1_alpha(arr, int(m), data_type, dmin=0, dmax=dmax)
     else:
         alpha = b1_alpha(arr, int(m), data_type, n_terms=analysis_terms(stat, int(m), arr.size))

@@ -9,10 +9,12 @@ tau = 0.75 m tau0 (Stable32 reports this tau; the variance itself uses m tau0):
 
 With a = m/2 - d and the lag-a first difference D_a(i) = x_i - x_{i+a}, the bracket is
 D_a(i) - D_a(i + m - a). Expanding the square, the sum over i is two windowed sums of
-D_a^2 (prefix sums) minus twice the lag-(m-a) autocorrelation of D_a, which is exact over
-the full valid range. So each a is visited once for all m: either one dot product per m or,
-when many m need that a (TheoBR), one FFT autocorrelation for all lags at once.
-Cost: O(N * max(m)/2) instead of O(N m^2 / 2) for brute force.
+D_a^2 minus twice the lag-(m-a) autocorrelation of D_a, which is exact over the full
+valid range. A few averaging factors are summed directly (O(N m / 2) each, squares of
+exact differences); many closely spaced ones (TheoBR's support, ``taus="all"``) go through
+FFT autocorrelations of D_a, summed over blocks of consecutive a in the frequency domain so
+that one inverse FFT serves a whole block (:func:`_theo1_fft_blocks`): O(N log N) per a for
+every m at once. :func:`fft_count` splits a sorted set between the two by a cost model.
 
 TheoBR (SP 1065 eq. (32), Howe & Tasset 2004): Theo1 scaled by
 kf = 1/(n+1) sum_{i=0}^{n} OAVAR(m=9+3i) / Theo1(m=12+4i), n = floor(0.1 N / 3 - 3).
@@ -21,6 +23,7 @@ TheoH (SP 1065 eq. (33)): OAVAR for tau <= 0.1 T (T = (N-1) tau0), TheoBR beyond
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 
 import numpy as np
@@ -32,7 +35,9 @@ from imubench.stats.prep import PhaseData
 
 _NO_ROWS = np.zeros(0, dtype=np.bool_)
 
-FFT_MIN_LAGS = 48  # use an FFT autocorrelation when at least this many m share an a
+FFT_BLOCK = 16  # consecutive a summed in the frequency domain before one inverse FFT
+FFT_COST = 2.0  # one real FFT of length P costs about FFT_COST * P log2 P multiply-adds
+FFT_WORKERS = max(1, min(2, os.cpu_count() or 1))  # threads of scipy.fft (2-core target)
 
 
 def theo1_sums(
@@ -49,60 +54,95 @@ def theo1_sums(
         return _theo1_sums_gaps(pd, ms)
     order = np.argsort(ms)
     srt = ms[order]
-    sums = np.zeros(srt.size)
-    a_split = _fft_a_limit(srt, pd.n_phase)
-    if a_split > 1:
-        _theo1_fft_part(pd.x, srt, a_split, sums, progress)
-    sums += _k.theo1_direct(pd.x, srt, a_split, _NO_ROWS)
-    out = np.empty_like(sums)
-    out[order] = sums
+    out = np.empty(srt.size)
+    out[order] = theo1_sums_nogap(pd.x, srt, fft_count(srt, pd.n_phase), progress)
     rows_all = pd.n_phase - ms
     return out, rows_all, np.zeros_like(rows_all)
 
 
-def _fft_a_limit(srt: np.ndarray, n: int) -> int:
-    """Smallest a from which the direct sums are cheaper than one FFT autocorrelation.
-
-    For a given a every m >= 2a needs one O(N) pass directly, against one FFT pair of
-    about N log2 N work for all of them: FFT below the first a where fewer than
-    :data:`FFT_MIN_LAGS` averaging factors still need it."""
-    a = 1
-    while a <= int(srt[-1]) // 2:
-        if srt.size - int(np.searchsorted(srt, 2 * a)) < FFT_MIN_LAGS:
-            return a
-        a += 1
-    return a
-
-
-def _theo1_fft_part(
+def theo1_sums_nogap(
     x: np.ndarray,
     srt: np.ndarray,
-    a_split: int,
-    sums: np.ndarray,
-    progress: Callable[[float], None] | None,
-) -> None:
-    """Add the a < a_split terms: per a, windowed sums of D_a^2 from a prefix sum and the
-    lag-(m-a) autocorrelation of D_a from one FFT, for every m >= 2a at once."""
+    n_fft: int,
+    progress: Callable[[float], None] | None = None,
+) -> np.ndarray:
+    """S(m) for sorted even ``srt`` on gap-free phase: the first ``n_fft`` averaging factors by
+    blocked FFT autocorrelations (:func:`_theo1_fft_blocks`), the others directly."""
+    sums = np.zeros(srt.size)
+    if n_fft > 0:
+        sums[:n_fft] = _theo1_fft_blocks(x, srt[:n_fft], progress)
+    if n_fft < srt.size:
+        sums[n_fft:] = _k.theo1_direct(x, srt[n_fft:], 1, _NO_ROWS)
+    return sums
+
+
+def _fft_len(n: int, m_hi: int) -> int:
+    """FFT length with no circular wrap for lags up to m_hi - 1 of a series of n - 1 points."""
+    return int(scipy.fft.next_fast_len(n + m_hi, real=True))
+
+
+def fft_count(srt: np.ndarray, n: int) -> int:
+    """How many of the sorted averaging factors to give to the blocked FFT path.
+
+    Cost model (in units of one multiply-add over the data): the FFT path costs one real
+    FFT of length P per a <= m_hi / 2, about :data:`FFT_COST` P log2 P, plus the irfft per
+    block; the direct path costs (m / 2)(N - m) per m. The split minimising the sum is
+    chosen (the many closely spaced TheoBR support factors go to the FFT, a few octave
+    factors far above them stay direct)."""
+    direct = (srt / 2.0) * (n - srt)
+    tail = np.concatenate([np.cumsum(direct[::-1])[::-1], [0.0]])
+    best, best_j = tail[0], 0
+    for j in range(1, srt.size + 1):
+        p = _fft_len(n, int(srt[j - 1]))
+        cost = (srt[j - 1] / 2.0) * FFT_COST * p * np.log2(p) + tail[j]
+        if cost < best:
+            best, best_j = cost, j
+    return best_j
+
+
+def _theo1_fft_blocks(
+    x: np.ndarray, srt: np.ndarray, progress: Callable[[float], None] | None
+) -> np.ndarray:
+    """S(m) for sorted even ``srt`` from per-a FFTs, summed over a in the frequency domain.
+
+    For a fixed a the m-th bracket sum is W_a(m) - 2 R_a(m - a) with W_a two windowed sums
+    of D_a^2 (totals minus short head/tail sums) and R_a(L) = sum_i D_a(i) D_a(i + L) the full-range
+    autocorrelation of D_a. R_a(m - a) is the value at lag m of R_a delayed by a, whose
+    spectrum is |F_a|^2 exp(-2 pi i k a / P) (F_a the zero-padded DFT of D_a, P >= N + m_hi
+    so nothing wraps). Within a block of :data:`FFT_BLOCK` consecutive a the shifted
+    spectra weighted by 1/a are summed and inverted once, giving sum_a R_a(m - a) / a for
+    every m at once; that is valid for the m that need every a of the block (m >= 2 a_last);
+    the few m inside the block's range (2 a_first <= m < 2 a_last) take their a >= a_first
+    terms from the direct kernel instead. The forward FFTs of a block are one batched call
+    (:data:`FFT_WORKERS` threads). Squares of D_a enter through FFTs of D_a, not of x:
+    the rounding is relative to sum D_a^2, as in the per-lag sums.
+    """
     n = x.size
-    cs = np.empty(n + 1)
-    d = np.empty(n)
-    for a in range(1, a_split):
-        k0 = int(np.searchsorted(srt, 2 * a))
-        sel = srt[k0:]
-        da = d[: n - a]
-        np.subtract(x[: n - a], x[a:], out=da)
-        cs[0] = 0.0
-        np.cumsum(da * da, out=cs[1 : n - a + 1])
-        rows = n - sel
-        lags = sel - a
-        total = cs[n - a]
-        sq = cs[rows] + (total - cs[lags])
-        nfft = scipy.fft.next_fast_len(int(n - a + lags.max() + 1), real=True)
-        f = scipy.fft.rfft(da, nfft)
-        ac = scipy.fft.irfft(f.real * f.real + f.imag * f.imag, nfft)
-        sums[k0:] += (sq - 2.0 * ac[lags]) / a
-        if progress is not None and a % 64 == 0:
-            progress(a / a_split)
+    m_hi = int(srt[-1])
+    a_max = m_hi // 2
+    p = _fft_len(n, m_hi)
+    sums = np.zeros(srt.size)
+    buf = np.empty((FFT_BLOCK, p))
+    spec = np.empty(p // 2 + 1, dtype=np.complex128)
+    ph = (-2.0 * np.pi / p) * np.arange(p // 2 + 1)
+    wr, wi = np.cos(ph), np.sin(ph)
+    er, ei = wr.copy(), wi.copy()  # exp(-2 pi i k a / P) at a = 1, advanced per a
+    for a0 in range(1, a_max + 1, FFT_BLOCK):
+        a_last = min(a0 + FFT_BLOCK - 1, a_max)
+        k_part = int(np.searchsorted(srt, 2 * a0))
+        k_full = int(np.searchsorted(srt, 2 * a_last))
+        if k_full > k_part:  # m in [2 a0, 2 a_last): a = a0 .. m/2 directly
+            sums[k_part:k_full] += _k.theo1_direct(x, srt[k_part:k_full], a0, _NO_ROWS)
+        nb = a_last - a0 + 1
+        sel = srt[k_full:]
+        rows = buf[:nb]
+        sums[k_full:] += _k.diff_rows_windows(x, a0, rows, sel).sum(axis=0)
+        f = scipy.fft.rfft(rows, axis=1, workers=FFT_WORKERS)
+        _k.shifted_power_sum(f, a0, wr, wi, er, ei, spec)
+        sums[k_full:] -= 2.0 * scipy.fft.irfft(spec, p, workers=FFT_WORKERS)[sel]
+        if progress is not None:
+            progress(a_last / a_max)
+    return sums
 
 
 def _theo1_sums_gaps(pd: PhaseData, ms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
