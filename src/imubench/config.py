@@ -75,7 +75,10 @@ class AllanConfig(_Section):
         3600.0, gt=0, description="Largest tau kept up to date (unit: s)"
     )
     memory: Literal["exact", "bounded"] = Field(
-        "exact", description="Streaming engine memory mode (unit: -): exact or bounded"
+        "bounded",
+        description="Streaming engine memory mode (unit: -): bounded (state independent of "
+        "tau, < 0.5 % EDF lost) or exact (keeps 3 m_max + 1 phase values per channel: "
+        "2.4 GB for 6 channels at 6.66 kHz up to 3600 s)",
     )
     state_path: str | None = Field(
         None,

@@ -14,6 +14,7 @@ from typing import Any
 
 from imubench.stats.api import DEV_NAME, VAR_NAME, compute
 from imubench.stats.result import StatResult
+from imubench.stats.streaming import StreamingAllan
 
 STATISTICS: tuple[str, ...] = tuple(VAR_NAME)
 
@@ -45,6 +46,7 @@ __all__ = [
     "STATISTICS",
     "VAR_NAME",
     "StatResult",
+    "StreamingAllan",
     "adev",
     "avar",
     "compute",

@@ -1,4 +1,26 @@
-"""Per-tau EDF and chi-squared deviation limits for a whole result (array form)."""
+"""Per-tau EDF and chi-squared deviation limits for a whole result (array form).
+
+The streaming engine's bounded mode keeps, for an overlapping statistic at a large
+averaging factor m, only the terms at positions that are multiples of a stride s (a
+divisor of m). Its EDF is Greenhall's combined EDF (C. A. Greenhall and W. J. Riley,
+"Uncertainty of stability variances based on finite differences", Proc. 35th PTTI, 2003,
+section 3.4) with the stride factor ``S = m / s`` instead of ``S = m`` (fully
+overlapping). :func:`imubench.stats.edf.edf_greenhall` only takes ``S in {1, m}``, so the
+decimated estimator is mapped onto an equivalent call: with ``m' = m / s`` and
+
+* modified variances (MVAR, TVAR; F = 1, L = (d + 1) m):
+  ``N' = (d + 1) m' + floor((N - (d + 1) m) / s)``;
+* unmodified variances (OAVAR, OHVAR, and OSTDVAR's white-FM OAVAR rule; F = m,
+  L = 1 + d m): ``N' = 1 + d m' + floor((N - 1 - d m) / s)``;
+
+``edf_greenhall(alpha, d, m', N', modified, overlapping=True)`` has the same number of
+terms ``M = 1 + floor((N - L) / s)``, the same ``S``, ``J`` and ``r = M / S``, hence the
+same EDF wherever the result does not depend on F: every modified case, and the unmodified
+cases alpha <= 0 and white PM as long as ``m' (d + 1) > J_max = 100`` (otherwise the
+finite-F branch would be taken with F = m' instead of m: there the non-overlapping
+estimator's EDF, ``S = 1``, a lower bound, is used). For unmodified flicker PM
+(alpha = 1) F = m' instead of m is an approximation.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +28,43 @@ import numpy as np
 
 from imubench.errors import StatsError
 from imubench.stats.ci import chi2_limits
+from imubench.stats.edf import GREENHALL_JMAX, canonical_stat, edf_greenhall
 from imubench.stats.edf import edf as edf_one
+
+#: (d, modified) of the overlapping statistics whose EDF follows Greenhall's algorithm.
+_STRIDED = {
+    "oavar": (2, False),
+    "ohvar": (3, False),
+    "mvar": (2, True),
+    "tvar": (2, True),
+    "ostdvar": (2, False),
+}
+
+
+def strided_edf(stat: str, alpha: int, m: int, n_phase: int, stride: int) -> float:
+    """EDF of the overlapping ``stat`` at m from only the terms at multiples of ``stride``.
+
+    ``stride = 1`` is the ordinary (fully overlapping) EDF of :func:`edf.edf`. OSTDVAR is
+    counted with the white-FM OAVAR rule, as :func:`edf.edf` does for the full estimator.
+    """
+    if stride == 1:
+        return edf_one(stat, alpha, m, n_phase)
+    name = canonical_stat(stat)
+    if name not in _STRIDED or m % stride:
+        raise StatsError(f"strided EDF: {stat!r} at m={m} with stride {stride} is not defined")
+    d, modified = _STRIDED[name]
+    if name == "ostdvar":
+        alpha = 0
+    mp = m // stride
+    if modified:
+        n_eq = (d + 1) * mp + (n_phase - (d + 1) * m) // stride
+    elif mp * (d + 1) > GREENHALL_JMAX:
+        n_eq = 1 + d * mp + (n_phase - 1 - d * m) // stride
+    else:
+        # F = m' would take Greenhall's finite-F branch where F = m does not: use the
+        # non-overlapping estimator's EDF (S = 1), a lower bound (wider, honest limits)
+        return edf_greenhall(int(alpha), d, m, n_phase, False, False)
+    return edf_greenhall(int(alpha), d, mp, int(n_eq), modified, True)
 
 
 def confidence_arrays(
@@ -16,19 +74,34 @@ def confidence_arrays(
     n_phase: int,
     var: np.ndarray,
     confidence: float,
+    stride: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(edf, ci_low, ci_high)`` per tau: EDF from :func:`imubench.stats.edf.edf`,
-    limits from :func:`imubench.stats.ci.chi2_limits`. Where the EDF is undefined
-    (alpha outside the method's range, too few points) the three are NaN."""
-    edf = np.full(m.shape, np.nan)
-    for i, (a, mm) in enumerate(zip(alpha, m, strict=True)):
-        try:
-            edf[i] = edf_one(stat, int(a), int(mm), n_phase)
-        except StatsError:
-            continue
+    """``(edf, ci_low, ci_high)`` per tau: EDF from :func:`imubench.stats.edf.edf` (or
+    :func:`strided_edf` where ``stride`` > 1), limits from
+    :func:`imubench.stats.ci.chi2_limits`. ``alpha`` and ``var`` have one entry per m
+    (shape ``(k,)``) or one row per channel (``(channels, k)``); the EDF is computed once
+    per distinct (alpha, m). Where the EDF is undefined (alpha outside the method's
+    range, too few points) or the variance is NaN, the three are NaN."""
+    alpha = np.asarray(alpha)
+    var = np.asarray(var, dtype=float)
+    strides = np.ones(m.shape, np.int64) if stride is None else np.asarray(stride)
+    edf = np.full(alpha.shape, np.nan)
+    cache: dict[tuple[int, int], float] = {}
+    for idx in np.ndindex(alpha.shape):
+        i = idx[-1]
+        key = (int(alpha[idx]), i)
+        e = cache.get(key)
+        if e is None:
+            try:
+                e = strided_edf(stat, key[0], int(m[i]), n_phase, int(strides[i]))
+            except StatsError:
+                e = float("nan")
+            cache[key] = e
+        edf[idx] = e
+    edf[~np.isfinite(var)] = np.nan  # no variance (every term hit a gap): as compute()
     ok = np.isfinite(edf) & (edf > 0) & np.isfinite(var)
-    lo = np.full(m.shape, np.nan)
-    hi = np.full(m.shape, np.nan)
+    lo = np.full(alpha.shape, np.nan)
+    hi = np.full(alpha.shape, np.nan)
     if ok.any():
         lo[ok], hi[ok] = chi2_limits(var[ok], edf[ok], confidence)
     return edf, lo, hi
