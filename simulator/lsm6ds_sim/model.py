@@ -25,7 +25,8 @@ and the sim-to-real diagnosis (which copies a model, changes a term, and re-simu
     temp_ref = 25.0          # degC
 
 Extension keys (documented in ``docs/noise-model.md``; a file without them loads the
-same): ``bandwidth_hz`` and ``filter_order`` (output low-pass), ``scale_error``,
+same): ``bandwidth_hz`` and ``filter_order`` (output low-pass), ``output_white`` (white
+noise after that filter), ``scale_error``,
 ``scale_temp_coeff``, ``scale_temp_coeff2``, ``nonlinearity``, ``cross_x``/``cross_y``/
 ``cross_z`` and, on gyro channels, ``g_sensitivity_x``/``_y``/``_z``.
 
@@ -67,6 +68,7 @@ NON_NEGATIVE_KEYS: frozenset[str] = frozenset(
         "outlier_rate",
         "outlier_amplitude",
         "bandwidth_hz",
+        "output_white",
     }
 )
 """Keys that are magnitudes, rates, times or frequencies: negative values are errors."""
@@ -103,6 +105,9 @@ class ChannelModel:
     """-3 dB bandwidth of the output low-pass (Butterworth, bilinear); 0 = no filter."""
     filter_order: int = 1
     """Order of the output low-pass: 1 or 2."""
+    output_white: float = 0.0
+    """White noise density (unit/sqrt(Hz)) added *after* the output low-pass (ADC and
+    quantisation noise of a real sensor); AVAR N^2/tau, like ``white`` without a filter."""
     scale_error: float = 0.0
     """Sensitivity error, fraction (output = (1 + scale_error) * input)."""
     scale_temp_coeff: float = 0.0

@@ -52,6 +52,7 @@ TERM_IDS: dict[str, int] = {
     "markov": 5,
     "sine": 6,
     "outliers": 7,
+    "output_white": 8,
 }
 """Stable index of each term in the seed's spawn key (never renumber: seeds would change)."""
 

@@ -16,6 +16,7 @@ accel: u = specific force in g), all terms optional (model keys in brackets)::
                          (bilinear transform with prewarping, scipy.signal.butter), started
                          in steady state on the first sample; no filter if bandwidth_hz is 0
                          or not below the Nyquist frequency 1/(2 dt_s)
+           + white noise of density output_white (after the filter)
 
 The true input is constant between calls: a jig sets it with :meth:`SensorPhysics.set_rate_dps`
 and :meth:`SensorPhysics.set_orientation`. With no model the sensor is quiet (no noise,
@@ -215,6 +216,11 @@ class SensorPhysics:
             if ch not in CHANNELS:
                 raise ModelError(f"SensorPhysics: unknown channel {ch!r}; use {CHANNELS}")
         self.noisy_channels = wanted
+        self._output_white = {
+            ch: WhiteNoise(self.model[ch].output_white,
+                           term_rng(self.seed, CHANNELS.index(ch), "output_white"))
+            for ch in wanted if self.model[ch].output_white > 0
+        }
         self._rate = np.zeros(3)
         self._force = np.array([0.0, 0.0, 1.0])
         self.set_rate_dps(rate_dps)
@@ -349,6 +355,8 @@ class SensorPhysics:
         for i, ch in enumerate(CHANNELS):
             if self.model[ch].bandwidth_hz > 0:
                 out[:, i] = self._filters[ch].apply(out[:, i], dt_s)
+        for ch, gen in self._output_white.items():  # model key output_white: after the filter
+            out[:, CHANNELS.index(ch)] += gen.generate(n, dt_s, t)
         self.samples_generated += n
         return TrueSamples(gyro_dps=out[:, :3], accel_g=out[:, 3:], temp_c=temp)
 

@@ -1,0 +1,83 @@
+"""``imubench fit``: fit the noise model file's terms to a recording.
+
+Writes a model file (TOML) that the simulator loads unchanged (``sim://...&model=PATH``),
+and optionally the full result as JSON (per channel: parameters, 95 % intervals, terms
+present, the AVAR points used, datasheet units; Kalibr values; datasheet comparison) and a
+Kalibr ``imu.yaml``. See docs/noise-fit.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from imubench.errors import ImubenchError
+from imubench.noisefit.fit import METHODS
+from imubench.noisefit.recording_fit import RecordingFit, fit_recording
+from imubench.noisefit.units import kalibr_yaml
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "fit",
+        help="fit the noise model (white, flicker, random walk, ...) to a recording",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("recording", type=Path, help="recording (.imbr or .csv)")
+    p.add_argument("--channels", default=None,
+                   help="channels to fit, e.g. gx,gy,gz (default: every channel present)")
+    p.add_argument("--terms", default="auto",
+                   help="auto (model selection) or a comma list of: white, flicker, "
+                        "random_walk, ramp, quantization, markov, sine, filter")
+    p.add_argument("--method", choices=METHODS, default="wls",
+                   help="wls: GLS on the Allan variance with EDF weights (default); "
+                        "tangent: datasheet slope lines")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="MODEL.toml",
+                   help="model file to write")
+    p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")
+    p.add_argument("--kalibr", type=Path, default=None, metavar="imu.yaml",
+                   help="also write Kalibr noise parameters")
+    p.set_defaults(func=run)
+
+
+def format_summary(result: RecordingFit) -> str:
+    """One line per channel: present terms with value and 95 % interval."""
+    lines = [f"# {result.source}  rate={result.rate_hz:g} Hz  method={result.method}"]
+    for ch, f in result.fits.items():
+        parts = []
+        for key in f.present:
+            if key == "filter_order":
+                continue
+            lo, hi = f.ci.get(key, (float("nan"), float("nan")))
+            parts.append(f"{key}={f.params[key]:.4g} [{lo:.3g}, {hi:.3g}]")
+        lines.append(f"{ch}: " + ("  ".join(parts) if parts else "(no term found)"))
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
+                               method=args.method)
+        model = result.noise_model()
+        args.output.write_text(model.to_toml(), encoding="utf-8")
+        if args.json is not None:
+            text = json.dumps(result.to_dict(), indent=1)
+            if args.json == "-":
+                print(text)
+            else:
+                Path(args.json).write_text(text + "\n", encoding="utf-8")
+        if args.kalibr is not None:
+            args.kalibr.write_text(kalibr_yaml(result.to_dict()["kalibr"]), encoding="utf-8")
+        if args.json != "-":
+            print(format_summary(result))
+    except ImubenchError as exc:
+        print(f"imubench fit: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"imubench fit: error: cannot write {exc.filename}: {exc.strerror}",
+              file=sys.stderr)
+        return 2
+    return 0

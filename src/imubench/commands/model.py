@@ -1,0 +1,122 @@
+"""``imubench model``: the OADEV a noise model file predicts, per channel.
+
+``imubench model MODEL.toml --rate HZ --taus SPEC [--n N] [--json PATH|-]`` prints (or
+writes as ``{"channels": {"gx": {"tau_s": [...], "dev": [...]}}}``) the Allan deviation of
+each channel that carries noise, at the taus of SPEC (``octave``, ``decade``, ``all``, an
+integer = points per decade, or a comma list of seconds). Keyword SPECs need ``--n`` (the
+record length in samples: taus stop at the OADEV limit N/4). With ``--n`` each channel also
+gets ``edf`` and the 68.3 % ``ci_low``/``ci_high`` a recording of N samples would show
+(Greenhall EDF for the noise type of the model's local slope). The AVAR is exact for
+sampled data (closed forms where they exist; the output filter from the model's
+autocovariance, i.e. its spectrum): see docs/noise-fit.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lsm6ds_sim.model import ChannelModel, NoiseModel, load_model
+
+from imubench.batch import CHANNELS
+from imubench.commands.allan import parse_taus
+from imubench.errors import ImubenchError
+from imubench.noisefit.errors import FitError
+from imubench.noisefit.identify import local_slopes
+from imubench.noisefit.model_avar import model_avar_m
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "model",
+        help="Allan deviation a noise model file predicts (per channel)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", type=Path, help="noise model file (TOML)")
+    p.add_argument("--rate", type=float, required=True, help="sample rate in Hz")
+    p.add_argument("--taus", required=True,
+                   help="octave | decade | all | N (points per decade) | comma list of tau_s")
+    p.add_argument("--n", type=int, default=None,
+                   help="record length in samples (needed by keyword taus; adds EDF and CI)")
+    p.add_argument("--json", default=None, metavar="PATH|-", help="write JSON here")
+    p.set_defaults(func=run)
+
+
+def _factors(spec: str, rate_hz: float, n: int | None) -> np.ndarray:
+    from imubench.stats.taus import averaging_factors
+
+    taus = parse_taus(spec)
+    if isinstance(taus, list):
+        m = np.unique(np.maximum(np.rint(np.asarray(taus) * rate_hz), 1).astype(np.int64))
+        if n is not None:
+            m = m[m <= max((n - 1) // 4, 1)]
+        return m
+    if n is None:
+        raise FitError(f"--taus {spec}: a keyword or points-per-decade spec needs --n "
+                       "(record length in samples) to know where to stop")
+    return averaging_factors("oadev", n - 1, taus, 1.0 / rate_hz)
+
+
+def _expected_ci(tau: np.ndarray, avar: np.ndarray, m: np.ndarray, n: int) -> dict[str, Any]:
+    from imubench.stats.ci import chi2_limits
+    from imubench.stats.edf import edf
+
+    slope = local_slopes(tau, np.sqrt(avar)) if tau.size > 1 else np.array([-0.5])
+    alpha = np.clip(np.rint(-2.0 * slope - 1.0), -2, 2).astype(int)
+    edfs = np.array([edf("oavar", int(a), int(mm), n) for a, mm in zip(alpha, m, strict=True)])
+    lo, hi = chi2_limits(avar, edfs, 0.683)
+    return {"edf": edfs.tolist(), "ci_low": np.asarray(lo).tolist(),
+            "ci_high": np.asarray(hi).tolist(), "alpha": alpha.tolist()}
+
+
+def predict(model: NoiseModel, rate_hz: float, spec: str, n: int | None) -> dict[str, Any]:
+    """The ``{"channels": {...}}`` document for every channel that carries noise."""
+    if not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise FitError(f"--rate must be > 0 Hz, got {rate_hz}")
+    if n is not None and n < 8:
+        raise FitError(f"--n must be at least 8 samples, got {n}")
+    m = _factors(spec, rate_hz, n)
+    if m.size == 0:
+        raise FitError(f"--taus {spec}: no averaging time left (need tau >= 1/rate"
+                       + (f" and <= N/4 samples with N={n}" if n else "") + ")")
+    out: dict[str, Any] = {"rate_hz": rate_hz, "channels": {}}
+    quiet = ChannelModel()
+    for ch in CHANNELS:
+        cm = model[ch]
+        noise_keys = ("white", "flicker", "random_walk", "ramp", "quantization",
+                      "markov_sigma", "sine_amplitude", "outlier_rate", "output_white")
+        if all(getattr(cm, k) == getattr(quiet, k) for k in noise_keys):
+            continue
+        avar = model_avar_m(cm, m, rate_hz)
+        tau = m / rate_hz
+        entry: dict[str, Any] = {"tau_s": tau.tolist(), "dev": np.sqrt(avar).tolist()}
+        if n is not None:
+            entry.update(_expected_ci(tau, avar, m, n))
+        out["channels"][ch] = entry
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        doc = predict(load_model(args.model), args.rate, args.taus, args.n)
+        if args.json is None:
+            for ch, e in doc["channels"].items():
+                print(f"# {ch}")
+                print(f"{'tau_s':>12} {'dev':>12}")
+                for t, d in zip(e["tau_s"], e["dev"], strict=True):
+                    print(f"{t:>12.5e} {d:>12.5e}")
+        else:
+            text = json.dumps(doc, indent=1)
+            if args.json == "-":
+                print(text)
+            else:
+                Path(args.json).write_text(text + "\n", encoding="utf-8")
+    except ImubenchError as exc:
+        print(f"imubench model: error: {exc}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,554 @@
+"""Where real and simulated data differ: Allan curves, spectra and tails, with bands.
+
+The real record gives one overlapping Allan deviation (OADEV, NIST SP 1065 eq. (11)) per
+averaging factor m, with its chi-squared confidence limits (SP 1065 sec. 5.3). The model
+gives K simulated realisations of the same length, rate and temperature history; their
+mean Allan variance is the model's expected curve and their spread is how far one record
+can stray from it. Per tau the difference
+
+    d = ln ADEV_real - ln sqrt(mean_k AVAR_sim,k)
+
+is compared with the combined band ``s = sqrt(((s_ci^2 + s_sim^2) / 2) (1 + 1/K))``: the
+single-record spread estimated twice (from the real curve's confidence interval, one
+sigma in ln ADEV, and from the realisations' standard deviation of ln ADEV), inflated by
+the uncertainty of a mean of K. ``z = d / s``.
+
+The **gap** is ``sqrt(mean(d^2))`` over the analysed taus (the issue's measure).
+A **region** is a maximal run of consecutive taus with ``|z| > Z_EDGE`` of one sign that
+holds at least one ``|z| > Z_REGION``. The spectra (Welch, Hann, 50 % overlap) are
+compared in log-spaced bands the same way; the highest narrow peak above the spectrum's
+own running-median continuum in a fine Welch spectrum (a spectral line) and the count
+of impulsive samples (beyond TAIL_SIGMAS robust sigmas of the high-passed series) are
+compared with their distribution over the realisations.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import welch
+from scipy.stats import norm
+from scipy.stats import t as student_t
+
+from imubench.stats.allan import oavar as oavar_kernel
+from imubench.stats.prep import to_phase
+from imubench.stats.taus import averaging_factors
+
+Z_REGION = 3.5
+"""|z| a tau (or band) must exceed for a region to be significant."""
+Z_EDGE = 2.0
+"""|z| that extends a region to its neighbours."""
+TAIL_SIGMAS = 5.0
+"""Impulse threshold in robust (MAD) sigmas of the high-passed series."""
+BANDS_PER_DECADE = 3
+WELCH_SEGMENTS = 16
+"""About this many 50 %-overlapping Welch segments per record."""
+
+
+@dataclass(frozen=True)
+class Region:
+    """A run of taus (or frequencies) where real and simulated curves differ."""
+
+    tau_min_s: float
+    tau_max_s: float
+    direction: str
+    """``real_above`` or ``real_below``."""
+    gap: float
+    """RMS of ln(ADEV_real / ADEV_sim) over the region's taus (or ln PSD ratio / 2)."""
+    z_max: float
+
+    def to_dict(self) -> dict[str, float | str]:
+        return {
+            "tau_min_s": self.tau_min_s,
+            "tau_max_s": self.tau_max_s,
+            "direction": self.direction,
+            "gap": self.gap,
+            "z_max": self.z_max,
+        }
+
+
+@dataclass(frozen=True)
+class Features:
+    """What is compared for one series: ADEV per m, band PSD, peak line ratio, impulses."""
+
+    avar: np.ndarray
+    band_psd: np.ndarray
+    psd: np.ndarray
+    impulses: int
+    temp_slope: float = float("nan")
+    """Least-squares slope of block means of the rate on temperature (unit/degC)."""
+    trend_slope: float = float("nan")
+    """Least-squares slope of the rate against time (unit/s)."""
+    line_ln: float = 0.0
+    """ln(peak / continuum) of the highest narrow line of the fine spectrum."""
+    line_f_hz: float = 0.0
+    """Its frequency (Hz)."""
+    temp_corr: float = float("nan")
+    """Fisher z = atanh(r) of the correlation between the block means' and the block
+    temperatures' first differences (differencing removes random-walk and ramp levels,
+    whose chance correlation with a slow temperature would otherwise be large)."""
+    trend_corr: float = float("nan")
+    """Fisher z = atanh(r) of the block means' correlation with time."""
+    level_corr: float = float("nan")
+    """Fisher z of the lag-1 autocorrelation of the linearly detrended block means
+    (:func:`detrended_lag1`): ~0 for a ramp on white/flicker noise, near 1 for a
+    random walk (or any wandering level); separates the two time-domain causes of a
+    rising Allan curve."""
+
+
+@dataclass
+class SimFeatures:
+    """Features of K realisations, stacked (first axis = realisation)."""
+
+    avar: np.ndarray
+    band_psd: np.ndarray
+    psd: np.ndarray
+    impulses: np.ndarray
+    temp_slope: np.ndarray
+    trend_slope: np.ndarray
+    temp_corr: np.ndarray
+    trend_corr: np.ndarray
+    line_ln: np.ndarray
+    level_corr: np.ndarray
+
+    @property
+    def k(self) -> int:
+        return int(self.avar.shape[0])
+
+
+@dataclass
+class Comparison:
+    """Real versus simulated on one part of a record."""
+
+    tau_s: np.ndarray
+    adev_real: np.ndarray
+    adev_sim: np.ndarray
+    adev_sim_lo: np.ndarray
+    adev_sim_hi: np.ndarray
+    d: np.ndarray
+    z: np.ndarray
+    sigma: np.ndarray
+    """Combined one-sigma band in ln ADEV per tau."""
+    band_f_hz: np.ndarray
+    band_z: np.ndarray
+    line_z: float
+    line_f_hz: float
+    tail_z: float
+    temp_z: float = float("nan")
+    """Real correlation with temperature against the realisations' (z; NaN without temp).
+
+    Fisher's z = atanh(r) (Fisher 1915) of the first differences of block means and
+    block temperatures is compared, not the slope: a noisier candidate (random walk)
+    widens the spread of chance slopes, but a deterministic temperature response keeps
+    |r| near 1 where the chance correlation of independent increments does not."""
+    trend_z: float = float("nan")
+    """Real correlation with time against the realisations' (Fisher z, as temp_z)."""
+    level_z: float = float("nan")
+    """Real lag-1 autocorrelation of the detrended block means against the
+    realisations' (Fisher z, as temp_z). Scored in chi2, not a significance test."""
+    realisations: int = 10
+    regions: list[Region] = field(default_factory=list)
+    bands: list[dict[str, float | str]] = field(default_factory=list)
+
+    @property
+    def gap(self) -> float:
+        """RMS over analysed taus of ln(ADEV_real / ADEV_sim)."""
+        ok = np.isfinite(self.d)
+        return float(np.sqrt(np.mean(self.d[ok] ** 2))) if ok.any() else float("nan")
+
+    @property
+    def gap_null(self) -> float:
+        """RMS of ln(ADEV_real / ADEV_sim) expected from scatter alone: sqrt(mean(s^2)).
+
+        Under the null (real = one more realisation of the model) each ``d`` has mean
+        ~0 and variance ``s^2`` (the combined band), so ``E[gap^2] = mean(s^2)`` over the
+        same taus."""
+        ok = np.isfinite(self.d) & np.isfinite(self.sigma)
+        return float(np.sqrt(np.mean(self.sigma[ok] ** 2))) if ok.any() else float("nan")
+
+    @property
+    def gap_excess(self) -> float:
+        """The systematic part of the gap: ``sqrt(max(0, gap^2 - gap_null^2))``.
+
+        The issue's gap (RMS over all taus) keeps the statistical scatter of the taus no
+        effect touches, so even a perfect model leaves ``gap ~ gap_null``; the excess is
+        what a better model can remove."""
+        g, g0 = self.gap, self.gap_null
+        if not (math.isfinite(g) and math.isfinite(g0)):
+            return float("nan")
+        return math.sqrt(max(0.0, g * g - g0 * g0))
+
+    def gap_over(self, tau_lo_s: float, tau_hi_s: float) -> float:
+        """RMS of ln(ADEV_real / ADEV_sim) over the analysed taus in [tau_lo_s, tau_hi_s]."""
+        sel = (self.tau_s >= tau_lo_s * 0.999) & (self.tau_s <= tau_hi_s * 1.001)
+        sel &= np.isfinite(self.d)
+        return float(np.sqrt(np.mean(self.d[sel] ** 2))) if sel.any() else float("nan")
+
+    def region_gap(self, regions: list[Region]) -> float:
+        """RMS of ln(ADEV_real / ADEV_sim) over the union of the regions' taus."""
+        sel = np.zeros(self.tau_s.size, dtype=bool)
+        for r in regions:
+            sel |= (self.tau_s >= r.tau_min_s * 0.999) & (self.tau_s <= r.tau_max_s * 1.001)
+        sel &= np.isfinite(self.d)
+        return float(np.sqrt(np.mean(self.d[sel] ** 2))) if sel.any() else float("nan")
+
+    def excess_closed(self, before: Comparison) -> float:
+        """1 - excess chi2 after / excess chi2 before (excess = chi2 - n_terms, >= 0)."""
+        excess0 = before.chi2 - before.n_terms
+        if not excess0 > 0:
+            return float("nan")
+        return 1.0 - max(self.chi2 - self.n_terms, 0.0) / excess0
+
+    @property
+    def chi2(self) -> float:
+        """Sum of squared z over taus and bands, plus the one-sided line and tail excess."""
+        zz = np.concatenate([self.z[np.isfinite(self.z)], self.band_z[np.isfinite(self.band_z)]])
+        slopes = [v**2 for v in (self.temp_z, self.trend_z, self.level_z)
+                  if math.isfinite(v)]
+        return float(
+            np.sum(zz**2) + max(self.line_z, 0.0) ** 2 + max(self.tail_z, 0.0) ** 2
+            + sum(slopes)
+        )
+
+    @property
+    def n_terms(self) -> int:
+        slopes = sum(math.isfinite(v) for v in (self.temp_z, self.trend_z, self.level_z))
+        return int(np.isfinite(self.z).sum() + np.isfinite(self.band_z).sum() + 2 + slopes)
+
+    @property
+    def significant(self) -> bool:
+        dof = self.realisations - 1
+        return bool(self.regions or self.bands
+                    or self.line_z > t_threshold(Z_LINE, dof)
+                    or self.tail_z > t_threshold(Z_TAIL, dof)
+                    or abs(self.temp_z) > t_threshold(Z_SLOPE, dof)
+                    or abs(self.trend_z) > t_threshold(Z_SLOPE, dof))
+
+
+Z_LINE = 4.0
+"""z of the largest spectral-bin ratio against the realisations that flags a line."""
+Z_TAIL = 5.0
+"""z of the impulse count against the realisations that flags impulsive outliers."""
+Z_SLOPE = 3.5
+"""|z| of the temperature slope or of the linear trend against the realisations."""
+TEMP_BLOCK_S = 10.0
+"""Shortest block (s) of the means the temperature and trend regressions use."""
+N_BLOCKS = 64
+"""Number of blocks the regressions aim at."""
+
+
+def block_means(v: np.ndarray, n_block: int) -> np.ndarray:
+    """Means of consecutive blocks of n_block samples (NaN ignored; last partial dropped)."""
+    nb = len(v) // n_block
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(v[: nb * n_block].reshape(nb, n_block), axis=1)
+
+
+def block_length(n: int, rate_hz: float) -> int:
+    """Samples per block: n / N_BLOCKS, at least TEMP_BLOCK_S seconds (and >= 8 blocks).
+
+    Long blocks average the white and flicker noise away so a deterministic response to
+    temperature (or time) keeps a correlation near 1; N_BLOCKS keeps enough points for
+    the regression.
+    """
+    n_block = max(1, round(TEMP_BLOCK_S * rate_hz), n // N_BLOCKS)
+    return n_block if n // n_block >= 8 else max(1, n // 8)
+
+
+def temperature_blocks(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Block means (:func:`block_length`) of rate and temperature, finite pairs only."""
+    n_block = block_length(len(y), rate_hz)
+    yb = block_means(y, n_block)
+    tb = block_means(temp_c, n_block)
+    ok = np.isfinite(yb) & np.isfinite(tb)
+    return yb[ok], tb[ok]
+
+
+def slope(x: np.ndarray, y: np.ndarray) -> float:
+    """Ordinary least-squares slope of y on x (NaN when x is constant)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    xc = x[ok] - x[ok].mean()
+    den = float(np.dot(xc, xc))
+    return float(np.dot(xc, y[ok] - y[ok].mean()) / den) if den > 0 else float("nan")
+
+
+def fisher_z(x: np.ndarray, y: np.ndarray) -> float:
+    """atanh of Pearson's r between x and y (finite pairs; clipped at |r| = 1 - 1e-12)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.sum() < 4:
+        return float("nan")
+    r = np.corrcoef(x[ok], y[ok])[0, 1]
+    return float(np.arctanh(np.clip(r, -1 + 1e-12, 1 - 1e-12))) if np.isfinite(r) else \
+        float("nan")
+
+
+def trend_blocks(y: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """(block mid times in s, block means of y), blocks of :func:`block_length`."""
+    n_block = block_length(len(y), rate_hz)
+    yb = block_means(y, n_block)
+    return (np.arange(len(yb)) + 0.5) * n_block / rate_hz, yb
+
+
+def detrended_lag1(t_s: np.ndarray, yb: np.ndarray) -> float:
+    """Fisher z of the lag-1 autocorrelation of block means minus their straight line.
+
+    Residual whiteness of the trend fit (Box & Jenkins, Time Series Analysis, sec. 8.2):
+    a ramp leaves residuals as white as the block-averaged noise, a random walk leaves a
+    wandering level whose consecutive block means stay correlated."""
+    ok = np.isfinite(t_s) & np.isfinite(yb)
+    if ok.sum() < 8:
+        return float("nan")
+    t, v = t_s[ok], yb[ok]
+    r = v - np.polyval(np.polyfit(t, v, 1), t)
+    return fisher_z(r[:-1], r[1:])
+
+
+def trend_slope(y: np.ndarray, rate_hz: float) -> float:
+    """Least-squares slope (unit/s) of the block means of y against the blocks' mid times."""
+    return slope(*trend_blocks(y, rate_hz))
+
+
+def analysis_afs(n: int, rate_hz: float) -> np.ndarray:
+    """Octave averaging factors 1, 2, 4, ... up to the statistics' own OADEV limit."""
+    return averaging_factors("oadev", n, "octave", 1.0 / rate_hz)
+
+
+def oavar_at(y: np.ndarray, rate_hz: float, afs: np.ndarray) -> np.ndarray:
+    """Overlapping AVAR (SP 1065 eq. (11)) at ``afs`` from the statistics' raw kernel.
+
+    The same numbers as ``oadev(...).var`` without noise identification and confidence
+    limits, which the realisations do not need (their spread is the band).
+    """
+    pd, _ = to_phase(y, rate_hz, "freq")
+    return np.array([oavar_kernel(pd, int(m))[0] for m in afs])
+
+
+def welch_psd(y: np.ndarray, rate_hz: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided Welch PSD (unit^2/Hz), Hann, 50 % overlap, mean removed; NaN filled by 0."""
+    v = np.where(np.isfinite(y), y - np.nanmean(y), 0.0)
+    f, p = welch(v, fs=rate_hz, window="hann", nperseg=nperseg, noverlap=nperseg // 2,
+                 detrend="constant", axis=-1)
+    return f, p
+
+
+def line_segment(n: int) -> int:
+    """Segment of the fine spectrum for lines: the whole series (one Hann periodogram).
+
+    A coherent line's peak grows with the segment length while the continuum per bin
+    does not; the maximum of ~n/2 chi-squared(2) bins is a sharp Gumbel law (spread
+    ~1.3 / ln(n/2) in ln), so one long segment detects the weakest lines."""
+    return max(64, n)
+
+
+def psd_segment(n: int) -> int:
+    """Welch segment length: about WELCH_SEGMENTS segments, a power of two, >= 64."""
+    return int(max(64, 2 ** int(math.log2(max(n // (WELCH_SEGMENTS // 2 + 1), 64)))))
+
+
+def band_edges(f_hz: np.ndarray) -> np.ndarray:
+    """Log-spaced band edges (BANDS_PER_DECADE per decade) from the first bin to Nyquist."""
+    lo, hi = f_hz[1], f_hz[-1]
+    nb = max(1, math.ceil(BANDS_PER_DECADE * math.log10(hi / lo)))
+    return np.geomspace(lo, hi * (1 + 1e-9), nb + 1)
+
+
+def band_means(f_hz: np.ndarray, psd: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Mean PSD in each band [edges[i], edges[i+1]) (NaN when a band holds no bin)."""
+    idx = np.digitize(f_hz, edges) - 1
+    out = np.full((*psd.shape[:-1], len(edges) - 1), np.nan)
+    for b in range(len(edges) - 1):
+        sel = idx == b
+        if sel.any():
+            out[..., b] = psd[..., sel].mean(axis=-1)
+    return out
+
+
+def impulse_count(y: np.ndarray) -> int:
+    """Samples beyond TAIL_SIGMAS robust sigmas of y minus its running median."""
+    r = highpass_residual(y)
+    sigma = robust_sigma(r)
+    if not sigma > 0:
+        return 0
+    return int(np.sum(np.abs(r) > TAIL_SIGMAS * sigma))
+
+
+def highpass_residual(y: np.ndarray) -> np.ndarray:
+    """y minus the median of its four neighbours y[k-2], y[k-1], y[k+1], y[k+2].
+
+    The sample itself is left out of the median, so an isolated impulse keeps its full
+    amplitude in the residual and is never averaged into its own reference; smooth
+    (low-frequency) noise cancels. NaN samples are replaced by the series' median.
+    """
+    v = np.where(np.isfinite(y), y, np.nanmedian(y))
+    p = np.pad(v, 2, mode="edge")
+    a, b, c, d = p[:-4], p[1:-3], p[3:-1], p[4:]
+    hi = np.maximum(np.maximum(a, b), np.maximum(c, d))
+    lo = np.minimum(np.minimum(a, b), np.minimum(c, d))
+    return v - 0.5 * (a + b + c + d - hi - lo)  # median of 4 = mean of the middle two
+
+
+def robust_sigma(r: np.ndarray) -> float:
+    """1.4826 median(|r - median(r)|): the normal-equivalent MAD sigma."""
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def features(y: np.ndarray, rate_hz: float, afs: np.ndarray, edges: np.ndarray,
+             nperseg: int, temp_c: np.ndarray | None = None) -> Features:
+    """ADEV (as AVAR) at ``afs``, band PSD, Welch PSD, impulse count, slopes of one series."""
+    avar = oavar_at(y, rate_hz, afs)
+    f, p = welch_psd(y, rate_hz, nperseg)
+    ts = tz = float("nan")
+    if temp_c is not None and np.isfinite(temp_c).any():
+        yb, tb = temperature_blocks(y, temp_c, rate_hz)
+        if len(tb) >= 5 and np.ptp(tb) > 1e-6:
+            ts, tz = slope(tb, yb), fisher_z(np.diff(tb), np.diff(yb))
+    tt, yt = trend_blocks(y, rate_hz)
+    nl = line_segment(len(y))
+    fl, pl = welch_psd(y, rate_hz, nl)
+    ib, ln_peak = line_peak(pl)
+    return Features(avar, band_means(f, p, edges), p, impulse_count(y), ts, slope(tt, yt),
+                    ln_peak, float(fl[ib]), tz, fisher_z(tt, yt), detrended_lag1(tt, yt))
+
+
+def stack(feats: list[Features]) -> SimFeatures:
+    return SimFeatures(
+        np.array([f.avar for f in feats]),
+        np.array([f.band_psd for f in feats]),
+        np.array([f.psd for f in feats]),
+        np.array([f.impulses for f in feats], dtype=float),
+        np.array([f.temp_slope for f in feats]),
+        np.array([f.trend_slope for f in feats]),
+        np.array([f.temp_corr for f in feats]),
+        np.array([f.trend_corr for f in feats]),
+        np.array([f.line_ln for f in feats]),
+        np.array([f.level_corr for f in feats]),
+    )
+
+
+def t_threshold(z: float, dof: int) -> float:
+    """Student's t value (dof) with the same one-sided tail probability as normal z.
+
+    A value compared with K realisations' mean and standard deviation is t-distributed
+    with K - 1 degrees of freedom (prediction interval of a new draw), so the thresholds
+    Z_* (stated as normal z) are converted to keep their false-alarm rates whatever K is;
+    the t values themselves enter chi2 unconverted so a strong effect keeps its weight.
+    """
+    return float(student_t.isf(norm.sf(z), dof))
+
+
+LINE_CONTINUUM_BINS = 64
+"""Bins per block whose median (scaled to a mean) is the spectrum's local continuum."""
+
+
+def line_peak(psd: np.ndarray) -> tuple[int, float]:
+    """(bin, ln(psd / continuum)) of the highest narrow peak above the first block.
+
+    The continuum is the median of each block of LINE_CONTINUUM_BINS bins divided by
+    ln 2 (the median of a chi-squared(2) periodogram bin is ln 2 times its mean),
+    so it is robust to the line itself and nearly noise-free."""
+    b = LINE_CONTINUUM_BINS
+    nb = len(psd) // b
+    if nb < 2:
+        return 0, 0.0
+    blocks = psd[: nb * b].reshape(nb, b)
+    cont = np.repeat(np.median(blocks, axis=1) / math.log(2.0), b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.log(np.where(cont > 0, psd[: nb * b] / cont, np.nan))
+    r[:b] = np.nan
+    if not np.isfinite(r).any():
+        return 0, 0.0
+    ib = int(np.nanargmax(r))
+    return ib, float(r[ib])
+
+
+def _z_against(value: float, sims: np.ndarray) -> float:
+    """t = (value - mean) / (std sqrt(1 + 1/K)) over the realisations (NaN if undefined)."""
+    ok = np.isfinite(sims)
+    if not math.isfinite(value) or ok.sum() < 3:
+        return float("nan")
+    sd = float(sims[ok].std(ddof=1)) * math.sqrt(1.0 + 1.0 / ok.sum())
+    if not sd > 0:
+        return float("nan")
+    return float((value - sims[ok].mean()) / sd)
+
+
+def _runs(z: np.ndarray, d: np.ndarray, z_edge: float = Z_EDGE, z_region: float = Z_REGION
+          ) -> list[tuple[int, int]]:
+    """Index ranges [i, j] of runs with |z| > z_edge, one sign, holding |z| > z_region."""
+    out: list[tuple[int, int]] = []
+    i = 0
+    n = len(z)
+    while i < n:
+        if not (np.isfinite(z[i]) and abs(z[i]) > z_edge):
+            i += 1
+            continue
+        sign = np.sign(z[i])
+        j = i
+        while j + 1 < n and np.isfinite(z[j + 1]) and abs(z[j + 1]) > z_edge and \
+                np.sign(z[j + 1]) == sign:
+            j += 1
+        if np.nanmax(np.abs(z[i : j + 1])) > z_region:
+            out.append((i, j))
+        i = j + 1
+    return out
+
+
+def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.ndarray,
+            f_hz: np.ndarray, edges: np.ndarray) -> Comparison:
+    """Real features against K realisations (see the module docstring for z and regions).
+
+    ``real_ci_s``: the real curve's one-sigma spread in ln ADEV from its confidence
+    interval (NaN where unknown; the realisations' spread is used alone there).
+    """
+    k = sims.k
+    mean_avar = sims.avar.mean(axis=0)
+    ln_sim = 0.5 * np.log(sims.avar)
+    s_sim = ln_sim.std(axis=0, ddof=1) if k > 1 else np.zeros(len(tau_s))
+    s_ci = np.where(np.isfinite(real_ci_s), real_ci_s, s_sim)
+    s = np.sqrt((s_ci**2 + s_sim**2) / 2.0 * (1.0 + 1.0 / k))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = 0.5 * np.log(real.avar / mean_avar)
+        z = np.where(s > 0, d / s, np.nan)
+    # spectra in bands: same construction in ln PSD
+    mean_band = sims.band_psd.mean(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ln_b = np.log(sims.band_psd)
+        sb = ln_b.std(axis=0, ddof=1) if k > 1 else np.zeros(mean_band.shape)
+        db = np.log(real.band_psd / mean_band)
+        band_z = np.where(sb > 0, db / (sb * math.sqrt(1.0 + 1.0 / k)), np.nan)
+    # spectral line: the largest narrow peak above the series' OWN local continuum,
+    # against the same statistic of each realisation (a continuum mismatch is not a line)
+    peak = real.line_ln
+    sim_peaks = sims.line_ln
+    line_z = float((peak - sim_peaks.mean()) / (max(sim_peaks.std(ddof=1), 0.05)
+                                                 * math.sqrt(1.0 + 1.0 / k)))
+    imp_mean = sims.impulses.mean()
+    tail_z = float((real.impulses - imp_mean) / math.sqrt(sims.impulses.var() + imp_mean + 1.0))
+    comp = Comparison(
+        tau_s=tau_s, adev_real=np.sqrt(real.avar), adev_sim=np.sqrt(mean_avar),
+        adev_sim_lo=np.exp(np.quantile(ln_sim, 0.05, axis=0)),
+        adev_sim_hi=np.exp(np.quantile(ln_sim, 0.95, axis=0)),
+        d=d, z=z, sigma=s, band_f_hz=np.sqrt(edges[:-1] * edges[1:]), band_z=band_z,
+        line_z=line_z, line_f_hz=real.line_f_hz, tail_z=tail_z,
+        temp_z=_z_against(real.temp_corr, sims.temp_corr),
+        trend_z=_z_against(real.trend_corr, sims.trend_corr),
+        level_z=_z_against(real.level_corr, sims.level_corr), realisations=k,
+    )
+    for i, j in _runs(z, d):
+        comp.regions.append(Region(
+            float(tau_s[i]), float(tau_s[j]),
+            "real_above" if d[i] > 0 else "real_below",
+            float(np.sqrt(np.mean(d[i : j + 1] ** 2))), float(np.nanmax(np.abs(z[i : j + 1]))),
+        ))
+    for i, j in _runs(band_z, db, t_threshold(Z_EDGE, k - 1), t_threshold(Z_REGION, k - 1)):
+        comp.bands.append({
+            "f_min_hz": float(edges[i]), "f_max_hz": float(edges[j + 1]),
+            "direction": "real_above" if db[i] > 0 else "real_below",
+            "z_max": float(np.nanmax(np.abs(band_z[i : j + 1]))),
+        })
+    return comp

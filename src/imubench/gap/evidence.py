@@ -1,0 +1,131 @@
+"""Time-domain and spectral evidence: each estimator fits one effect to the REAL data.
+
+* temperature: least squares of the FIRST DIFFERENCES of block means of the rate on
+  those of ``dT`` and ``dT^2``, ``dT = T - temp_ref`` (block means low-pass both series
+  so white noise does not dilute the regression; ordinary least squares, e.g. Draper &
+  Smith, Applied Regression Analysis, ch. 2). Differencing prewhitens a wandering level:
+  a random walk or flicker level correlates spuriously with any slow temperature
+  history in levels (Granger & Newbold 1974, J. Econometrics 2, "Spurious regressions
+  in econometrics"), but its increments are independent of the temperature's.
+* ramp: least-squares slope of the rate against time (unit/s; the model's ``ramp``; computed
+  with the features, :func:`imubench.gap.curves.trend_slope`).
+* sine: the largest line of the Welch spectrum's ratio to the model's; frequency refined
+  on the zero-padded periodogram of the whole fit part, amplitude by least squares of a
+  sine and cosine at that frequency (Kay, Modern Spectral Estimation, sec. 13.3).
+* outliers: impulses beyond ``T = TAIL_SIGMAS`` robust sigmas of the series minus its
+  running median. With impulse plus noise ``a ~ N(0, v^2)`` observed only when
+  ``|a| > T``, the truncated-normal moment ``E[a^2 | |a| > T] = v^2 (1 + u phi(u) / Q(u))``,
+  ``u = T / v`` (Johnson, Kotz & Balakrishnan, Continuous Univariate Distributions 1,
+  sec. 13.10.1) is solved for v; amplitude ``s = sqrt(v^2 - sigma^2)`` and rate
+  ``lambda = n_detected / (duration 2 Q(u))``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+from scipy.stats import norm
+
+from imubench.gap.curves import (
+    TAIL_SIGMAS,
+    highpass_residual,
+    robust_sigma,
+    temperature_blocks,
+)
+
+
+@dataclass(frozen=True)
+class TemperatureFit:
+    temp_coeff: float
+    temp_coeff2: float
+    temp_coeff_linear: float
+    """Slope of the linear-only fit (unit/degC)."""
+    block_temp_c: np.ndarray
+    block_rate: np.ndarray
+
+
+def fit_temperature(y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
+                    temp_ref_c: float) -> TemperatureFit | None:
+    """Regress differenced block means of y on differenced (T - temp_ref) and
+    (T - temp_ref)^2 (no intercept: differencing removes the bias); None if T is flat."""
+    yb, tb = temperature_blocks(y, temp_c, rate_hz)
+    if len(yb) < 5 or np.ptp(tb) < 1e-6:
+        return None
+    dt = tb - temp_ref_c
+    a2 = np.diff(np.column_stack([dt, dt**2]), axis=0)
+    dy = np.diff(yb)
+    c2, *_ = np.linalg.lstsq(a2, dy, rcond=None)
+    c1, *_ = np.linalg.lstsq(a2[:, :1], dy, rcond=None)
+    return TemperatureFit(float(c2[0]), float(c2[1]), float(c1[0]), tb, yb)
+
+
+@dataclass(frozen=True)
+class SineFit:
+    sine_amplitude: float
+    sine_freq: float
+
+
+def fit_sine(y: np.ndarray, rate_hz: float, f_guess_hz: float, bin_hz: float) -> SineFit:
+    """Refine a line near f_guess_hz (within one Welch bin) and fit its peak amplitude.
+
+    The frequency is the maximum of the 16x zero-padded periodogram of the whole series
+    within one bin of the guess, refined by a parabola through the three highest
+    log-power points; amplitude by least squares of sin and cos at that frequency.
+    """
+    v = np.where(np.isfinite(y), y - np.nanmean(y), 0.0)
+    n = len(v)
+    nfft = int(2 ** math.ceil(math.log2(16 * n)))
+    power = np.abs(np.fft.rfft(v, nfft)) ** 2
+    df = rate_hz / nfft
+    lo = max(1, int((f_guess_hz - bin_hz) / df))
+    hi = min(len(power) - 2, int((f_guess_hz + bin_hz) / df) + 1)
+    k = lo + int(np.argmax(power[lo : hi + 1]))
+    a, b, c = np.log(power[k - 1 : k + 2] + 1e-300)
+    den = a - 2 * b + c
+    shift = 0.5 * (a - c) / den if den < 0 else 0.0
+    best = (k + float(np.clip(shift, -0.5, 0.5))) * df
+    t = np.arange(n) / rate_hz
+    basis = np.column_stack([np.sin(2 * math.pi * best * t), np.cos(2 * math.pi * best * t)])
+    c2, *_ = np.linalg.lstsq(basis, v, rcond=None)
+    return SineFit(float(math.hypot(c2[0], c2[1])), best)
+
+
+@dataclass(frozen=True)
+class OutlierFit:
+    outlier_rate: float
+    outlier_amplitude: float
+    detected: np.ndarray
+    """Residual values of the detected impulses (for the evidence histogram)."""
+    sigma: float
+    threshold: float
+
+
+def fit_outliers(y: np.ndarray, rate_hz: float, false_per_record: float = 0.0
+                 ) -> OutlierFit | None:
+    """Rate (1/s) and amplitude of impulses from the detected tail (None if < 3 found)."""
+    r = highpass_residual(y)
+    sigma = robust_sigma(r)
+    if not sigma > 0:
+        return None
+    thr = TAIL_SIGMAS * sigma
+    hit = r[np.abs(r) > thr]
+    n_hit = len(hit) - false_per_record
+    if n_hit < 3:
+        return None
+    m2 = float(np.mean(hit**2))
+    def excess(u: float) -> float:
+        v2 = (thr / u) ** 2
+        return v2 * (1.0 + u * norm.pdf(u) / norm.sf(u)) - m2
+
+    try:  # excess falls monotonically in u from +inf (u -> 0) to thr^2 - m2 < 0
+        u = brentq(excess, 1e-3, 30.0)
+    except ValueError:
+        u = 30.0
+    v = thr / u
+    amp = math.sqrt(max(v * v - sigma * sigma, 0.0))
+    duration = np.isfinite(y).sum() / rate_hz
+    rate = n_hit / (duration * 2.0 * norm.sf(u))
+    return OutlierFit(float(rate), float(amp), hit, sigma, thr)

@@ -1,0 +1,172 @@
+"""``--report DIR``: the plots a user needs to believe the verdict, and an index.html.
+
+Per channel: ``<ch>_adev.png/.svg`` (real OADEV against the model's mean and 5-95 %
+band of the realisations, before and after adding the winning effect, on the fit part and
+on the held-out part) and ``<ch>_evidence.png/.svg`` (the evidence behind the verdict:
+temperature scatter, spectrum with its line, impulse histogram, or the per-tau z of the
+Allan curves for the curve-shaped effects).
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from imubench.gap.curves import Comparison
+from imubench.gap.diagnose import ChannelDiagnosis
+from imubench.gap.errors import GapError
+
+
+def _adev_panel(ax: Any, title: str, before: Comparison, after: Comparison | None,
+                label: str) -> None:
+    t = before.tau_s
+    ax.fill_between(t, before.adev_sim_lo, before.adev_sim_hi, color="tab:blue", alpha=0.2,
+                    label="model 5-95 %")
+    ax.loglog(t, before.adev_sim, "-", color="tab:blue", label="model (mean)")
+    if after is not None:
+        ax.fill_between(t, after.adev_sim_lo, after.adev_sim_hi, color="tab:green",
+                        alpha=0.2, label=f"model + {label} 5-95 %")
+        ax.loglog(t, after.adev_sim, "--", color="tab:green", label=f"model + {label}")
+    err = np.abs(before.adev_real * (np.exp(before.sigma) - 1.0))
+    ax.errorbar(t, before.adev_real, yerr=err, fmt="o", color="k", ms=3, label="real")
+    for r in before.regions:
+        ax.axvspan(r.tau_min_s / 1.2, r.tau_max_s * 1.2, color="tab:red", alpha=0.08)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_title(f"{title}: gap {before.gap:.3f}"
+                 + (f" -> {after.gap:.3f}" if after is not None else ""))
+    ax.set_xlabel("tau (s)")
+    ax.set_ylabel("Allan deviation")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+
+
+def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
+    ev = d.evidence
+    eff = d.verdict
+    if eff == "temperature" and "temperature" in ev:
+        tf = ev["temperature"]
+        ax.plot(tf.block_temp_c, tf.block_rate, ".", ms=3, label="real (block means)")
+        p = d.candidates[0].params
+        tt = np.linspace(tf.block_temp_c.min(), tf.block_temp_c.max(), 50)
+        ref = float(np.mean(tf.block_rate) - np.mean(
+            p["temp_coeff"] * (tf.block_temp_c - tf.block_temp_c.mean())))
+        yy = ref + p["temp_coeff"] * (tt - tf.block_temp_c.mean()) + p.get("temp_coeff2", 0.0) * (
+            (tt - tf.block_temp_c.mean()) ** 2 - np.mean((tf.block_temp_c
+                                                          - tf.block_temp_c.mean()) ** 2))
+        ax.plot(tt, yy, "r-", label=f"fit: {p['temp_coeff']:.3g}/degC")
+        ax.set_xlabel("temperature (degC)")
+        ax.set_ylabel("rate (block mean)")
+        ax.legend(fontsize=7)
+        return "temperature scatter (fit part)"
+    if eff == "outliers" and "outliers" in ev:
+        of = ev["outliers"]
+        ax.hist(of.detected / of.sigma, bins=40, color="tab:red")
+        ax.axvline(of.threshold / of.sigma, color="k", ls="--")
+        ax.axvline(-of.threshold / of.sigma, color="k", ls="--")
+        ax.set_xlabel("impulse residual (robust sigmas)")
+        ax.set_ylabel("count")
+        return (f"impulses beyond the threshold: rate {of.outlier_rate:.3g}/s, amplitude "
+                f"{of.outlier_amplitude:.3g}")
+    if eff == "sine" or d.before.bands:
+        f, real, sim = ev["psd"]
+        ax.loglog(f[1:], real[1:], "k-", lw=0.7, label="real")
+        ax.loglog(f[1:], sim[1:], "b-", lw=1.0, label="model (mean of realisations)")
+        if eff == "sine":
+            ax.axvline(d.candidates[0].params["sine_freq"], color="r", ls="--",
+                       label=f"line {d.candidates[0].params['sine_freq']:.4g} Hz")
+        ax.set_xlabel("frequency (Hz)")
+        ax.set_ylabel("PSD (unit^2/Hz)")
+        ax.legend(fontsize=7)
+        return "Welch spectrum (fit part)"
+    ax.semilogx(d.before.tau_s, d.before.z, "o-", label="model")
+    if d.winner is not None and d.winner.fit is not None:
+        ax.semilogx(d.before.tau_s, d.winner.fit.z, "s--", label=f"model + {eff}")
+    ax.axhline(0, color="k", lw=0.5)
+    for zz in (-3.5, 3.5):
+        ax.axhline(zz, color="r", ls=":", lw=0.8)
+    ax.set_xlabel("tau (s)")
+    ax.set_ylabel("z = ln(real/model) / band")
+    ax.legend(fontsize=7)
+    return "per-tau z of the Allan curves (fit part)"
+
+
+def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, ChannelDiagnosis],
+                 rate_hz: float) -> Path:
+    """Write the plots and index.html into out_dir; returns the index path."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise GapError(f"--report {out_dir}: cannot create ({exc.strerror})") from exc
+    rows = []
+    for ch, d in diags.items():
+        w = d.winner
+        label = w.effect if w is not None else (d.candidates[0].effect if d.candidates
+                                                 else "")
+        best = w if w is not None else (d.candidates[0] if d.candidates else None)
+        n_pan = 2 if d.holdout_before is not None else 1
+        fig, axes = plt.subplots(1, n_pan, figsize=(6 * n_pan, 4.5), squeeze=False)
+        _adev_panel(axes[0][0], f"{ch} fit part", d.before,
+                    best.fit if best is not None else None, label)
+        if d.holdout_before is not None:
+            _adev_panel(axes[0][1], f"{ch} held out", d.holdout_before,
+                        best.holdout if best is not None else None, label)
+        fig.suptitle(f"{ch}: verdict {d.verdict}")
+        fig.tight_layout()
+        for ext in ("png", "svg"):
+            fig.savefig(out_dir / f"{ch}_adev.{ext}", dpi=110)
+        plt.close(fig)
+        fig, ax = plt.subplots(figsize=(6, 4.5))
+        caption = _evidence(ax, d)
+        ax.set_title(f"{ch}: {caption}", fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+        fig.tight_layout()
+        for ext in ("png", "svg"):
+            fig.savefig(out_dir / f"{ch}_evidence.{ext}", dpi=110)
+        plt.close(fig)
+        c = result["channels"][ch]
+        eff_rows = "".join(
+            f"<tr><td>{html.escape(e['effect'])}</td><td>{html.escape(_fmt(e['params']))}"
+            f"</td><td>{_num(e['gap_after'])}</td><td>{_num(e.get('holdout_gap_after'))}"
+            f"</td><td>{_num(e['score'])}</td></tr>" for e in c["effects"])
+        hold = c.get("holdout") or {}
+        rows.append(
+            f"<h2>{ch}: verdict <b>{html.escape(c['verdict'])}</b></h2>"
+            f"<p>gap {_num(c['gap_before'])} &rarr; {_num(c['gap_after'])} (fit part); "
+            f"held out {_num(hold.get('gap_before'))} &rarr; {_num(hold.get('gap_after'))}; "
+            f"regions: {html.escape(_regions(c['regions']))}</p>"
+            f"<img src='{ch}_adev.png'><img src='{ch}_evidence.png'>"
+            "<table border=1><tr><th>effect</th><th>params</th><th>gap after</th>"
+            f"<th>held-out gap after</th><th>score</th></tr>{eff_rows}</table>"
+        )
+    index = out_dir / "index.html"
+    index.write_text(
+        "<!doctype html><html><head><meta charset='utf-8'><title>imubench gap</title>"
+        "</head><body><h1>Sim-to-real gap</h1>"
+        f"<p>recording {html.escape(str(result['recording']))}, model "
+        f"{html.escape(str(result['model']))}, {rate_hz:g} Hz, "
+        f"{result['realisations']} realisations, seed {result['seed']}</p>"
+        + "".join(rows) + "</body></html>\n", encoding="utf-8")
+    return index
+
+
+def _num(v: Any) -> str:
+    return "-" if v is None else f"{v:.3g}"
+
+
+def _fmt(p: dict[str, float]) -> str:
+    return ", ".join(f"{k}={v:.3g}" for k, v in p.items())
+
+
+def _regions(regs: list[dict[str, Any]]) -> str:
+    if not regs:
+        return "none"
+    return "; ".join(f"{r['tau_min_s']:.3g}-{r['tau_max_s']:.3g} s {r['direction']}"
+                     for r in regs)

@@ -1,0 +1,125 @@
+"""Covariance model of overlapping Allan variance estimates at several averaging times.
+
+OAVAR estimates at neighbouring taus share data and are strongly correlated (for white
+noise about 0.5 between octaves), so a fit that treats them as independent reports
+intervals that are too narrow. For a Gaussian process the estimate at m is
+``A(m) = 1/(2n) sum_i D_i^2`` with ``D_i = ybar_{i+m} - ybar_i`` (n overlapping terms),
+and, because ``Cov(X^2, Y^2) = 2 Cov(X, Y)^2`` for jointly Gaussian zero-mean X, Y::
+
+    Cov(A(m1), A(m2)) = 1/(2 n1 n2) sum_d ov(d) c12(d)^2,
+    c12(d) = Cov(D_i^(m1), D_{i+d}^(m2)) = int S(nu) W1(nu) conj(W2(nu)) e^{2 pi i nu d} dnu
+
+with S the two-sided PSD of the model (:func:`imubench.noisefit.kernels.term_spectrum`),
+W_m the transfer function of the Allan difference of m-averages and ov(d) the number of
+index pairs (i, i + d). c12 is computed with one inverse FFT per pair. Only the
+*correlation* is taken from this model; the variances of the fit keep the EDF of each point
+(var = 2 AVAR^2 / edf, Greenhall & Riley EDF), as the issue asks. Large averaging factors
+are handled by scale invariance: block means of s samples of white, random walk,
+quantization and (approximately) flicker and Gauss-Markov noise are the same term at the
+sample time s tau0, so the pair (m1, m2) is evaluated at (m1/s, m2/s) with rate/s (the
+output filter is dropped there: it only acts on the shortest taus). Deterministic terms
+(ramp, sine) are left out of the covariance (documented limitation).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from functools import lru_cache
+
+import numpy as np
+
+from imubench.noisefit.kernels import filter_gain2, term_spectrum
+
+FFT_MAX: int = 1 << 14
+"""Longest FFT used for one pair (larger pairs are rescaled)."""
+MAX_RATIO: int = 64
+"""Pairs whose averaging factors differ by more than this are taken as uncorrelated (the
+correlation halves per octave for random walk, faster for the other terms: < 0.02 here)."""
+
+_STOCHASTIC = ("white", "flicker", "random_walk", "quantization", "markov")
+
+
+def _allan_weights(m: int, length: int) -> np.ndarray:
+    a = np.zeros(length)
+    a[:m] = -1.0 / m
+    a[m:2 * m] = 1.0 / m
+    return a
+
+
+@lru_cache(maxsize=512)
+def _spectrum(term: str, length: int, tau0_s: float, tau_c_s: float) -> np.ndarray:
+    return term_spectrum(term, np.fft.rfftfreq(length), tau0_s, tau_c_s=tau_c_s)
+
+
+@lru_cache(maxsize=512)
+def _weights_fft(m: int, length: int) -> np.ndarray:
+    return np.fft.rfft(_allan_weights(m, length))
+
+
+def _overlap(n1: int, n2: int, d: np.ndarray) -> np.ndarray:
+    """Number of (i, j) with 0 <= i < n1, 0 <= j < n2, j - i = d."""
+    lo = np.maximum(0, -d)
+    hi = np.minimum(n1, n2 - d)
+    return np.maximum(hi - lo, 0).astype(np.float64)
+
+
+def _pair_cov(m1: int, m2: int, n1: int, n2: int, amp2: Mapping[str, float], rate_hz: float,
+              tau_c_s: float, bandwidth_hz: float, filter_order: int) -> tuple[float, float, float]:
+    """(Cov11, Cov22, Cov12) up to a common factor for the pair (m1, m2)."""
+    s = 1
+    while 8 * (m1 + m2) // s > FFT_MAX and 2 * s <= min(m1, m2):
+        s *= 2
+    m1s, m2s, rate = m1 // s, m2 // s, rate_hz / s
+    n1s, n2s = max(n1 // s, 1), max(n2 // s, 1)
+    length = 1 << int(np.ceil(np.log2(8 * (m1s + m2s) + 64)))
+    nu = np.fft.rfftfreq(length)
+    tau0 = 1.0 / rate
+    spec = np.zeros(nu.size)
+    for term in _STOCHASTIC:
+        a2 = float(amp2.get(term, 0.0))
+        if a2 > 0 and (term != "markov" or tau_c_s > 0):
+            spec += a2 * _spectrum(term, length, tau0, tau_c_s)
+    if s == 1:
+        spec *= filter_gain2(nu, bandwidth_hz, filter_order, rate_hz)
+    spec += float(amp2.get("output_white", 0.0)) / tau0  # white after the filter
+    w1 = _weights_fft(m1s, length)
+    w2 = _weights_fft(m2s, length)
+    d = np.fft.fftfreq(length, 1.0 / length).astype(np.int64)
+    out = []
+    for wa, wb, na, nb in ((w1, w1, n1s, n1s), (w2, w2, n2s, n2s), (w1, w2, n1s, n2s)):
+        c = np.fft.irfft(spec * wa * np.conj(wb), n=length)
+        out.append(float(np.sum(_overlap(na, nb, d) * c * c)) / (2.0 * na * nb))
+    return out[0], out[1], out[2]
+
+
+def oavar_correlation(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, float],
+                      rate_hz: float, *, tau_c_s: float = 0.0, bandwidth_hz: float = 0.0,
+                      filter_order: int = 1) -> np.ndarray:
+    """Correlation matrix of the OAVAR estimates at averaging factors ``m``.
+
+    Args:
+        m: averaging factors (samples).
+        n_terms: number of overlapping terms of each estimate (Stable32 "#": N - 2m).
+        amp2: squared amplitudes of the model's stochastic terms by term name
+            (``white`` N^2, ``flicker`` B^2, ``random_walk`` K^2, ``quantization`` Q^2,
+            ``markov`` sigma^2), model units.
+        rate_hz: sample rate; tau_c_s: Markov correlation time; bandwidth_hz/filter_order:
+            the output low-pass.
+    """
+    m = np.asarray(m, dtype=np.int64)
+    k = m.size
+    corr = np.eye(k)
+    if not any(float(amp2.get(t, 0.0)) > 0 for t in (*_STOCHASTIC, "output_white")):
+        return corr
+    for i in range(k):
+        for j in range(i + 1, k):
+            if max(m[i], m[j]) > MAX_RATIO * min(m[i], m[j]):
+                continue
+            c11, c22, c12 = _pair_cov(int(m[i]), int(m[j]), int(n_terms[i]), int(n_terms[j]),
+                                      amp2, rate_hz, tau_c_s, bandwidth_hz, filter_order)
+            if c11 > 0 and c22 > 0:
+                corr[i, j] = corr[j, i] = min(c12 / np.sqrt(c11 * c22), 0.999)
+    return corr
+
+
+__all__ = ["FFT_MAX", "MAX_RATIO", "oavar_correlation"]

@@ -1,0 +1,707 @@
+"""Fit of the model file's noise terms to a recording's Allan variance curve.
+
+Method ``wls`` (default), in four steps:
+
+1. **Points.** The overlapping AVAR ``a_i`` at octave averaging factors (or the caller's
+   taus) with its EDF (Greenhall & Riley, PTTI 2003, per identified noise type), from
+   :func:`imubench.stats.oadev`.
+2. **Linear terms.** With the nonlinear settings fixed (Markov correlation time, sine
+   frequency, output filter bandwidth/order), the model AVAR is linear in the squared
+   amplitudes theta = (N^2, B^2, K^2, R^2, Q^2, sigma_M^2, A^2): ``a ~ X theta`` with X the
+   exact sampled-data AVAR of each term at unit amplitude (:mod:`.kernels`). theta >= 0 is
+   solved by non-negative generalized least squares with the covariance
+   ``Sigma_ij = r_ij sqrt(V_i V_j)``, ``V_i = 2 A_i^2 / edf_i`` (chi-squared variance of an
+   AVAR estimate, SP 1065 eq. 44) at the *model* AVAR A_i (iterated: weights from the data
+   bias the fit low), and r_ij the correlation of overlapping estimates from the model
+   (:mod:`.covariance`).
+3. **Model selection** (``terms="auto"``). Nonlinear extensions (output filter, Gauss-
+   Markov, sine) are searched on log grids (then refined) and kept when they lower the GLS
+   chi-squared by more than :data:`EXTENSION_DCHI2`; then backward elimination drops the
+   least significant linear term while its one-sided z = theta/se < :data:`Z_PRESENT`
+   (5 % level), refitting each time.
+4. **Intervals.** 95 % intervals on theta from the GLS covariance (X' Sigma^-1 X)^-1,
+   mapped to amplitudes by the square root (clipped at 0); absent terms get
+   (0, sqrt(theta + 1.645 se)) from a fit that includes them. Markov time, sine frequency
+   and bandwidth get profile intervals (chi-squared rise <= 3.84) and their amplitude the
+   union of its intervals over that profile region.
+
+``tangent`` lives in :mod:`.tangent`. (GMWM, Guerrier et al. 2013, is not implemented:
+its estimator is this GLS with a nonparametric instead of a model-based weight matrix.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+
+import numpy as np
+from lsm6ds_sim.model import ChannelModel
+from scipy.optimize import minimize_scalar, nnls
+
+from imubench.errors import StatsError
+from imubench.noisefit.covariance import oavar_correlation
+from imubench.noisefit.errors import FitError
+from imubench.noisefit.kernels import AMPLITUDE_KEY, averaging_factors, term_avar
+from imubench.noisefit.model_avar import model_avar
+
+BASE_TERMS: tuple[str, ...] = ("white", "flicker", "random_walk", "ramp", "quantization")
+EXTENSIONS: tuple[str, ...] = ("filter", "markov", "sine")
+TERM_NAMES: tuple[str, ...] = BASE_TERMS + EXTENSIONS
+Z_PRESENT: float = 1.645
+"""One-sided z (5 %) a linear term's squared amplitude must reach to be reported present."""
+EXTENSION_DCHI2: float = 13.8
+"""GLS chi-squared drop an extension (2 parameters) must give: chi2_2 at 0.999, which
+covers the look-elsewhere effect of the grid search better than BIC's 2 ln(n)."""
+SEARCH_DELTA: float = 0.02
+"""Relative floor used while searching the nonlinear settings only: it smooths the chi2
+landscape that points with EDF ~1e6 make rugged (final fits use the estimated delta)."""
+Z95: float = 1.959964
+METHODS: tuple[str, ...] = ("wls", "tangent")
+PARAM_KEYS: tuple[str, ...] = (
+    "white", "flicker", "random_walk", "ramp", "quantization", "markov_sigma",
+    "markov_tau", "sine_amplitude", "sine_freq", "bandwidth_hz", "filter_order",
+    "output_white",
+)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """Which linear terms, and the nonlinear settings they are evaluated with."""
+
+    terms: tuple[str, ...]
+    tau_c_s: float = 0.0
+    f0_hz: float = 0.0
+    bandwidth_hz: float = 0.0
+    filter_order: int = 1
+
+
+@dataclass(frozen=True)
+class Points:
+    """The AVAR points a fit uses."""
+
+    tau_s: np.ndarray
+    m: np.ndarray
+    avar: np.ndarray
+    edf: np.ndarray
+    n_terms: np.ndarray
+    rate_hz: float
+    n_samples: int
+    delta: float = 0.0
+    """Relative model-discrepancy std added to every point (see :func:`_estimate_delta`)."""
+
+
+@dataclass(frozen=True)
+class ChannelFit:
+    """Result of fitting one channel (see docs/noise-fit.md).
+
+    ``params`` model-file keys -> value (model units: dps or g based), ``ci`` 95 %
+    intervals, ``present`` keys of the terms judged present, ``tau_s/avar/edf`` the points
+    used. ``bias`` is the data mean (unit), ``chi2``/``dof`` the GLS fit statistic.
+    """
+
+    channel: str
+    rate_hz: float
+    method: str
+    params: dict[str, float]
+    ci: dict[str, tuple[float, float]]
+    present: tuple[str, ...]
+    tau_s: np.ndarray
+    avar: np.ndarray
+    edf: np.ndarray
+    bias: float = 0.0
+    chi2: float = float("nan")
+    dof: int = 0
+    notes: tuple[str, ...] = field(default=())
+
+    def channel_model(self, base: ChannelModel | None = None) -> ChannelModel:
+        """A ChannelModel with the fitted noise keys over ``base``.
+
+        The data mean (``bias``) is not written: for an accelerometer it holds gravity,
+        which the simulator adds itself.
+        """
+        cm = base if base is not None else ChannelModel()
+        vals: dict[str, float] = {k: float(v) for k, v in self.params.items()}
+        vals["filter_order"] = int(self.params.get("filter_order", 1))
+        return cm.replace(**vals)
+
+    def model_avar(self, tau_s: Sequence[float] | np.ndarray,
+                   rate_hz: float | None = None) -> np.ndarray:
+        """Predicted AVAR (unit^2) at ``tau_s`` for data at ``rate_hz`` (default: the fit's)."""
+        return model_avar(self.channel_model(), tau_s, self.rate_hz if rate_hz is None
+                          else rate_hz)
+
+    def term_avars(self, tau_s: Sequence[float] | np.ndarray,
+                   rate_hz: float | None = None) -> dict[str, np.ndarray]:
+        """AVAR of each present term alone (filter included) at ``tau_s``: for plots."""
+        rate = self.rate_hz if rate_hz is None else rate_hz
+        cm0 = ChannelModel().replace(
+            bandwidth_hz=self.params.get("bandwidth_hz", 0.0),
+            filter_order=int(self.params.get("filter_order", 1)))
+        out: dict[str, np.ndarray] = {}
+        for term, key in AMPLITUDE_KEY.items():
+            if key not in self.present:
+                continue
+            extra: dict[str, float] = {key: self.params[key]}
+            if term == "markov":
+                extra["markov_tau"] = self.params["markov_tau"]
+            if term == "sine":
+                extra["sine_freq"] = self.params["sine_freq"]
+            out[term] = model_avar(cm0.replace(**extra), tau_s, rate)
+        return out
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready summary."""
+        return {
+            "channel": self.channel,
+            "rate_hz": self.rate_hz,
+            "method": self.method,
+            "params": dict(self.params),
+            "ci95": {k: [float(a), float(b)] for k, (a, b) in self.ci.items()},
+            "present": list(self.present),
+            "bias": self.bias,
+            "chi2": None if not math.isfinite(self.chi2) else self.chi2,
+            "dof": self.dof,
+            "points": {"tau_s": self.tau_s.tolist(), "avar": self.avar.tolist(),
+                       "edf": self.edf.tolist()},
+            "notes": list(self.notes),
+        }
+
+
+# ------------------------------------------------------------------------ input
+def check_series(y: np.ndarray | Sequence[float], rate_hz: float, channel: str) -> np.ndarray:
+    """The rate series as float64, or FitError saying what is wrong with it."""
+    arr = np.asarray(y, dtype=np.float64)
+    if arr.ndim != 1:
+        raise FitError(f"fit {channel}: data must be 1-D, got shape {arr.shape}")
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise FitError(f"fit {channel}: rate_hz must be > 0, got {rate_hz}")
+    ok = np.isfinite(arr)
+    if ok.sum() < 64:
+        raise FitError(f"fit {channel}: needs at least 64 finite samples, got {int(ok.sum())}")
+    if np.nanstd(arr) == 0.0:
+        raise FitError(f"fit {channel}: the data are constant; there is no noise to fit")
+    return arr
+
+
+def parse_terms(terms: str | Iterable[str]) -> tuple[str, ...] | None:
+    """None for "auto", else the validated tuple of term names."""
+    if isinstance(terms, str):
+        if terms.strip().lower() == "auto":
+            return None
+        items = [t.strip() for t in terms.split(",") if t.strip()]
+    else:
+        items = [str(t).strip() for t in terms]
+    if not items:
+        raise FitError("terms: empty list; use 'auto' or names among " + ", ".join(TERM_NAMES))
+    bad = [t for t in items if t not in TERM_NAMES]
+    if bad:
+        raise FitError(f"terms: unknown term(s) {bad}; use 'auto' or names among "
+                       + ", ".join(TERM_NAMES))
+    return tuple(dict.fromkeys(items))
+
+
+def avar_points(y: np.ndarray, rate_hz: float, taus: Sequence[float] | str | None,
+                channel: str) -> Points:
+    """OAVAR with EDF at octave m (or the given taus) via :func:`imubench.stats.oadev`."""
+    from imubench.stats import oadev
+
+    try:
+        res = oadev(y, rate_hz, "freq", "octave" if taus is None else taus, confidence=0.95)
+    except StatsError as exc:
+        raise FitError(f"fit {channel}: {exc}") from exc
+    ok = np.isfinite(res.var) & (res.var > 0) & np.isfinite(res.edf) & (res.edf > 0)
+    if ok.sum() < 3:
+        raise FitError(f"fit {channel}: only {int(ok.sum())} usable Allan variance points; "
+                       "the record is too short for a fit")
+    return Points(res.tau_s[ok], res.m[ok].astype(np.int64), res.var[ok], res.edf[ok],
+                  res.n[ok].astype(np.int64), float(rate_hz), int(y.size))
+
+
+# ------------------------------------------------------------------------ linear algebra
+def design(st: Structure, pts: Points) -> np.ndarray:
+    """Columns: AVAR of each linear term of ``st`` at unit amplitude at the points."""
+    key = pts.m.tobytes()
+    cols = [_column(term, key, pts.rate_hz, st.tau_c_s if term == "markov" else 0.0,
+                    st.f0_hz if term == "sine" else 0.0, st.bandwidth_hz, st.filter_order)
+            for term in st.terms]
+    return np.column_stack(cols) if cols else np.zeros((pts.m.size, 0))
+
+
+@lru_cache(maxsize=4096)
+def _column(term: str, m_bytes: bytes, rate_hz: float, tau_c_s: float, f0_hz: float,
+            bandwidth_hz: float, filter_order: int) -> np.ndarray:
+    m = np.frombuffer(m_bytes, dtype=np.int64)
+    return term_avar(term, m, rate_hz, tau_c_s=tau_c_s, f0_hz=f0_hz,
+                     bandwidth_hz=bandwidth_hz, filter_order=filter_order)
+
+
+@dataclass
+class _Solution:
+    theta: np.ndarray
+    cov_theta: np.ndarray
+    chi2: float
+    sigma: np.ndarray
+
+
+def _solve(x: np.ndarray, a: np.ndarray, sigma: np.ndarray) -> _Solution:
+    """Non-negative GLS: min (X t - a)' Sigma^-1 (X t - a), t >= 0; covariance of t."""
+    chol = np.linalg.cholesky(sigma)
+    xw = np.linalg.solve(chol, x)
+    aw = np.linalg.solve(chol, a)
+    scale = np.linalg.norm(xw, axis=0)
+    scale[scale == 0] = 1.0
+    t_scaled, _ = nnls(xw / scale, aw, maxiter=50 * max(x.shape[1], 1))
+    theta = t_scaled / scale
+    r = xw @ theta - aw
+    fisher = (xw / scale).T @ (xw / scale)
+    cov_scaled = np.linalg.pinv(fisher, rcond=1e-12)
+    cov = cov_scaled / np.outer(scale, scale)
+    return _Solution(theta, cov, float(r @ r), sigma)
+
+
+def _amp2(st: Structure, theta: np.ndarray) -> dict[str, float]:
+    return {t: float(v) for t, v in zip(st.terms, theta, strict=True)}
+
+
+def _correlation(st: Structure, sol: _Solution, pts: Points) -> np.ndarray:
+    """Model correlation of the OAVAR points for the fitted structure (:mod:`.covariance`)."""
+    return oavar_correlation(pts.m, pts.n_terms, _amp2(st, sol.theta), pts.rate_hz,
+                             tau_c_s=st.tau_c_s, bandwidth_hz=st.bandwidth_hz,
+                             filter_order=st.filter_order)
+
+
+def _fit_structure(st: Structure, pts: Points, corr: np.ndarray | None = None,
+                   iterations: int = 3) -> _Solution:
+    """Iteratively reweighted non-negative GLS of the linear terms of ``st``.
+
+    The variances follow the model (V = 2 A_model^2 / edf, starting from the data); the
+    correlation ``corr`` is held fixed (identity when None).
+    """
+    x = design(st, pts)
+    a = pts.avar
+    corr = np.eye(a.size) if corr is None else corr
+    model = a.copy()
+    sol: _Solution | None = None
+    for _ in range(iterations):
+        mod = np.maximum(model, 1e-3 * a)
+        v = 2.0 * mod**2 / pts.edf
+        sigma = corr * np.sqrt(np.outer(v, v)) + np.diag((pts.delta * mod) ** 2)
+        sol = _solve(x, a, sigma)
+        model = x @ sol.theta
+    assert sol is not None
+    return sol
+
+
+def _fit_gls(st: Structure, pts: Points) -> tuple[_Solution, np.ndarray]:
+    """Diagonal fit, model correlation from it, then the GLS fit with that correlation."""
+    sol = _fit_structure(st, pts, None, iterations=2)
+    corr = _correlation(st, sol, pts)
+    return _fit_structure(st, pts, corr), corr
+
+
+def _chi2_fixed_sigma(st: Structure, pts: Points, sigma: np.ndarray) -> tuple[float, _Solution]:
+    sol = _solve(design(st, pts), pts.avar, sigma)
+    return sol.chi2, sol
+
+
+# ------------------------------------------------------------------------ nonlinear search
+def _grid(kind: str, pts: Points) -> np.ndarray:
+    tau0 = 1.0 / pts.rate_hz
+    span = pts.n_samples * tau0
+    if kind == "markov":  # a correlation time needs many of itself in the record
+        return np.geomspace(2.0 * tau0, span / 30.0, 20)
+    if kind == "sine":  # ... and a sine many periods, else it is low-frequency noise
+        return np.geomspace(30.0 / span, 0.45 * pts.rate_hz, 160)
+    return np.geomspace(0.02 * pts.rate_hz, 0.45 * pts.rate_hz, 14)
+
+
+def _with(st: Structure, kind: str, value: float, order: int = 1) -> Structure:
+    if kind == "markov":
+        terms = st.terms if "markov" in st.terms else (*st.terms, "markov")
+        return replace(st, terms=terms, tau_c_s=value)
+    if kind == "sine":
+        terms = st.terms if "sine" in st.terms else (*st.terms, "sine")
+        return replace(st, terms=terms, f0_hz=value)
+    terms = st.terms if "output_white" in st.terms else (*st.terms, "output_white")
+    return replace(st, terms=terms, bandwidth_hz=value, filter_order=order)
+
+
+def _search(st: Structure, kind: str, pts: Points,
+            corr: np.ndarray | None = None) -> tuple[Structure, float]:
+    """Best value of one nonlinear setting (fixed correlation ``corr``; grid then refine)."""
+    orders = (1, 2) if kind == "filter" else (1,)
+    best: tuple[float, Structure] | None = None
+    grid = _grid(kind, pts)
+    for order in orders:
+        chis = []
+        for v in grid:
+            cand = _with(st, kind, float(v), order)
+            chis.append(_fit_structure(cand, pts, corr, iterations=2).chi2)
+        i = int(np.argmin(chis))
+        lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+
+        def f(logv: float, order: int = order) -> float:
+            cand = _with(st, kind, float(np.exp(logv)), order)
+            return _fit_structure(cand, pts, corr, iterations=2).chi2
+
+        if hi > lo:
+            r = minimize_scalar(f, bounds=(math.log(lo), math.log(hi)), method="bounded",
+                                options={"xatol": 1e-3})
+            v, c = float(np.exp(r.x)), float(r.fun)
+            if c > chis[i]:
+                v, c = float(grid[i]), float(chis[i])
+        else:
+            v, c = float(grid[i]), float(chis[i])
+        if best is None or c < best[0]:
+            best = (c, _with(st, kind, v, order))
+    assert best is not None
+    return best[1], best[0]
+
+
+def _optimise(st: Structure, kinds: Sequence[str], pts: Points,
+              corr: np.ndarray | None = None, rounds: int = 2) -> Structure:
+    """Coordinate search of the nonlinear settings of ``kinds`` (filter first)."""
+    current = st
+    for _ in range(rounds if len(kinds) > 1 else 1):
+        for kind in kinds:
+            current, _ = _search(current, kind, pts, corr)
+    return current
+
+
+def _settings(st: Structure, kinds: Sequence[str]) -> list[float]:
+    attr = {"filter": "bandwidth_hz", "markov": "tau_c_s", "sine": "f0_hz"}
+    return [math.log(getattr(st, attr[k])) for k in kinds]
+
+
+def _polish(st: Structure, kinds: Sequence[str], pts: Points,
+            corr: np.ndarray | None = None) -> Structure:
+    """Joint Nelder-Mead refinement (log space) of the nonlinear settings of ``kinds``."""
+    from scipy.optimize import minimize
+
+    kinds = [k for k in kinds if k != "filter" or st.bandwidth_hz > 0]
+    if not kinds:
+        return st
+
+    def build(logs: np.ndarray) -> Structure:
+        cand = st
+        for k, lv in zip(kinds, logs, strict=True):
+            v = float(np.exp(lv))
+            if k == "filter":
+                v = min(v, 0.49 * pts.rate_hz)
+            cand = _with(cand, k, v, st.filter_order)
+        return cand
+
+    def f(logs: np.ndarray) -> float:
+        return _fit_structure(build(logs), pts, corr, iterations=2).chi2
+
+    x0 = np.array(_settings(st, kinds))
+    r = minimize(f, x0, method="Nelder-Mead",
+                 options={"xatol": 1e-4, "fatol": 1e-3, "maxfev": 150 * len(kinds)})
+    return build(r.x) if r.fun <= f(x0) else st
+
+
+def _estimate_delta(st: Structure, pts: Points, corr: np.ndarray, n_nonlinear: int) -> float:
+    """Relative model-discrepancy std delta that brings chi2 to its degrees of freedom.
+
+    A real sensor is never exactly the model, and its short-tau AVAR points have EDFs of
+    1e5 and more: without a floor, 1 % of misfit there outweighs everything else. Each
+    point's variance becomes V_i + (delta A_i)^2 with delta the smallest value for which
+    the GLS chi2 of the richest model equals n - p (the Birge-ratio / excess-scatter
+    convention); delta = 0 when the model already fits (as for simulated data).
+    """
+    from scipy.optimize import brentq
+
+    dof = max(pts.avar.size - len(st.terms) - n_nonlinear, 1)
+
+    def excess(log_delta: float) -> float:
+        p = replace(pts, delta=float(np.exp(log_delta)))
+        return _fit_structure(st, p, corr).chi2 - dof
+
+    if _fit_structure(st, pts, corr).chi2 <= dof:
+        return 0.0
+    lo, hi = math.log(1e-5), math.log(2.0)
+    if excess(hi) > 0:
+        return 2.0
+    if excess(lo) < 0:
+        return 1e-5
+    return float(np.exp(brentq(excess, lo, hi, xtol=1e-3)))
+
+
+def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
+                       ) -> tuple[Structure, Points]:
+    """Best subset of the nonlinear extensions (filter, Markov, sine).
+
+    Every subset is fitted (settings by coordinate search with diagonal weights); the best
+    fitting one (lowest chi2) is refined and gives the reference covariance (model
+    correlation and discrepancy floor delta); all subsets are compared by their GLS
+    chi-squared on that covariance, each charged :data:`EXTENSION_DCHI2` per extension.
+    """
+    from itertools import combinations
+
+    kinds = [k for k in EXTENSIONS if k in allowed]
+    subsets = [c for r in range(len(kinds) + 1) for c in combinations(kinds, r)]
+    coarse = replace(pts, delta=SEARCH_DELTA)
+    fitted = {sub: _optimise(st, sub, coarse) for sub in subsets}
+    chi2_diag = {sub: _fit_structure(fitted[sub], coarse, None).chi2 for sub in subsets}
+    ref_sub = min(subsets, key=lambda sb: chi2_diag[sb])
+    reference = _polish(_polish(fitted[ref_sub], ref_sub, coarse), ref_sub, pts)
+    fitted[ref_sub] = reference
+    sol_ref = _fit_structure(reference, pts, None, iterations=3)
+    corr = _correlation(reference, sol_ref, pts)
+    pts = replace(pts, delta=_estimate_delta(reference, pts, corr, 2 * len(ref_sub)))
+    sigma = _fit_structure(reference, pts, corr).sigma
+    best: tuple[float, Structure] | None = None
+    for sub in subsets:
+        chi2, _ = _chi2_fixed_sigma(fitted[sub], pts, sigma)
+        score = chi2 + EXTENSION_DCHI2 * len(sub)
+        if best is None or score < best[0]:
+            best = (score, fitted[sub])
+    assert best is not None
+    chosen = best[1]
+    sub = [k for k in kinds if (k == "filter" and chosen.bandwidth_hz > 0)
+           or (k == "markov" and "markov" in chosen.terms)
+           or (k == "sine" and "sine" in chosen.terms)]
+    return _polish(chosen, sub, pts, corr), pts
+
+
+def _eliminate(st: Structure, pts: Points) -> tuple[Structure, _Solution]:
+    """Backward elimination of linear terms whose z = theta/se < Z_PRESENT."""
+    current = st
+    sol, corr = _fit_gls(current, pts)
+    while current.terms:
+        se = np.sqrt(np.maximum(np.diag(sol.cov_theta), 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(se > 0, sol.theta / se, np.where(sol.theta > 0, np.inf, 0.0))
+        i = int(np.argmin(z))
+        if z[i] >= Z_PRESENT or len(current.terms) == 1:
+            break
+        dropped = current.terms[i]
+        terms = tuple(t for t in current.terms if t != dropped)
+        current = replace(current, terms=terms,
+                          tau_c_s=0.0 if dropped == "markov" else current.tau_c_s,
+                          f0_hz=0.0 if dropped == "sine" else current.f0_hz)
+        sol = _fit_structure(current, pts, corr)
+    corr = _correlation(current, sol, pts)
+    return current, _fit_structure(current, pts, corr)
+
+
+# ------------------------------------------------------------------------ intervals
+def _theta_ci(theta: float, se: float) -> tuple[float, float]:
+    lo = max(theta - Z95 * se, 0.0)
+    hi = max(theta + Z95 * se, 0.0)
+    return math.sqrt(lo), math.sqrt(hi)
+
+
+def _se_at(x: np.ndarray, theta: np.ndarray, j: int, value: float, pts: Points,
+           corr: np.ndarray) -> float:
+    """Standard error of theta_j with the covariance evaluated where theta_j = value."""
+    t = theta.copy()
+    t[j] = max(value, 0.0)
+    mod = np.maximum(x @ t, 1e-3 * pts.avar)
+    v = 2.0 * mod**2 / pts.edf
+    sigma = corr * np.sqrt(np.outer(v, v)) + np.diag((pts.delta * mod) ** 2)
+    chol = np.linalg.cholesky(sigma)
+    xw = np.linalg.solve(chol, x)
+    scale = np.linalg.norm(xw, axis=0)
+    scale[scale == 0] = 1.0
+    cov = np.linalg.pinv((xw / scale).T @ (xw / scale), rcond=1e-12) / np.outer(scale, scale)
+    return math.sqrt(max(cov[j, j], 0.0))
+
+
+def _endpoint_ci(x: np.ndarray, theta: np.ndarray, j: int, pts: Points,
+                 corr: np.ndarray) -> tuple[float, float]:
+    """95 % interval of amplitude j: theta_j -/+ 1.96 se, se taken *at each endpoint*.
+
+    The variance of an AVAR point is proportional to the model AVAR squared, so a Wald
+    interval with the variance at the estimate is too narrow above a low estimate and too
+    wide below a high one (the chi-squared skew of small-EDF points); evaluating the
+    standard error at the endpoint (three fixed-point steps, a score-type interval) fixes
+    that. Mapped to the amplitude by the square root, clipped at 0.
+    """
+    t0 = float(theta[j])
+    se0 = _se_at(x, theta, j, t0, pts, corr)
+    hi, lo = t0 + Z95 * se0, t0 - Z95 * se0
+    for _ in range(3):
+        hi = t0 + Z95 * _se_at(x, theta, j, hi, pts, corr)
+        lo = t0 - Z95 * _se_at(x, theta, j, max(lo, 0.0), pts, corr)
+    return math.sqrt(max(lo, 0.0)), math.sqrt(max(hi, 0.0))
+
+
+def _profile(st: Structure, kind: str, pts: Points, sigma: np.ndarray,
+             chi2_min: float) -> tuple[tuple[float, float], list[Structure]]:
+    """Profile 95 % interval of one nonlinear setting: chi-squared rise <= 3.84.
+
+    The linear amplitudes are refitted (fixed covariance) along the profile; the bound is
+    found by doubling steps in log space, then Brent's method. Returns the interval and
+    the structures at its two ends (for the amplitudes' projected intervals).
+    """
+    from scipy.optimize import brentq
+
+    attr = {"markov": "tau_c_s", "sine": "f0_hz", "filter": "bandwidth_hz"}[kind]
+    v0 = float(getattr(st, attr))
+    upper = math.log(0.49 * pts.rate_hz) if kind != "markov" else math.log(
+        pts.n_samples / pts.rate_hz)
+
+    def at(lv: float) -> Structure:
+        return _with(st, kind, float(math.exp(lv)), st.filter_order)
+
+    def rise(lv: float) -> float:
+        return _chi2_fixed_sigma(at(lv), pts, sigma)[0] - chi2_min - 3.841
+
+    ends: list[float] = []
+    lv0 = math.log(v0)
+    for direction in (-1.0, 1.0):
+        step, prev = 1e-3, lv0
+        end = None
+        while step < 8.0:
+            lv = lv0 + direction * step
+            if direction > 0 and lv >= upper:
+                end = upper
+                break
+            if rise(lv) > 0:
+                end = brentq(rise, min(prev, lv), max(prev, lv), xtol=1e-4)
+                break
+            prev, step = lv, step * 2.0
+        ends.append(lv0 + direction * 8.0 if end is None else end)
+    lo, hi = sorted(ends)
+    return (math.exp(lo), math.exp(hi)), [at(lo), at(hi)]
+
+
+# ------------------------------------------------------------------------ public
+def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto",
+            channel: str = "gx", taus: Sequence[float] | None = None) -> ChannelFit:
+    """GLS/WLS fit of the model terms to the OAVAR curve (module docstring)."""
+    arr = check_series(y, rate_hz, channel)
+    wanted = parse_terms(terms)
+    pts = avar_points(arr, rate_hz, taus, channel)
+    notes: list[str] = []
+    if wanted is None:
+        st, pts = _select_extensions(Structure(BASE_TERMS), pts, EXTENSIONS)
+        full = st
+        st, sol = _eliminate(st, pts)
+    else:
+        st = Structure(tuple(t for t in wanted if t in BASE_TERMS))
+        kinds = [k for k in EXTENSIONS if k in wanted]
+        st = _polish(_optimise(st, kinds, pts), kinds, pts)
+        sol0 = _fit_structure(st, pts, None)
+        pts = replace(pts, delta=_estimate_delta(st, pts, _correlation(st, sol0, pts),
+                                                 2 * len(kinds)))
+        full = st
+        sol, _ = _fit_gls(st, pts)
+    params = dict.fromkeys(PARAM_KEYS, 0.0)
+    params["filter_order"] = 1
+    ci: dict[str, tuple[float, float]] = {}
+    present: list[str] = []
+    corr = _correlation(st, sol, pts)
+    x = design(st, pts)
+    for j, term in enumerate(st.terms):
+        key = AMPLITUDE_KEY[term]
+        params[key] = math.sqrt(max(sol.theta[j], 0.0))
+        ci[key] = _endpoint_ci(x, sol.theta, j, pts, corr)
+        if sol.theta[j] > 0:
+            present.append(key)
+    profiled: list[Structure] = []
+    for kind, key, ci_key in (("markov", "markov_sigma", "markov_tau"),
+                              ("sine", "sine_amplitude", "sine_freq"),
+                              ("filter", "bandwidth_hz", "bandwidth_hz")):
+        if kind == "filter" and st.bandwidth_hz <= 0:
+            continue
+        if kind != "filter" and key not in present:
+            continue
+        ci[ci_key], ends = _profile(st, kind, pts, sol.sigma, sol.chi2)
+        profiled.extend(ends)
+    # amplitudes: union of their intervals over the profile ends (projection)
+    for end in profiled:
+        _, s_end = _chi2_fixed_sigma(end, pts, sol.sigma)
+        se_end = np.sqrt(np.maximum(np.diag(s_end.cov_theta), 0.0))
+        for j, term in enumerate(end.terms):
+            key = AMPLITUDE_KEY[term]
+            if key in ci:
+                lo, hi = _theta_ci(s_end.theta[j], se_end[j])
+                ci[key] = (min(ci[key][0], lo), max(ci[key][1], hi))
+    if "markov_sigma" in present:
+        params["markov_tau"] = st.tau_c_s
+        present.append("markov_tau")
+    if "sine_amplitude" in present:
+        params["sine_freq"] = st.f0_hz
+        present.append("sine_freq")
+    if st.bandwidth_hz > 0:
+        params["bandwidth_hz"] = st.bandwidth_hz
+        params["filter_order"] = st.filter_order
+        present.extend(["bandwidth_hz", "filter_order"])
+    if "ramp" in present:  # AVAR sees R^2: the sign comes from the LS slope
+        t = np.arange(arr.size) / rate_hz
+        ok = np.isfinite(arr)
+        slope = np.polyfit(t[ok], arr[ok], 1)[0]
+        if slope < 0:
+            params["ramp"] = -params["ramp"]
+            lo, hi = ci["ramp"]
+            ci["ramp"] = (-hi, -lo)
+    # upper limits for the base terms judged absent (fit with them included)
+    absent = [t for t in BASE_TERMS if AMPLITUDE_KEY[t] not in present]
+    if absent:
+        withall = replace(full, terms=tuple(dict.fromkeys((*st.terms, *absent))),
+                          tau_c_s=st.tau_c_s, f0_hz=st.f0_hz)
+        sol_all = _solve(design(withall, pts), pts.avar, sol.sigma)
+        se_all = np.sqrt(np.maximum(np.diag(sol_all.cov_theta), 0.0))
+        for t in absent:
+            j = withall.terms.index(t)
+            ci[AMPLITUDE_KEY[t]] = (0.0, math.sqrt(max(sol_all.theta[j], 0.0)
+                                                   + Z_PRESENT * se_all[j]))
+    dof = int(pts.avar.size - len(st.terms) - 2 * sum(
+        1 for v in (st.tau_c_s, st.f0_hz, st.bandwidth_hz) if v > 0))
+    bias = float(np.nanmean(arr))
+    if pts.delta > 0:
+        notes.append(f"model discrepancy floor delta = {pts.delta:.3g} (relative std added "
+                     "to every AVAR point so that chi2 = dof)")
+    return ChannelFit(channel, float(rate_hz), "wls", params, ci, tuple(present), pts.tau_s,
+                      pts.avar, pts.edf, bias, sol.chi2, dof, tuple(notes))
+
+
+def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
+                terms: str | Iterable[str] = "auto", method: str = "wls", channel: str = "gx",
+                taus: Sequence[float] | None = None) -> ChannelFit:
+    """Fit the model file's noise terms to one channel's rate samples.
+
+    Args:
+        y: rate samples (dps or g), NaN where samples were lost.
+        rate_hz: sample rate (Hz).
+        terms: "auto" (model selection) or a list / comma string of term names among
+            white flicker random_walk ramp quantization markov sine filter.
+        method: "wls" (GLS on the OAVAR curve) or "tangent" (datasheet practice).
+        channel: label for messages and the result (gx gy gz ax ay az).
+        taus: tau values (s) for the AVAR points; default octave averaging factors.
+
+    Raises:
+        FitError: bad data, rate, terms or method (the message names which).
+    """
+    if method == "wls":
+        return fit_wls(np.asarray(y, dtype=float), rate_hz, terms=terms, channel=channel,
+                       taus=taus)
+    if method == "tangent":
+        from imubench.noisefit.tangent import fit_tangent
+
+        return fit_tangent(np.asarray(y, dtype=float), rate_hz, channel=channel, taus=taus)
+    raise FitError(f"fit {channel}: unknown method {method!r}; use one of "
+                   + ", ".join(METHODS))
+
+
+__all__ = [
+    "BASE_TERMS",
+    "EXTENSIONS",
+    "METHODS",
+    "PARAM_KEYS",
+    "TERM_NAMES",
+    "ChannelFit",
+    "Points",
+    "Structure",
+    "avar_points",
+    "averaging_factors",
+    "check_series",
+    "design",
+    "fit_channel",
+    "fit_wls",
+    "parse_terms",
+]

@@ -1,0 +1,97 @@
+"""Fit every channel of a recording and turn the result into a model file and JSON."""
+
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from lsm6ds_sim.model import ChannelModel, NoiseModel
+
+from imubench.batch import CHANNELS
+from imubench.noisefit.errors import FitError
+from imubench.noisefit.fit import ChannelFit, fit_channel
+from imubench.noisefit.units import (
+    datasheet_comparison,
+    datasheet_units,
+    kalibr_imu,
+)
+
+
+@dataclass(frozen=True)
+class RecordingFit:
+    """The fits of a recording's channels."""
+
+    source: str
+    rate_hz: float
+    chip: str | None
+    method: str
+    fits: dict[str, ChannelFit]
+
+    def noise_model(self) -> NoiseModel:
+        """A model file's content: fitted channels, others quiet; provenance in [meta]."""
+        chans = {ch: (self.fits[ch].channel_model() if ch in self.fits else ChannelModel())
+                 for ch in CHANNELS}
+        meta: dict[str, Any] = {
+            "name": f"imubench fit of {Path(self.source).name}",
+            "source": str(self.source),
+            "method": self.method,
+            "rate_hz": float(self.rate_hz),
+            "fitted_channels": ",".join(self.fits),
+            "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        }
+        if self.chip:
+            meta["chip"] = self.chip
+        return NoiseModel(channels=chans, meta=meta, source=str(self.source))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: per channel the fit, its datasheet units; Kalibr; datasheet ratio."""
+        params = {ch: f.params for ch, f in self.fits.items()}
+        return {
+            "recording": str(self.source),
+            "rate_hz": self.rate_hz,
+            "chip": self.chip,
+            "method": self.method,
+            "channels": {
+                ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params)}
+                for ch, f in self.fits.items()
+            },
+            "kalibr": kalibr_imu(params, self.rate_hz),
+            "datasheet_comparison": datasheet_comparison(self.chip, params),
+        }
+
+
+def parse_channels(text: str | Sequence[str] | None, available: Iterable[str]) -> list[str]:
+    """Channels to fit: the given ones (comma/space separated), else every one present."""
+    avail = [c for c in available if c in CHANNELS]
+    if text is None or (isinstance(text, str) and not text.strip()):
+        return avail
+    items = text.replace(",", " ").split() if isinstance(text, str) else list(text)
+    bad = [c for c in items if c not in CHANNELS]
+    if bad:
+        raise FitError(f"--channels: unknown channel(s) {bad}; channels are "
+                       + ", ".join(CHANNELS))
+    missing = [c for c in items if c not in avail]
+    if missing:
+        raise FitError(f"--channels: {missing} not in the recording (it has {avail})")
+    return items
+
+
+def fit_recording(path: str | Path, *, channels: str | Sequence[str] | None = None,
+                  terms: str = "auto", method: str = "wls") -> RecordingFit:
+    """Load a recording (.imbr / .csv) and fit the chosen channels."""
+    from imubench.recording import load_recording
+
+    rec = load_recording(path)
+    chans = parse_channels(channels, rec.channels)
+    if not chans:
+        raise FitError(f"{path}: no gyro or accel channel with data to fit")
+    fits = {ch: fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
+                            channel=ch) for ch in chans}
+    chip = rec.metadata.get("chip")
+    return RecordingFit(str(path), rec.rate_hz, str(chip) if chip else None, method, fits)
+
+
+__all__ = ["RecordingFit", "fit_recording", "parse_channels"]

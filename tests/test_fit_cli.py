@@ -1,0 +1,138 @@
+"""CLI: imubench fit -> model file -> load_model/simulate; imubench model; bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lsm6ds_sim import noise
+from lsm6ds_sim.model import NoiseModel, load_model
+from lsm6ds_sim.physics import simulate
+
+from imubench.batch import Batch
+from imubench.cli import main
+from imubench.recording import open_writer
+
+RATE = 104.0
+
+
+def write_recording(path: Path, model: NoiseModel, n: int, seed: int = 1) -> Path:
+    """A native recording of simulate() output (all six channels)."""
+    sim = simulate(model, n, RATE, seed)
+    values = np.column_stack([sim[c] for c in ("gx", "gy", "gz", "ax", "ay", "az")])
+    idx = np.arange(n, dtype=np.int64)
+    meta = {"chip": "lsm6dsl", "odr_hz": RATE, "gyro_sensitivity_dps": 8.75e-3,
+            "accel_sensitivity_g": 0.061e-3}
+    with open_writer(path, meta) as w:
+        w.write(Batch(idx, idx / RATE, values, np.full(n, 25.0)))
+    return path
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    model = NoiseModel.quiet().with_all(white=0.004).with_channel("ax", white=8e-5) \
+        .with_channel("ay", white=8e-5).with_channel("az", white=8e-5, random_walk=1e-5)
+    return write_recording(tmp_path_factory.mktemp("rec") / "r.imbr", model, 40_000)
+
+
+def test_fit_cli_writes_a_model_the_simulator_loads(recording: Path, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "m.toml"
+    js = tmp_path / "f.json"
+    kal = tmp_path / "imu.yaml"
+    rc = main(["fit", str(recording), "--channels", "gx,az", "-o", str(out), "--json",
+               str(js), "--kalibr", str(kal)])
+    assert rc == 0, capsys.readouterr().err
+    model = load_model(out)
+    assert model["gx"].white == pytest.approx(0.004, rel=0.03)
+    assert model["az"].white == pytest.approx(8e-5, rel=0.03)
+    assert model["gy"].white == 0.0  # not fitted: quiet
+    sim = simulate(model, 1000, RATE, 3, channels=["gx"])
+    assert np.std(sim["gx"]) == pytest.approx(0.004 * np.sqrt(RATE), rel=0.1)
+    doc = json.loads(js.read_text())
+    assert set(doc["channels"]) == {"gx", "az"}
+    assert doc["channels"]["gx"]["datasheet_units"]["noise_density_mdps_per_sqrt_hz"] == \
+        pytest.approx(4.0, rel=0.03)
+    assert doc["datasheet_comparison"]["gx"]["ratio"] == pytest.approx(1.0, rel=0.03)
+    assert doc["kalibr"]["update_rate"] == RATE
+    assert "gyroscope_noise_density" in kal.read_text()
+    assert "gx: white=" in capsys.readouterr().out
+
+
+def test_fit_cli_tangent_method(recording: Path, tmp_path: Path) -> None:
+    out = tmp_path / "t.toml"
+    assert main(["fit", str(recording), "--channels", "gy", "--method", "tangent",
+                 "-o", str(out)]) == 0
+    assert load_model(out)["gy"].white == pytest.approx(0.004, rel=0.05)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--channels", "gq"], "unknown channel"),
+        (["--terms", "white,pink"], "unknown term"),
+    ],
+)
+def test_fit_cli_bad_input(recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                           args: list[str], message: str) -> None:
+    rc = main(["fit", str(recording), *args, "-o", str(tmp_path / "x.toml")])
+    assert rc == 2
+    assert message in capsys.readouterr().err
+
+
+def test_fit_cli_missing_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["fit", str(tmp_path / "none.imbr"), "-o", str(tmp_path / "x.toml")]) == 2
+    assert "none.imbr" in capsys.readouterr().err
+
+
+def test_model_cli_matches_the_closed_forms(tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "m.toml"
+    path.write_text("[channels.gx]\nwhite = 0.004\nrandom_walk = 1e-4\n"
+                    "[channels.az]\nquantization = 1e-4\n")
+    assert main(["model", str(path), "--rate", "100", "--taus", "0.01,0.1,1,10,100",
+                 "--json", "-"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc["channels"]) == {"gx", "az"}
+    gx = doc["channels"]["gx"]
+    tau = np.array(gx["tau_s"])
+    expect = np.sqrt(noise.avar_white(tau, 0.004) + noise.avar_random_walk(tau, 1e-4))
+    np.testing.assert_allclose(gx["dev"], expect, rtol=1e-9)
+    az = doc["channels"]["az"]
+    np.testing.assert_allclose(az["dev"], np.sqrt(noise.avar_quantization(tau, 1e-4)),
+                               rtol=1e-9)
+
+
+def test_model_cli_against_a_long_simulation(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Prediction with a filter and flicker vs allantools OADEV of a simulated record."""
+    import allantools
+
+    path = tmp_path / "m.toml"
+    path.write_text("[channels.gx]\nwhite = 0.004\nflicker = 0.002\nbandwidth_hz = 15.0\n"
+                    "filter_order = 2\n")
+    n = 300_000
+    assert main(["model", str(path), "--rate", "100", "--taus", "octave", "--n", str(n),
+                 "--json", "-"]) == 0
+    gx = json.loads(capsys.readouterr().out)["channels"]["gx"]
+    tau = np.array(gx["tau_s"])
+    y = simulate(load_model(path), n, 100.0, 9, channels=["gx"])["gx"]
+    _, dev, _, _ = allantools.oadev(y, rate=100.0, data_type="freq", taus=tau)
+    inside = (np.array(gx["ci_low"]) <= dev) & (dev <= np.array(gx["ci_high"]))
+    assert inside.mean() >= 0.6  # 68 % intervals
+    np.testing.assert_allclose(dev[:6], np.array(gx["dev"])[:6], rtol=0.02)
+
+
+def test_model_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "m.toml"
+    path.write_text("[channels.gx]\nwhite = 0.004\n")
+    assert main(["model", str(path), "--rate", "100", "--taus", "octave"]) == 2
+    assert "--n" in capsys.readouterr().err
+    assert main(["model", str(path), "--rate", "0", "--taus", "1,2"]) == 2
+    assert "--rate" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[channels.gx]\nwhite = -1\n")
+    assert main(["model", str(bad), "--rate", "100", "--taus", "1"]) == 2
+    assert "bad.toml" in capsys.readouterr().err

@@ -1,0 +1,250 @@
+"""Noise fit (issue 7): exact model AVAR, covariance model, round trip, tangent, units."""
+
+from __future__ import annotations
+
+import math
+
+import allantools
+import numpy as np
+import pytest
+from lsm6ds_sim import noise
+from lsm6ds_sim.model import ChannelModel, NoiseModel
+from lsm6ds_sim.physics import simulate
+
+from imubench.noisefit import ChannelFit, FitError, fit_channel, model_avar
+from imubench.noisefit.covariance import oavar_correlation
+from imubench.noisefit.identify import SLOPE_TABLE, identify
+from imubench.noisefit.units import datasheet_units, kalibr_imu, kalibr_yaml
+
+RATE = 100.0
+M = np.array([1, 2, 4, 16, 256, 4096, 65536])
+TAU = M / RATE
+
+
+# ------------------------------------------------------------------ model AVAR vs closed forms
+@pytest.mark.parametrize(
+    ("keys", "analytic", "rtol"),
+    [
+        ({"white": 0.004}, lambda t: noise.avar_white(t, 0.004), 1e-12),
+        ({"random_walk": 2e-4}, lambda t: noise.avar_random_walk(t, 2e-4), 1e-9),
+        ({"ramp": 3e-3}, lambda t: noise.avar_ramp(t, 3e-3), 1e-9),
+        ({"quantization": 0.01}, lambda t: noise.avar_quantization(t, 0.01), 1e-12),
+        ({"sine_amplitude": 1.0, "sine_freq": 0.37},
+         lambda t: noise.avar_sine_sampled(t, 1.0, 0.37, 1 / RATE), 1e-9),
+    ],
+)
+def test_model_avar_equals_the_closed_forms(keys: dict[str, float], analytic, rtol: float) -> None:
+    got = model_avar(ChannelModel(**keys), TAU, RATE)
+    np.testing.assert_allclose(got, analytic(TAU), rtol=rtol)
+
+
+def test_model_avar_flicker_and_markov_tend_to_the_continuous_forms() -> None:
+    fl = model_avar(ChannelModel(flicker=1e-3), TAU, RATE) / noise.avar_flicker(TAU, 1e-3)
+    # simulator doc: ADEV +20 % at m = 1, +2 % at m = 4, < 0.5 % from m = 16
+    assert fl[0] ** 0.5 == pytest.approx(1.20, abs=0.01)
+    assert fl[2] ** 0.5 == pytest.approx(1.02, abs=0.01)
+    assert np.all(np.abs(fl[3:] ** 0.5 - 1) < 0.005)
+    mk = model_avar(ChannelModel(markov_sigma=0.5, markov_tau=10.0), TAU, RATE)
+    ratio = mk / noise.avar_markov(TAU, 0.5, 10.0)
+    assert np.all(np.abs(ratio[3:] - 1) < 2e-3)  # simulator doc: < 0.2 % from m = 16
+    assert ratio[0] == pytest.approx(1.5, rel=1e-3)  # ~1/(2 m^2) excess at m = 1
+
+
+def test_model_avar_with_output_filter_matches_a_long_simulation() -> None:
+    """Independent estimator: allantools OADEV of the simulator's filtered output."""
+    cm = ChannelModel(white=0.004, quantization=2e-4, markov_sigma=0.02, markov_tau=0.5,
+                      bandwidth_hz=8.0, filter_order=2, output_white=0.001)
+    model = NoiseModel.quiet().with_channel("gx", **cm.to_dict())
+    n = 400_000
+    m = np.array([1, 2, 4, 8, 16, 64, 256, 1024])
+    pred = model_avar(cm, m / RATE, RATE)
+    unfiltered = model_avar(cm.replace(bandwidth_hz=0.0), m / RATE, RATE)
+    assert pred[0] < 0.2 * unfiltered[0]  # the filter matters at short taus
+    est = []
+    for seed in (1, 2):
+        y = simulate(model, n, RATE, seed, channels=["gx"])["gx"]
+        _, dev, _, _ = allantools.oadev(y, rate=RATE, data_type="freq", taus=m / RATE)
+        est.append(dev**2)
+    ratio = np.mean(est, axis=0) / pred
+    assert np.all(np.abs(ratio[:5] - 1) < 0.03), ratio
+    assert np.all(np.abs(ratio[5:] - 1) < 0.15), ratio
+
+
+def test_output_white_key_is_validated_and_round_trips(tmp_path) -> None:
+    from lsm6ds_sim.model import load_model
+
+    from imubench.errors import ModelError
+
+    m = NoiseModel.single_term("gx", white=0.004, bandwidth_hz=20.0, output_white=0.002)
+    p = tmp_path / "m.toml"
+    p.write_text(m.to_toml())
+    assert load_model(p)["gx"].output_white == 0.002
+    p.write_text("[channels.gx]\noutput_white = -1.0\n")
+    with pytest.raises(ModelError, match="output_white"):
+        load_model(p)
+
+
+def test_model_avar_rejects_bad_input() -> None:
+    with pytest.raises(FitError, match="rate_hz"):
+        model_avar(ChannelModel(white=1.0), [1.0], 0.0)
+    with pytest.raises(FitError, match="tau_s"):
+        model_avar(ChannelModel(white=1.0), [1.0, -2.0], 100.0)
+
+
+# ------------------------------------------------------------------ covariance model
+def test_oavar_correlation_matches_monte_carlo() -> None:
+    """Correlation of OAVAR estimates across taus vs allantools over 300 white-noise runs."""
+    rng = np.random.default_rng(7)
+    n, ms = 4096, np.array([1, 2, 4, 8])
+    est = []
+    for _ in range(300):
+        _, dev, _, _ = allantools.oadev(rng.standard_normal(n), rate=1.0, data_type="freq",
+                                        taus=ms.astype(float))
+        est.append(dev**2)
+    emp = np.corrcoef(np.array(est).T)
+    mod = oavar_correlation(ms, n - 2 * ms, {"white": 1.0}, 1.0)
+    off = ~np.eye(ms.size, dtype=bool)
+    # standard error of a correlation from 300 runs ~ 0.055
+    assert np.all(np.abs(emp[off] - mod[off]) < 0.17), (emp, mod)
+    assert mod[0, 1] > 0.1
+
+
+# ------------------------------------------------------------------ round trip (short)
+TRUTH = {"white": 0.002, "flicker": 0.0015, "random_walk": 4e-4}
+
+
+@pytest.fixture(scope="module")
+def short_fits() -> list[ChannelFit]:
+    model = NoiseModel.single_term("gx", **TRUTH)
+    out = []
+    for seed in (11, 12, 13):
+        y = simulate(model, 180_000, RATE, seed, channels=["gx"])["gx"]
+        out.append(fit_channel(y, RATE, channel="gx"))
+    return out
+
+
+def test_round_trip_recovers_white_flicker_random_walk(short_fits: list[ChannelFit]) -> None:
+    covered = 0
+    for f in short_fits:
+        assert f.params["white"] == pytest.approx(TRUTH["white"], rel=0.02)
+        assert f.params["flicker"] == pytest.approx(TRUTH["flicker"], rel=0.4)
+        assert f.params["random_walk"] == pytest.approx(TRUTH["random_walk"], rel=0.6)
+        for key, v in TRUTH.items():
+            lo, hi = f.ci[key]
+            covered += lo <= v <= hi
+    assert covered >= 7  # of 9 intervals (95 % each; P(<= 6) < 0.1 %)
+
+
+def test_round_trip_reports_absent_terms_absent(short_fits: list[ChannelFit]) -> None:
+    for key in ("ramp", "quantization", "markov_sigma", "sine_amplitude", "bandwidth_hz"):
+        absent = [key not in f.present and f.params[key] == 0.0 for f in short_fits]
+        assert sum(absent) >= 2, key  # a 5 % test: one false alarm in 3 is tolerated
+    for f in short_fits:
+        if "ramp" not in f.present:
+            lo, hi = f.ci["ramp"]
+            assert lo == 0.0 and hi > 0
+
+
+def test_fit_finds_markov_and_filter() -> None:
+    truth = {"white": 0.004, "markov_sigma": 0.01, "markov_tau": 2.0, "bandwidth_hz": 10.0,
+             "filter_order": 2}
+    y = simulate(NoiseModel.single_term("gx", **truth), 200_000, RATE, 5, channels=["gx"])["gx"]
+    f = fit_channel(y, RATE)
+    assert "markov_sigma" in f.present and "bandwidth_hz" in f.present
+    assert f.params["markov_sigma"] == pytest.approx(0.01, rel=0.25)
+    lo, hi = f.ci["markov_tau"]
+    assert lo <= 2.0 <= hi
+    assert f.params["bandwidth_hz"] == pytest.approx(10.0, rel=0.1)
+    assert f.params["filter_order"] == 2
+    # the fitted model predicts the measured curve
+    ratio = f.model_avar(f.tau_s) / f.avar
+    assert np.all(np.abs(np.log(ratio[:10])) < 0.1)
+
+
+def test_fit_with_a_term_list_keeps_exactly_those_terms() -> None:
+    y = simulate(NoiseModel.single_term("gx", white=0.004), 100_000, RATE, 3,
+                 channels=["gx"])["gx"]
+    f = fit_channel(y, RATE, terms="white,flicker")
+    assert set(f.present) <= {"white", "flicker"}
+    assert f.params["white"] == pytest.approx(0.004, rel=0.02)
+    cm = f.channel_model()
+    assert cm.white == f.params["white"] and cm.random_walk == 0.0
+
+
+def test_fit_bad_input_errors() -> None:
+    y = np.random.default_rng(0).standard_normal(10_000)
+    with pytest.raises(FitError, match="unknown term"):
+        fit_channel(y, RATE, terms="white,pink")
+    with pytest.raises(FitError, match="unknown method"):
+        fit_channel(y, RATE, method="magic")
+    with pytest.raises(FitError, match="at least 64"):
+        fit_channel(y[:10], RATE)
+    with pytest.raises(FitError, match="constant"):
+        fit_channel(np.ones(1000), RATE)
+    with pytest.raises(FitError, match="rate_hz"):
+        fit_channel(y, -1.0)
+    with pytest.raises(FitError, match="1-D"):
+        fit_channel(y.reshape(100, 100), RATE)
+
+
+# ------------------------------------------------------------------ tangent
+def test_tangent_method_on_single_terms() -> None:
+    n = 200_000
+    y = simulate(NoiseModel.single_term("gx", white=0.004), n, RATE, 1, channels=["gx"])["gx"]
+    t = fit_channel(y, RATE, method="tangent")
+    # pure white: sigma(tau) sqrt(tau) = N at every tau; the minimum is read, so slightly low
+    assert t.params["white"] == pytest.approx(0.004, rel=0.02)
+    lo, hi = t.ci["white"]
+    assert lo < t.params["white"] < hi
+    y = simulate(NoiseModel.single_term("gx", flicker=0.002), n, RATE, 2, channels=["gx"])["gx"]
+    t = fit_channel(y, RATE, method="tangent")
+    assert t.params["flicker"] == pytest.approx(0.002, rel=0.25)
+    assert t.method == "tangent" and t.present == ("white", "flicker", "random_walk")
+
+
+# ------------------------------------------------------------------ identification
+def test_slope_table_and_identification() -> None:
+    rows = {r[1]: r for r in SLOPE_TABLE}
+    assert rows["white PM"][3:] == (-1.0, -1.5, -0.5)
+    assert rows["random-walk FM"][3:] == (0.5, 0.5, 1.5)
+    y = simulate(NoiseModel.single_term("gx", white=0.004), 100_000, RATE, 4,
+                 channels=["gx"])["gx"]
+    ids = identify(y, RATE)
+    assert all(r.alpha == 0 for r in ids[:8])
+    assert all(abs(r.adev_slope + 0.5) < 0.1 for r in ids[:8])
+    assert ids[2].name == "angle/velocity random walk"
+    q = simulate(NoiseModel.single_term("gx", quantization=0.01), 100_000, RATE, 4,
+                 channels=["gx"])["gx"]
+    assert identify(q, RATE)[3].name == "quantization"
+
+
+# ------------------------------------------------------------------ units
+def test_datasheet_units_hand_computed() -> None:
+    g = datasheet_units("gx", {"white": 0.004, "flicker": 0.001, "random_walk": 1e-4})
+    assert g["arw_deg_per_sqrt_h"] == pytest.approx(0.24)  # 0.004 deg/sqrt(s) * 60
+    assert g["noise_density_mdps_per_sqrt_hz"] == pytest.approx(4.0)
+    assert g["bias_instability_deg_per_h"] == pytest.approx(3.6)
+    assert g["adev_floor_deg_per_h"] == pytest.approx(3.6 * 0.664282, rel=1e-5)
+    assert g["rrw_deg_per_h_per_sqrt_h"] == pytest.approx(21.6)  # 1e-4 * 3600 * 60
+    a = datasheet_units("az", {"white": 8e-5, "flicker": 3e-5, "random_walk": 2e-6})
+    assert a["noise_density_ug_per_sqrt_hz"] == pytest.approx(80.0)
+    assert a["vrw_m_per_s_per_sqrt_h"] == pytest.approx(8e-5 * 9.80665 * 60)  # 0.0470719
+    assert a["bias_instability_ug"] == pytest.approx(30.0)
+    assert a["random_walk_ug_per_sqrt_s"] == pytest.approx(2.0)
+    with pytest.raises(FitError, match="unknown channel"):
+        datasheet_units("temp", {})
+
+
+def test_kalibr_values_hand_computed() -> None:
+    params = {"gx": {"white": 0.004, "random_walk": 1e-4},
+              "gy": {"white": 0.005, "random_walk": 2e-5},
+              "az": {"white": 8e-5, "random_walk": 2e-6}}
+    k = kalibr_imu(params, 104.0)
+    assert k["gyroscope_noise_density"] == pytest.approx(0.005 * math.pi / 180)  # 8.7266e-5
+    assert k["gyroscope_random_walk"] == pytest.approx(1e-4 * math.pi / 180)
+    assert k["accelerometer_noise_density"] == pytest.approx(7.84532e-4)
+    assert k["accelerometer_random_walk"] == pytest.approx(1.96133e-5)
+    assert k["update_rate"] == 104.0
+    text = kalibr_yaml(k)
+    assert "gyroscope_noise_density: 8.726646e-05" in text
+    assert "update_rate: 1.040000e+02" in text
