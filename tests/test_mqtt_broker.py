@@ -258,9 +258,13 @@ def test_qos1_and_qos2_both_directions(embedded_broker: BrokerFactory) -> None:
             await pub.publish(f"{p}/t", b"zero", qos=0)
             got2 = await receive(sub2, 3)
             got1 = await receive(sub1, 3)
-            # delivered QoS = min(publish QoS, granted QoS) (§3.8.4)
-            assert [(m.payload, m.qos) for m in got2] == [(b"one", 1), (b"two", 2), (b"zero", 0)]
-            assert [(m.payload, m.qos) for m in got1] == [(b"one", 1), (b"two", 1), (b"zero", 0)]
+            # delivered QoS = min(publish QoS, granted QoS) (§3.8.4). Order across QoS
+            # levels is not guaranteed at the application: paho hands a QoS 2 message over
+            # only when the broker's PUBREL arrives, so a later QoS 0 one may overtake it.
+            assert sorted((m.payload, m.qos) for m in got2) == [
+                (b"one", 1), (b"two", 2), (b"zero", 0)]
+            assert sorted((m.payload, m.qos) for m in got1) == [
+                (b"one", 1), (b"two", 1), (b"zero", 0)]
 
     run(scenario)
 
