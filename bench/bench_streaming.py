@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python bench/bench_streaming.py [--quick] [--skip-rt] [--skip-rss]
-        [--edf-seeds K] [--exact-1e9]
+        [--edf-seeds K] [--exact-1e9] [--only SECTIONS] [--malloc default|pad|trim]
 
 Sections, all printed in one run (machine and date first):
 
@@ -48,6 +48,11 @@ from bench_stats import copy_bandwidth_gbs  # reuse the batch bench's bandwidth 
 RATE_HZ = 6660.0
 
 
+def load_average() -> str:
+    """1, 5 and 15 minute load averages (other jobs on this shared machine)."""
+    return " ".join(f"{v:.2f}" for v in os.getloadavg())
+
+
 def rss_mb() -> float:
     """Resident set size of this process (MB, from /proc/self/statm)."""
     with open("/proc/self/statm") as fh:
@@ -75,7 +80,14 @@ def bench_realtime(n: int) -> None:
         rt.add_frequency(v)
     t_rt = time.process_time() - c0
     print(f"(a) OADEV, {len(afs)} octave AFs 1..{afs[-1]}, {n:.0e} samples (CPU time); "
-          f"allantools oadev_realtime {t_rt / n * 1e6:.2f} us/sample")
+          f"allantools oadev_realtime {t_rt / n * 1e6:.2f} us/sample; load average "
+          f"{load_average()}")
+    for chunk in (4096, 65536):  # load the compiled kernels (every array layout the
+        for alpha in (None, 0):  # timed runs meet) and scipy before timing
+            warm = StreamingAllan(1.0, taus=[float(a) for a in afs], stats=("oadev",),
+                                  max_tau_s=float(afs[-1]), alpha=alpha)
+            feed(warm, y[:n // 5], chunk)
+            warm.snapshot()
     for chunk in (1, 4096, 65536):
         for alpha in (None, 0):
             if chunk == 1 and n > 100_000:
@@ -96,7 +108,8 @@ def bench_throughput(quick: bool) -> None:
     bw = copy_bandwidth_gbs()
     pass_rate = bw * 1e9 / 2 / 8  # float64 values/s for one read+write pass
     print(f"(b) OADEV+MVAR+OHVAR, octave m up to 2^20, rate {RATE_HZ} Hz, noise ID on; copy "
-          f"bandwidth {bw:.1f} GB/s = {pass_rate:.2e} float64 values/s per read+write pass")
+          f"bandwidth {bw:.1f} GB/s = {pass_rate:.2e} float64 values/s per read+write pass; "
+          f"load average {load_average()}")
     print("    memory  ch  input  chunk   rows   M samples/s/channel (CPU)  (wall)  passes")
     rng = np.random.default_rng(2)
     rows_1 = 1 << (21 if quick else 23)
@@ -124,11 +137,19 @@ def bench_throughput(quick: bool) -> None:
 def bench_rss(total: int) -> None:
     chunk = 65536
     pool = (np.random.default_rng(3).normal(size=(1 << 21, 6)) * 20).astype(np.int16)
+    rss0 = rss_mb()
+    # the compiled kernels (numba and LLVM, loaded once per process) are not the engine's
+    tiny = StreamingAllan(RATE_HZ, stats=("oadev", "mdev", "ohdev"), max_tau_s=1.0,
+                          memory="bounded")
+    tiny.update(pool[:chunk + 1000])
+    tiny.snapshot()
+    del tiny
     eng = StreamingAllan(RATE_HZ, stats=("oadev", "mdev", "ohdev"), max_tau_s=1e5,
                          memory="bounded")
     base = rss_mb()
     print(f"(c) bounded, 6 ch int16 at {RATE_HZ} Hz, max_tau_s=1e5, OADEV+MVAR+OHVAR, "
-          f"{total:.0e} samples/channel, chunks of {chunk}; RSS before {base:.1f} MB")
+          f"{total:.0e} samples/channel, chunks of {chunk}; RSS before {base:.1f} MB, of "
+          f"which {base - rss0:.1f} MB for loading the compiled kernels (once per process)")
     marks = set(int(total * k / 10) // chunk for k in range(1, 11))
     fed = 0
     c0 = time.process_time()
@@ -281,18 +302,25 @@ def main() -> None:
                     help="bounded-mode overlap factors for (e), comma separated")
     ap.add_argument("--exact-1e9", action="store_true", help="run (f) (minutes)")
     ap.add_argument("--only", default="abcdef", help="sections to run, e.g. 'bd'")
-    ap.add_argument("--malloc-pad", action="store_true",
-                    help="keep freed heap memory (glibc mallopt M_TOP_PAD 256 MB, "
-                    "M_TRIM_THRESHOLD 512 MB): no page faults for the per-chunk temporaries")
+    ap.add_argument("--malloc", choices=("default", "pad", "trim"), default="default",
+                    help="glibc allocator setting to run under: 'pad' keeps freed heap "
+                    "memory (M_TOP_PAD 256 MB, M_TRIM_THRESHOLD 512 MB); 'trim' is the worst "
+                    "case, every allocation >= 128 kB mapped afresh and the heap top "
+                    "returned to the OS at every free (M_MMAP_THRESHOLD 128 kB, "
+                    "M_TRIM_THRESHOLD 0, M_TOP_PAD 0). The engine should not care.")
     args = ap.parse_args()
-    if args.malloc_pad:
-        libc = ctypes.CDLL("libc.so.6")
+    libc = ctypes.CDLL("libc.so.6")
+    if args.malloc == "pad":
         libc.mallopt(-2, 256 << 20)  # M_TOP_PAD
         libc.mallopt(-1, 512 << 20)  # M_TRIM_THRESHOLD
+    elif args.malloc == "trim":
+        libc.mallopt(-3, 128 << 10)  # M_MMAP_THRESHOLD (fixed: no dynamic raise)
+        libc.mallopt(-1, 0)  # M_TRIM_THRESHOLD
+        libc.mallopt(-2, 0)  # M_TOP_PAD
     print(f"{datetime.date.today()} {platform.node()} {platform.processor() or platform.machine()}"
           f", {os.cpu_count()} cores, Python {platform.python_version()}, numpy "
           f"{np.__version__}; machine shared with other jobs (wall times are noisy); "
-          f"allocator: {'glibc heap kept (--malloc-pad)' if args.malloc_pad else 'default'}")
+          f"allocator: {args.malloc}; load average {load_average()}")
     if "a" in args.only and not args.skip_rt:
         bench_realtime(100_000 if args.quick else 1_000_000)
     if "b" in args.only:

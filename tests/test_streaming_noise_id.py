@@ -268,3 +268,30 @@ def test_real_recordings_equal_batch(reference_dir) -> None:  # type: ignore[no-
 @pytest.mark.slow
 def test_real_recordings_equal_batch_full_all_stats(reference_dir) -> None:  # type: ignore[no-untyped-def]
     _check_recordings(reference_dir, ALL_STATS, full=True)
+
+
+def test_gaps_noise_id_over_many_processed_chunks() -> None:
+    """Integer counts with gap masks over several processed chunks (>= 65536 rows each),
+    so that the noise-ID values of long m (fewer than 256 per chunk) wait across chunks
+    before they are summed: the result still equals the batch on the NaN-marked series."""
+    rng = np.random.default_rng(5)
+    n = 120_000
+    base = rng.normal(size=(n, 3)) * 20 + np.cumsum(rng.normal(size=(n, 3)), axis=0) * 0.05
+    mask = np.zeros((n, 3), bool)
+    for ch in range(3):
+        for _ in range(ch * 3):
+            i = rng.integers(0, n - 50)
+            mask[i:i + rng.integers(1, 40), ch] = True
+    counts = base.astype(np.int32)
+    eng = StreamingAllan(100.0, stats=("oadev", "ohdev"), max_tau_s=8192 / 100)
+    feed(eng, counts, rng, top=30_000, gaps=mask)
+    for ch, res in enumerate(eng.snapshot()):  # type: ignore[arg-type]
+        y = counts[:, ch].astype(float)
+        y[mask[:, ch]] = np.nan
+        for stat in ("oadev", "ohdev"):
+            b = compute(stat, y, 100.0, "freq", bias_correction=False)
+            keep = np.isin(b.m, res[stat].m)
+            np.testing.assert_array_equal(res[stat].m, b.m[keep])
+            np.testing.assert_array_equal(res[stat].alpha, b.alpha[keep], err_msg=f"ch{ch}")
+            np.testing.assert_allclose(res[stat].dev, b.dev[keep], rtol=1e-10)
+            np.testing.assert_array_equal(res[stat].n, b.n[keep])

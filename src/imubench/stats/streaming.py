@@ -14,23 +14,33 @@ Terms (NIST SP 1065 definitions written on the cumulative rate sum X, tau = m ta
 * OHVAR (SP 1065 eq. 17, 1/6 normalisation): ``H_p = X_p - 3X_{p-m} + 3X_{p-2m} -
   X_{p-3m}``, ``var = <H^2> / (6 m^2)``; HVAR keeps ``p % m == 0``.
 * MVAR (SP 1065 eq. 14): ``E_p = sum_{r=0}^{m-1} D_{p-r}`` (a moving sum of the OAVAR
-  terms: differences of a running sum of D local to each chunk for m <= 256, of one kept
-  across chunks beyond), ``var = <E^2> / (2 m^4)``; TVAR (eq. 15) = ``tau^2 / 3 * MVAR``.
-  OAVAR, HVAR/OHVAR (``H_p = D_p - D_{p-m}``) and, at stride 1, MVAR share one D array.
+  terms, ``E_p = E_{p-1} + D_p - D_{p-m}``, carried across chunks; for float input
+  summed afresh from its m terms after every ``8 m`` moves, so its rounding does not
+  accumulate), ``var = <E^2> / (2 m^4)``; TVAR (eq. 15) = ``tau^2 / 3 * MVAR``.
+  Every term is formed from the kept X history in place (no term arrays).
 * STDVAR / OSTDVAR: ``A_p = X_p - X_{p-m}`` (m times the m-sample mean), sample variance
   of ``A / m`` over non-overlapping (``p % m == 0``) or all positions.
 
 Integer input (raw int16 counts) accumulates in int64 (two's-complement wrap-around is
 harmless: every term is a difference whose true value fits in int64), so the terms are
-exact; squares are summed in float64 per chunk (numpy's pairwise summation) and the
-chunk sums are added with Neumaier compensation. Float input uses the same compensated
-sums. NaN samples are gaps: the cumulative gap count ``G_p`` tells whether a term's
-window holds one; such terms are skipped and counted, never bridged.
+exact; squares are summed in float64 in blocks of 4096 terms and the block sums are
+added with Neumaier compensation. Float input uses the same compensated sums.
+
+The per-term work runs in compiled kernels (``_stream_kernels``): one call per
+decimation level adds every m's AVAR/OAVAR/HVAR/OHVAR terms of every channel, one call
+per (level, m) its MVAR terms, one per m the noise-ID sums, reading the level histories
+in place and writing into (accumulator x channel) tables. The chunk's own arrays (input
+copy, phase, running sums, gap counts) live in engine-owned work buffers grown to the
+largest chunk seen: after warm-up an update allocates no large temporary, whatever the
+allocator does with freed memory.
+
+NaN samples are gaps: the cumulative gap count ``G_p`` tells whether a term's window
+holds one; such terms are skipped and counted, never bridged.
 
 Memory modes:
 
 * ``exact``: every overlapping term, needing the last ``3 m_max + 1`` phase values per
-  channel (8 bytes each, plus the per-m moving-sum histories).
+  channel (8 bytes each; MVAR adds one moving sum E per m and channel).
 * ``bounded``: for ``m > overlap`` the overlapping estimators (OAVAR, MVAR, OHVAR,
   OSTDVAR) use only the terms at positions that are multiples of a stride
   ``s = m / overlap`` (power of two), from phase values and block sums decimated by ``s``,
@@ -59,12 +69,13 @@ import contextlib
 import io
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from imubench.errors import StatsError
+from imubench.stats._stream_kernels import level_sums, mvar_sums
 from imubench.stats.edf import canonical_stat
 from imubench.stats.streaming_noise import (
     LAG1_MIN_POINTS,
@@ -101,11 +112,9 @@ STATE_FORMAT = 2
 _INBOX_ROWS = 1 << 16
 # noise-ID phase values are added to the sums in batches of at least this many rows
 _NOISE_BATCH = 256
-# MVAR at q = m / stride <= this: terms from a chunk-local running sum (no history of
-# its own); above it a running sum kept across chunks (re-summing q terms would dominate)
-_LOCAL_MVAR_Q = 256
-# term window length in units of m (phase values spanned minus one)
-_SPAN = {"avar": 2, "hvar": 3, "mvar": 3, "std": 1}
+# float input: the moving MVAR sum E is summed afresh after this many moves per q (its
+# rounding then never accumulates over more than ~8 q terms); integer E is exact
+_MVAR_REANCHOR = 8
 
 
 def _canonical(stat: str) -> str:
@@ -124,12 +133,13 @@ class _Accumulator:
 
     __slots__ = ("comp", "n", "skipped", "sum1", "sum2")
 
-    def __init__(self, nch: int) -> None:
-        self.n = np.zeros(nch, np.int64)
-        self.skipped = np.zeros(nch, np.int64)
-        self.sum2 = np.zeros(nch)
-        self.comp = np.zeros(nch)
-        self.sum1 = np.zeros(nch)
+    def __init__(self, tab: _Tables, row: int) -> None:
+        # views of one row of the engine's tables, which the compiled kernels update
+        self.n = tab.cnt[row]
+        self.skipped = tab.skip[row]
+        self.sum2 = tab.sum2[row]
+        self.comp = tab.comp[row]
+        self.sum1 = np.zeros(tab.sum2.shape[1])
 
     @staticmethod
     def _neumaier(total: np.ndarray, comp: np.ndarray, add: np.ndarray) -> None:
@@ -138,8 +148,10 @@ class _Accumulator:
         comp += np.where(big, (total - t) + add, (add - t) + total)
         total[...] = t
 
-    def add(self, v: np.ndarray, valid: np.ndarray | None, first_moment: bool) -> None:
-        """Add terms ``v`` (k, nch); ``valid`` masks terms free of gaps (None = all)."""
+    def add_moments(self, v: np.ndarray, valid: np.ndarray | None) -> None:
+        """Add terms ``v`` (k, nch) to the running mean and sum of squared deviations
+        (the standard variances); ``valid`` masks terms free of gaps (None = all). The
+        squared-difference families are summed by ``_stream_kernels`` instead."""
         if v.shape[0] == 0:
             return
         vf = v.astype(np.float64, copy=False)
@@ -150,9 +162,6 @@ class _Accumulator:
             cnt = np.count_nonzero(valid, axis=0)
             self.n += cnt
             self.skipped += v.shape[0] - cnt
-        if not first_moment:
-            self._neumaier(self.sum2, self.comp, np.einsum("ij,ij->j", vf, vf))
-            return
         # mean and sum of squared deviations, merged per chunk (Chan, Golub & LeVeque
         # 1979): stable when the mean is large against the spread (a gyro's bias).
         n_old = self.n - (v.shape[0] if valid is None else np.count_nonzero(valid, axis=0))
@@ -172,6 +181,17 @@ class _Accumulator:
         return {k: getattr(self, k) for k in self.__slots__}
 
 
+class _Tables:
+    """All accumulators' sums as (accumulator row, channel) tables, so that one compiled
+    call (:mod:`imubench.stats._stream_kernels`) updates every m of a level."""
+
+    def __init__(self, rows: int, nch: int) -> None:
+        self.sum2 = np.zeros((rows, nch))
+        self.comp = np.zeros((rows, nch))
+        self.cnt = np.zeros((rows, nch), np.int64)
+        self.skip = np.zeros((rows, nch), np.int64)
+
+
 class _Seq:
     """Append-only history of the last ``keep`` rows of a 2-D sequence, as a linear
     buffer that is compacted when full (amortised O(1) per row, contiguous slices)."""
@@ -183,7 +203,10 @@ class _Seq:
         self.stop = 0  # absolute index one past the last row
 
     def append(self, rows: np.ndarray) -> None:
-        k = rows.shape[0]
+        self.reserve(rows.shape[0])[...] = rows
+
+    def reserve(self, k: int) -> np.ndarray:
+        """Append k rows and return them (uninitialised) for the caller to fill."""
         fill = self.stop - self.start
         if fill + k > self.buf.shape[0]:
             tail = min(fill, self.keep)
@@ -198,13 +221,13 @@ class _Seq:
                 self.buf[:tail] = self.buf[fill - tail : fill]
             self.start = self.stop - tail
             fill = tail
-        self.buf[fill : fill + k] = rows
         self.stop += k
+        return self.buf[fill : fill + k]
 
     def zeros_like(self, dtype: np.dtype) -> _Seq:
         """A sequence holding zeros at the same absolute indices as this one."""
         z = _Seq(self.keep, self.buf.shape[1], dtype)
-        z.buf = np.zeros(self.buf.shape, dtype)
+        z.buf = np.zeros(self.buf.shape, dtype, order="F")
         z.start, z.stop = self.start, self.stop
         return z
 
@@ -226,8 +249,11 @@ class _Level:
     g_end: _Seq | None  # G at positions b*s+s-1
     part_sum: np.ndarray  # partial block sum being built
     ms: list[int]
-    cd: dict[int, _Seq]  # per-m running sum of block second differences (MVAR)
+    mv_e: dict[int, np.ndarray]  # per m: MVAR term E at the last block (per channel)
+    mv_age: dict[int, np.ndarray]  # per m: moves of E since it was summed (-1: not kept)
     bs_live: bool = True  # block sums still needed (MVAR stats, or young noise-ID m)
+    qs: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # m // stride
+    rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.int64))
 
 
 class StreamingAllan:
@@ -308,7 +334,10 @@ class StreamingAllan:
         else:
             self.scale = np.broadcast_to(np.asarray(self._scale_arg, float), (nch,)).copy()
         self._n_proc = 0  # samples processed (phase positions 1.._n_proc exist)
-        self._inbox: list[tuple[np.ndarray, np.ndarray | None]] = []
+        # gathered small chunks (rows 0.._inbox_rows-1; the gap mask only once one came)
+        self._inbox = np.empty((0, nch), dtype, order="F")
+        self._inbox_mask = np.zeros((0, nch), bool, order="F")
+        self._inbox_masked = False  # some gathered chunk came with a gap mask
         self._inbox_rows = 0
         self._gaps_seen = False
         self.n_gaps = np.zeros(nch, np.int64)
@@ -317,13 +346,17 @@ class StreamingAllan:
         self._x_last = np.zeros((1, nch), dtype)
         self._g_last = np.zeros((1, nch), np.int64)
         self._mvar_stats = "mvar" in {STREAM_STATS[s][0] for s in self.stats}
+        self._std_stats = [s for s in self.stats if STREAM_STATS[s][0] == "std"]
+        self._no_g = np.zeros((0, nch), np.int64, order="F")  # G buffer before any gap
+        self._scr = np.empty(0)  # see _scratch
+        self._bufs: dict[str, np.ndarray] = {}  # see _work
         need_bs = self._mvar_stats or self.alpha is None
         self.levels: dict[int, _Level] = {}
         for m in self.ms:
             s = self._stride(m)
             lv = self.levels.get(s)
             if lv is None:
-                lv = _Level(s, None, None, None, None, np.zeros(nch, dtype), [], {})  # type: ignore[arg-type]
+                lv = _Level(s, None, None, None, None, np.zeros(nch, dtype), [], {}, {})  # type: ignore[arg-type]
                 self.levels[s] = lv
             lv.ms.append(m)
         for s, lv in self.levels.items():
@@ -341,10 +374,15 @@ class StreamingAllan:
                     lv.bs = _Seq(keep, nch, dtype)
                     lv.g_end = lv.bs.zeros_like(np.dtype(np.int64))
                 for m in lv.ms:
-                    if m // s > _LOCAL_MVAR_Q:
-                        lv.cd[m] = _Seq(m // s + 2, nch, dtype)
+                    lv.mv_e[m] = np.zeros(nch, dtype)
+                    lv.mv_age[m] = np.array([-1], np.int64)
+        keys = [(stat, m) for stat in self.stats for m in self.ms]
+        if self.alpha is None:
+            keys += [("_nmvar", m) for m in self.ms]
+        self._tab = _Tables(len(keys), nch)
+        self._row = {k: i for i, k in enumerate(keys)}
         self.acc: dict[tuple[str, int], _Accumulator] = {
-            (stat, m): _Accumulator(nch) for stat in self.stats for m in self.ms
+            k: _Accumulator(self._tab, i) for k, i in self._row.items()
         }
         # noise identification (alpha=None): running lag-1/B1 sums per m, and while m can
         # still fall back to B1 (< 30 averages) an MVAR with the noise-ID gap rule
@@ -357,7 +395,13 @@ class StreamingAllan:
             for m in self.ms:
                 self._noise[m] = RunningNoiseSums(m, nch, orders=max(dmax) + 1)
                 self._nid_young[m] = True
-                self.acc[("_nmvar", m)] = _Accumulator(nch)
+        for lv in self.levels.values():
+            # kernel tables of the level: q = m / stride and the accumulator row of each
+            # D/H family at that m (-1: statistic not asked for)
+            lv.qs = np.array([m // lv.stride for m in lv.ms], np.int64)
+            lv.rows = np.array(
+                [[self._row.get((st, m), -1) for st in ("oadev", "adev", "ohdev", "hdev")]
+                 for m in lv.ms], np.int64).reshape(len(lv.ms), 4)
 
     # -- update ---------------------------------------------------------------------
     def update(self, chunk: np.ndarray | Sequence[float], gaps: np.ndarray | None = None) -> None:
@@ -391,8 +435,7 @@ class StreamingAllan:
         if arr.shape[0] < _INBOX_ROWS:
             # small chunks (a FIFO read) are gathered: the cost per processed chunk is
             # mostly per-m Python work, whatever its length; snapshot() flushes them
-            self._inbox.append((arr.copy(), None if mask is None else mask.copy()))
-            self._inbox_rows += arr.shape[0]
+            self._gather(arr, mask)
             if self._inbox_rows >= _INBOX_ROWS:
                 self._flush_inbox()
             return
@@ -404,23 +447,39 @@ class StreamingAllan:
         """Samples (rows) given to update() so far."""
         return self._n_proc + self._inbox_rows if self._nch is not None else 0
 
+    def _gather(self, arr: np.ndarray, mask: np.ndarray | None) -> None:
+        """Copy a small chunk into the inbox buffer (grown only: 2 x _INBOX_ROWS)."""
+        k, n = self._inbox_rows, arr.shape[0]
+        if k + n > self._inbox.shape[0]:
+            grown = np.empty((max(k + n, 2 * _INBOX_ROWS), arr.shape[1]), self._inbox.dtype,
+                             order="F")
+            grown[:k] = self._inbox[:k]
+            self._inbox = grown
+        np.copyto(self._inbox[k:k + n], arr, casting="unsafe" if self._int else "same_kind")
+        if mask is not None and not self._inbox_masked:
+            if self._inbox_mask.shape[0] < self._inbox.shape[0]:
+                self._inbox_mask = np.zeros(self._inbox.shape, bool, order="F")
+            self._inbox_mask[:k] = False
+            self._inbox_masked = True
+        if self._inbox_masked:
+            if self._inbox_mask.shape[0] < k + n:
+                grown_m = np.zeros(self._inbox.shape, bool, order="F")
+                grown_m[:k] = self._inbox_mask[:k]
+                self._inbox_mask = grown_m
+            self._inbox_mask[k:k + n] = False if mask is None else mask
+        self._inbox_rows = k + n
+
     def _flush_inbox(self) -> None:
-        if not self._inbox:
+        k = self._inbox_rows
+        if not k:
             return
-        arrs = [a for a, _ in self._inbox]
-        if all(mk is None for _, mk in self._inbox):
-            mask = None
-        else:
-            mask = concat_f(
-                [np.zeros(a.shape, bool) if mk is None else mk for a, mk in self._inbox]
-            )
-        self._inbox = []
         self._inbox_rows = 0
-        self._process(concat_f(arrs), mask)
+        mask = self._inbox_mask[:k] if self._inbox_masked else None
+        self._inbox_masked = False
+        self._process(self._inbox[:k], mask)
 
     def _process(self, arr: np.ndarray, mask: np.ndarray | None) -> None:
-        # column-contiguous from here on (see streaming_noise.concat_f)
-        arr = np.asfortranarray(arr)
+        # (arr is copied into column-contiguous work arrays by _update)
         mask = None if mask is None else np.asfortranarray(mask)
         step = 1 << 16
         for lo in range(0, arr.shape[0], step):
@@ -430,12 +489,14 @@ class StreamingAllan:
         c = y.shape[0]
         if c == 0:
             return
+        # per-chunk arrays live in engine-owned buffers (grown only, see _work): no large
+        # temporary per chunk, so the allocator's heap trimming cannot cost page faults
+        y0 = self._work("y0", c, self._dtype)
+        np.copyto(y0, y, casting="unsafe" if self._int else "same_kind")
         if self._int:
-            y0 = y.astype(np.int64)
             gaps = mask
         else:
-            y0 = y.astype(np.float64)
-            gaps = np.isnan(y)
+            gaps = np.isnan(y0, out=self._work("nan", c, np.dtype(bool)))
             if mask is not None:
                 gaps |= mask
         if gaps is not None and not gaps.any():
@@ -447,16 +508,18 @@ class StreamingAllan:
                 if col.size:
                     self._ref[j] = col[0]
                     self._ref_set[j] = True
-        y0 = y0 - self._ref
+        y0 -= self._ref
         if gaps is not None:
-            y0[gaps] = 0
+            np.copyto(y0, 0, where=gaps)
         p0 = self._n_proc  # phase positions p0+1 .. p0+c are new
-        x = np.cumsum(y0, axis=0)
+        x = np.cumsum(y0, axis=0, out=self._work("x", c, self._dtype))
         x += self._x_last
         if gaps is None:
             g = np.broadcast_to(self._g_last, (c, self._nch))
         else:
-            g = self._g_last + np.cumsum(gaps, axis=0, dtype=np.int64)
+            g = np.cumsum(gaps, axis=0, dtype=np.int64,
+                          out=self._work("g", c, np.dtype(np.int64)))
+            g += self._g_last
             self.n_gaps += np.count_nonzero(gaps, axis=0)
         self._x_last = x[-1:].copy()
         self._g_last = g[-1:].copy()
@@ -467,7 +530,8 @@ class StreamingAllan:
             self._update_noise(p0, x, g, gaps)
         csum = None
         if any(s > 1 and lv.bs is not None and lv.bs_live for s, lv in self.levels.items()):
-            csum = np.cumsum(x, axis=0)  # chunk-local running sum of X for block sums
+            # chunk-local running sum of X for block sums
+            csum = np.cumsum(x, axis=0, out=self._work("csum", c, self._dtype))
         for lv in self.levels.values():
             self._update_level(lv, p0, x, g, csum)
 
@@ -493,8 +557,26 @@ class StreamingAllan:
                                else np.zeros(p[0].shape, np.int64) for p in pending])
             sums.add(xs, gs)
             pending.clear()
-            if self._nid_young[mm] and sums.points().min() >= LAG1_MIN_POINTS:
-                self._nid_young[mm] = False  # lag-1 from now on: B1's MVAR not needed
+            self._noise_added(mm)
+
+    def _noise_added(self, m: int) -> None:
+        if self._nid_young[m] and self._noise[m].points().min() >= LAG1_MIN_POINTS:
+            self._nid_young[m] = False  # lag-1 from now on: B1's MVAR not needed
+
+    def _work(self, name: str, rows: int, dtype: np.dtype) -> np.ndarray:
+        """Engine-owned (rows, channels) work array, column-contiguous, reused by every
+        chunk and grown only (to the largest chunk seen)."""
+        buf = self._bufs.get(name)
+        if buf is None or buf.shape[0] < rows:
+            buf = np.empty((rows, int(self._nch or 0)), dtype, order="F")
+            self._bufs[name] = buf
+        return buf[:rows]
+
+    def _scratch(self, n: int) -> np.ndarray:
+        """A float64 work array of at least n values, kept by the engine (grown only)."""
+        if self._scr.size < n:
+            self._scr = np.empty(max(n, 2 * self._scr.size))
+        return self._scr
 
     def _update_noise(self, p0: int, x: np.ndarray, g: np.ndarray,
                       gaps: np.ndarray | None) -> None:
@@ -505,13 +587,19 @@ class StreamingAllan:
             i0 = (p0 // m + 1) * m - p0 - 1
             if i0 >= c:
                 continue
+            n_new = (c - 1 - i0) // m + 1
+            pending = self._noise_pending[m]
+            if n_new >= _NOISE_BATCH and not pending and not self._gaps_seen:
+                # many values and no gap yet: summed in place by a compiled kernel
+                self._noise[m].add_strided(x, i0, self._scratch(n_new + 8))
+                self._noise_added(m)
+                continue
             xs = x[i0::m].astype(np.float64)
             gs = None
             if self._gaps_seen:  # cumulative gap counts at the same positions
-                gs = g[i0::m]
+                gs = g[i0::m].copy()  # g is a work buffer, reused by the next chunk
                 if gaps is not None:
                     xs[gaps[i0::m]] = np.nan
-            pending = self._noise_pending[m]
             pending.append((xs, gs))
             # a few values per chunk (long m) are batched: the sums' cost is per call
             if xs.shape[0] >= _NOISE_BATCH or len(pending) * xs.shape[0] >= _NOISE_BATCH:
@@ -549,10 +637,9 @@ class StreamingAllan:
                 e0 = (s - 1 - (p0 + 1)) % s
                 if e0 < c:
                     ends = csum[e0::s]
-                    sums = np.empty_like(ends)
-                    sums[0] = ends[0] + lv.part_sum
+                    sums = lv.bs.reserve(ends.shape[0])
+                    np.add(ends[0], lv.part_sum, out=sums[0])
                     np.subtract(ends[1:], ends[:-1], out=sums[1:])
-                    lv.bs.append(sums)
                     if self._gaps_seen:
                         lv.g_end.append(g[e0::s])  # type: ignore[union-attr]
                     lv.part_sum = csum[-1] - ends[-1]
@@ -561,151 +648,52 @@ class StreamingAllan:
             b_new = lv.bs.stop
         if i_new == i_old and b_new == b_old:
             return  # a long stride: no new phase value or block in this chunk
-        gaps = self._gaps_seen
-        xa = lv.x_at
+        tab = self._tab
+        if i_new > i_old and lv.rows.max(initial=-1) >= 0:
+            g, g0 = (lv.g_at.buf, lv.g_at.start) if self._gaps_seen else (self._no_g, 0)
+            level_sums(lv.x_at.buf, lv.x_at.start, g, g0, i_old, i_new, lv.qs, lv.rows,
+                       tab.sum2, tab.comp, tab.cnt, tab.skip)
         for m in lv.ms:
-            q = m // s
-            # second differences D_i = X_i - 2 X_{i-q} + X_{i-2q} (level indices) shared
-            # by AVAR, OAVAR, HVAR, OHVAR (H_i = D_i - D_{i-q}) and, at stride 1, MVAR
-            d_lo = max(i_old - q, 2 * q)
-            dd: np.ndarray | None = None
-            if d_lo < i_new:
-                x0 = xa.view(d_lo, i_new)
-                dd = x0 - xa.view(d_lo - q, i_new - q)
-                dd -= xa.view(d_lo - q, i_new - q)
-                dd += xa.view(d_lo - 2 * q, i_new - 2 * q)
-            for stat in self.stats:
-                fam, overlapping = STREAM_STATS[stat]
-                if fam == "mvar":
-                    continue
-                span = _SPAN[fam] * q
-                lo = max(i_old, span)
-                if lo >= i_new:
-                    continue
-                # non-overlapping terms sit on positions that are multiples of m
-                idx0 = lo if overlapping else -(-lo // q) * q
-                if idx0 >= i_new:
-                    continue
-                step = 1 if overlapping else q
-                n_t = (i_new - 1 - idx0) // step + 1
-                hi = idx0 + (n_t - 1) * step + 1
-                if fam == "avar":
-                    assert dd is not None
-                    v = dd[idx0 - d_lo : hi - d_lo : step]
-                elif fam == "hvar":
-                    assert dd is not None
-                    v = (
-                        dd[idx0 - d_lo : hi - d_lo : step]
-                        - dd[idx0 - q - d_lo : hi - q - d_lo : step]
-                    )
-                else:
-                    v = xa.view(idx0, hi)[::step] - xa.view(idx0 - q, hi - q)[::step]
-                valid = None
-                if gaps:
-                    valid = (
-                        lv.g_at.view(idx0, hi)[::step]
-                        == lv.g_at.view(idx0 - span, hi - span)[::step]
-                    )
-                self.acc[(stat, m)].add(v, valid, fam == "std")
+            for stat in self._std_stats:
+                self._update_std(lv, stat, m, i_old, i_new)
             if b_new > b_old and (self._mvar_stats or self._nid_young.get(m, False)):
-                self._update_mvar(lv, m, b_old, b_new, dd if s == 1 else None, d_lo)
+                self._update_mvar(lv, m, b_old, b_new)
 
-    def _update_mvar(
-        self, lv: _Level, m: int, b_old: int, b_new: int, dd: np.ndarray | None, d_lo: int
-    ) -> None:
+    def _update_std(self, lv: _Level, stat: str, m: int, i_old: int, i_new: int) -> None:
+        """STDVAR / OSTDVAR terms A_i = X_i - X_{i-q} (level indices i_old..i_new-1)."""
+        q = m // lv.stride
+        overlapping = STREAM_STATS[stat][1]
+        lo = max(i_old, q)
+        # non-overlapping terms sit on positions that are multiples of m
+        idx0 = lo if overlapping else -(-lo // q) * q
+        if idx0 >= i_new:
+            return
+        step = 1 if overlapping else q
+        n_t = (i_new - 1 - idx0) // step + 1
+        hi = idx0 + (n_t - 1) * step + 1
+        xa = lv.x_at
+        v = xa.view(idx0, hi)[::step] - xa.view(idx0 - q, hi - q)[::step]
+        valid = None
+        if self._gaps_seen:
+            valid = lv.g_at.view(idx0, hi)[::step] == lv.g_at.view(idx0 - q, hi - q)[::step]
+        self.acc[(stat, m)].add_moments(v, valid)
+
+    def _update_mvar(self, lv: _Level, m: int, b_old: int, b_new: int) -> None:
+        """Add the new MVAR terms of m (blocks b_old..b_new-1 of the level)."""
         s = lv.stride
         q = m // s
         assert lv.bs is not None and lv.g_end is not None
-        if q <= _LOCAL_MVAR_Q:
-            e = self._mvar_terms_local(lv, q, b_old, b_new, dd, d_lo)
-        else:
-            e = self._mvar_terms_cd(lv, m, b_old, b_new, dd, d_lo)
-        if e is None:
-            return
-        lo = b_new - e.shape[0]
-        self._add_mvar_terms(lv, m, s, q, lo, b_new, e)
-
-    def _mvar_terms_cd(
-        self, lv: _Level, m: int, b_old: int, b_new: int, dd: np.ndarray | None, d_lo: int
-    ) -> np.ndarray | None:
-        """New MVAR terms from the running sum ``cd`` of d kept across chunks (long q:
-        recomputing q - 1 differences per chunk would cost more than the chunk)."""
-        q = m // lv.stride
-        bs = lv.bs
-        assert bs is not None
-        cd = lv.cd[m]
-        lo = max(b_old, 2 * q)
-        if lo < b_new:
-            if dd is not None:  # stride 1: the block sums are X, d is the shared D
-                d = dd[lo - d_lo :]
-            else:
-                d = (
-                    bs.view(lo, b_new)
-                    - 2 * bs.view(lo - q, b_new - q)
-                    + bs.view(lo - 2 * q, b_new - 2 * q)
-                )
-            if cd.stop == 0:
-                # CD is indexed from block 2q on; pad so absolute indices line up
-                cd.start = cd.stop = 2 * q - 1
-                cd.append(np.zeros((1, d.shape[1]), d.dtype))
-            last = cd.view(cd.stop - 1, cd.stop)
-            run = np.cumsum(d, axis=0)
-            run += last
-            cd.append(run)
-        lo = max(b_old, 3 * q - 1)
-        if lo >= b_new:
-            return None
-        return cd.view(lo, b_new) - cd.view(lo - q, b_new - q)
-
-    @staticmethod
-    def _mvar_terms_local(
-        lv: _Level, q: int, b_old: int, b_new: int, dd: np.ndarray | None, d_lo: int
-    ) -> np.ndarray | None:
-        """New MVAR terms E_b = sum_{j=b-q+1}^{b} d_j (d: second differences of the block
-        sums) from a running sum local to this chunk: no history beyond the block sums,
-        q - 1 differences recomputed per chunk (used for q <= _LOCAL_MVAR_Q)."""
-        lo = max(b_old, 3 * q - 1)
-        if lo >= b_new:
-            return None
-        d0 = lo - q + 1
-        if dd is not None and d0 >= d_lo:  # stride 1: the block sums are X: d is D
-            d = dd[d0 - d_lo :]
-        else:
-            bs = lv.bs
-            assert bs is not None
-            d = bs.view(d0, b_new) - bs.view(d0 - q, b_new - q)
-            d -= bs.view(d0 - q, b_new - q)
-            d += bs.view(d0 - 2 * q, b_new - 2 * q)
-        run = np.cumsum(d, axis=0)
-        e = run[q - 1 :].copy(order="F")
-        e[1:] -= run[:-q]
-        return e
-
-    def _add_mvar_terms(
-        self, lv: _Level, m: int, s: int, q: int, lo: int, b_new: int, e: np.ndarray
-    ) -> None:
-        """Add MVAR terms E_b, b = lo..b_new-1, skipping (and counting) gap windows."""
-        valid = valid_noise = None
+        rows = np.array([self._row.get((st, m), -1) for st in ("mdev", "tdev")], np.int64)
+        noise_row = self._row[("_nmvar", m)] if self._nid_young.get(m, False) else -1
+        tab = self._tab
         if self._gaps_seen:
-            # window y_{b0 s+1} .. y_{(b0+3q) s - 1}, b0 = b - 3q + 1
-            g_end = lv.g_end.view(lo, b_new)
-            g_start = lv.g_at.view(lo - 3 * q + 1, b_new - 3 * q + 1)
-            valid = valid_noise = g_end == g_start
-            if s == 1:
-                # noise ID's MVAR (noise_id._mvar on api._noise_phase) also rejects a
-                # term when the sample just before its window is a gap: y_{b-3m+1}..y_b
-                if lo - 3 * q >= 0:
-                    g_before = lv.g_at.view(lo - 3 * q, b_new - 3 * q)
-                else:  # G_{-1} = 0 = G_0 for the first term
-                    g_before = np.concatenate(
-                        [np.zeros((1, e.shape[1]), np.int64), lv.g_at.view(0, b_new - 3 * q)]
-                    )
-                valid_noise = g_end == g_before
-        for stat in ("mdev", "tdev"):
-            if stat in self.stats:
-                self.acc[(stat, m)].add(e, valid, False)
-        if self._nid_young.get(m, False):
-            self.acc[("_nmvar", m)].add(e, valid_noise, False)
+            ga, ga0, ge, ge0 = lv.g_at.buf, lv.g_at.start, lv.g_end.buf, lv.g_end.start
+        else:
+            ga, ga0, ge, ge0 = self._no_g, 0, self._no_g, 0
+        mvar_sums(lv.bs.buf, lv.bs.start, ga, ga0, ge, ge0, b_old, b_new, q, s == 1, rows,
+                  noise_row, tab.sum2, tab.comp, tab.cnt, tab.skip,
+                  self._scratch(b_new - b_old), lv.mv_e[m], lv.mv_age[m],
+                  -1 if self._int else _MVAR_REANCHOR * q)
 
     # -- results --------------------------------------------------------------------
     def _variance(self, stat: str, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -908,7 +896,6 @@ class StreamingAllan:
             seqs["g_at"] = lv.g_at
             if s > 1:
                 seqs["g_end"] = lv.g_end
-        seqs.update({f"cd{m}": q for m, q in lv.cd.items()})
         return seqs
 
     @classmethod
@@ -952,8 +939,8 @@ class StreamingAllan:
             eng._g_last = z["g_last"]
             eng.n_gaps = z["n_gaps"]
             for (stat, m), acc in eng.acc.items():
-                for k in acc.__slots__:
-                    setattr(acc, k, z[f"acc/{stat}/{m}/{k}"].copy())
+                for k in acc.__slots__:  # in place: n, skipped, sum2, comp are table views
+                    getattr(acc, k)[...] = z[f"acc/{stat}/{m}/{k}"]
             for m, sums in eng._noise.items():
                 sums.load({k: z[f"nid/{m}/{k}"] for k in sums.state()})
                 eng._nid_young[m] = bool(z[f"nid/{m}/young"][0])

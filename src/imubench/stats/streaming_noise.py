@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from imubench.errors import StatsError
+from imubench.stats._stream_kernels import noise_sums_finite
 from imubench.stats.noise_id import (
     LAG1_MIN_POINTS,
     alpha_range,
@@ -142,15 +143,36 @@ class RunningNoiseSums:
                 self._add_finite(add[d], z, j0)
             else:
                 self._add_masked(add[d], z, h, j0)
-        t = self.sums + add  # Neumaier-compensated accumulation
-        big = np.abs(self.sums) >= np.abs(add)
-        self.comp += np.where(big, (self.sums - t) + add, (add - t) + self.sums)
-        self.sums = t
+        self._accumulate(add)
         n_keep = min(_TAIL, buf.shape[0])
         self.tail[_TAIL - n_keep:] = buf[buf.shape[0] - n_keep:]
         if gbuf is not None:
             self.gtail[_TAIL - n_keep:] = gbuf[gbuf.shape[0] - n_keep:]
         self.tail_n = n_keep
+
+    def add_strided(self, x: np.ndarray, i0: int, scratch: np.ndarray) -> None:
+        """``add(x[i0::m])`` for phase rows x (int64 or float64, (rows, nch)) free of gaps
+        and unknown values, read in place by a compiled kernel
+        (``_stream_kernels.noise_sums_finite``); ``scratch``: float64, >= 5 + rows / m."""
+        xs = x[i0::self.m]
+        if not self.shift_set.all() or self.gtail[-1].any() or xs.shape[0] == 0:
+            self.add(xs.astype(np.float64))  # first values (shift) or after a gap
+            return
+        add = np.zeros_like(self.sums)
+        noise_sums_finite(x, i0, self.m, self.tail, self.tail_n, self.orders, self.shift,
+                          add, scratch)
+        self._accumulate(add)
+        buf = np.concatenate([self.tail[_TAIL - self.tail_n:], xs[-_TAIL:]])
+        n_keep = min(_TAIL, buf.shape[0])
+        self.tail[_TAIL - n_keep:] = buf[buf.shape[0] - n_keep:]
+        self.tail_n = n_keep
+
+    def _accumulate(self, add: np.ndarray) -> None:
+        """sums += add, Neumaier-compensated (the compensation in ``comp``)."""
+        t = self.sums + add
+        big = np.abs(self.sums) >= np.abs(add)
+        self.comp += np.where(big, (self.sums - t) + add, (add - t) + self.sums)
+        self.sums = t
 
     @staticmethod
     def _add_finite(out: np.ndarray, z: np.ndarray, j0: int) -> None:
