@@ -37,6 +37,7 @@ from imubench.gap.curves import (
     line_segment,
     psd_segment,
     stack,
+    t_threshold,
     welch_psd,
 )
 from imubench.gap.errors import GapError
@@ -55,13 +56,20 @@ MAIN_PARAM: dict[str, str] = {
 """The model-file key that measures each effect's size (used for parameter errors)."""
 MIN_CLOSURE = 0.5
 """Fraction of the excess chi-squared the best candidate must remove, else unexplained."""
-MARKOV_SPAN = 20.0
+MARKOV_SPAN = 15.0
 """A Markov candidate needs its tau_c at most the longest analysed tau / MARKOV_SPAN.
 
 Gauss-Markov ADEV peaks near 1.9 tau_c and falls as tau^-1/2 beyond ~3 tau_c (IEEE 952
-C.6); only that descent, seen over most of a decade (3 to 20 tau_c, a factor 2.6 in
+C.6); only that descent, seen over a factor 5 in tau (3 to 15 tau_c, a factor 2.2 in
 ADEV), tells it from flicker (flat) or random walk (rising), which have one parameter
 fewer. A longer tau_c is reported as those."""
+Z_TEMP_CANDIDATE = 2.5
+"""The temperature candidate needs |temp_z| (the correlation of the block means'
+INCREMENTS with the temperature's, against the realisations') above this normal-
+equivalent z (as Student t with K - 1 dof). A random walk or flicker level correlates
+with any slow temperature history in levels, and then a temperature coefficient closes
+a rising Allan curve as well as the random walk does; only a correlation of the
+prewhitened (differenced) series beyond the realisations' chance level is evidence."""
 HOLDOUT_TOP = 3
 """Effects (winner and runners-up) re-checked on the held-out part and replicates."""
 
@@ -330,7 +338,8 @@ def fit_candidates(cm: ChannelModel, fit: _PartSetup, before: Comparison,
                                              "sine_freq": sf.sine_freq}, 2))
                 ev["sine"] = sf
         elif eff == "temperature":
-            if s.has_temperature:
+            dof = base_feats.k - 1
+            if s.has_temperature and abs(before.temp_z) > t_threshold(Z_TEMP_CANDIDATE, dof):
                 assert s.temp_c is not None
                 tf = evidence.fit_temperature(s.y, s.temp_c, s.rate_hz, cm.temp_ref)
                 if tf is not None:

@@ -1,12 +1,16 @@
 """Time-domain and spectral evidence: each estimator fits one effect to the REAL data.
 
-* temperature: least squares of the FIRST DIFFERENCES of block means of the rate on
-  those of ``dT`` and ``dT^2``, ``dT = T - temp_ref`` (block means low-pass both series
-  so white noise does not dilute the regression; ordinary least squares, e.g. Draper &
-  Smith, Applied Regression Analysis, ch. 2). Differencing prewhitens a wandering level:
-  a random walk or flicker level correlates spuriously with any slow temperature
-  history in levels (Granger & Newbold 1974, J. Econometrics 2, "Spurious regressions
-  in econometrics"), but its increments are independent of the temperature's.
+* temperature: least squares of block means of the rate on ``dT`` and ``dT^2``,
+  ``dT = T - temp_ref`` (block means low-pass both series so white noise does not dilute
+  the regression; ordinary least squares, e.g. Draper & Smith, Applied Regression
+  Analysis, ch. 2). A random walk or flicker level correlates spuriously with any slow
+  temperature history in levels (Granger & Newbold 1974, J. Econometrics 2, "Spurious
+  regressions in econometrics"), so the diagnosis only fits this candidate when the
+  prewhitened (first-differenced) block means correlate with the temperature's
+  increments beyond the realisations' chance level (``diagnose.Z_TEMP_CANDIDATE``); the
+  coefficient itself comes from levels, because differencing the recorded temperature
+  amplifies its quantization and noise and biases the slope toward zero (errors in
+  variables).
 * ramp: least-squares slope of the rate against time (unit/s; the model's ``ramp``; computed
   with the features, :func:`imubench.gap.curves.trend_slope`).
 * sine: the largest line of the Welch spectrum's ratio to the model's; frequency refined
@@ -49,17 +53,16 @@ class TemperatureFit:
 
 def fit_temperature(y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
                     temp_ref_c: float) -> TemperatureFit | None:
-    """Regress differenced block means of y on differenced (T - temp_ref) and
-    (T - temp_ref)^2 (no intercept: differencing removes the bias); None if T is flat."""
+    """Regress block means of y on (T - temp_ref), (T - temp_ref)^2; None if T is flat."""
     yb, tb = temperature_blocks(y, temp_c, rate_hz)
     if len(yb) < 5 or np.ptp(tb) < 1e-6:
         return None
     dt = tb - temp_ref_c
-    a2 = np.diff(np.column_stack([dt, dt**2]), axis=0)
-    dy = np.diff(yb)
-    c2, *_ = np.linalg.lstsq(a2, dy, rcond=None)
-    c1, *_ = np.linalg.lstsq(a2[:, :1], dy, rcond=None)
-    return TemperatureFit(float(c2[0]), float(c2[1]), float(c1[0]), tb, yb)
+    a2 = np.column_stack([np.ones_like(dt), dt, dt**2])
+    c2, *_ = np.linalg.lstsq(a2, yb, rcond=None)
+    a1 = a2[:, :2]
+    c1, *_ = np.linalg.lstsq(a1, yb, rcond=None)
+    return TemperatureFit(float(c2[1]), float(c2[2]), float(c1[1]), tb, yb)
 
 
 @dataclass(frozen=True)
