@@ -247,8 +247,9 @@ def bench_exact_1e9(total: int) -> None:
     x_last = 0
     x0_pending = True
     c0 = time.process_time()
-    for b in range(total // block):
-        y = np.random.default_rng([11, b]).integers(-40, 41, block).astype(np.int16) + np.int16(900)
+    for b in range(-(-total // block)):
+        size = min(block, total - b * block)  # the last block may be short: exactly `total`
+        y = np.random.default_rng([11, b]).integers(-40, 41, size).astype(np.int16) + np.int16(900)
         eng.update(y)
         x = x_last + np.cumsum(y.astype(np.int64))
         x_last = int(x[-1])
@@ -275,7 +276,7 @@ def bench_exact_1e9(total: int) -> None:
             sums[("mdev", m)] += _exact_sq_sum(e)
             counts[("mdev", m)] += e.size
         hist = full[-keep:]
-    n_fed = (total // block) * block
+    n_fed = total
     snap = eng.snapshot()
     worst = 0.0
     print(f"(f) exactness after {n_fed:.3e} int16 samples ({time.process_time() - c0:.0f} s CPU):")

@@ -122,4 +122,27 @@ def oavar_correlation(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, flo
     return corr
 
 
-__all__ = ["FFT_MAX", "MAX_RATIO", "oavar_correlation"]
+def oavar_edf(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, float], avar: np.ndarray,
+              rate_hz: float, *, tau_c_s: float = 0.0, bandwidth_hz: float = 0.0,
+              filter_order: int = 1) -> np.ndarray:
+    """EDF of the OAVAR estimates under the model: 2 A_i^2 / Var(A_i) (SP 1065 eq. 44).
+
+    ``avar`` is the model AVAR A_i at the points, ``Var`` the diagonal of the module's
+    covariance (arguments as :func:`oavar_correlation`). Unlike the Greenhall-Riley EDF of
+    a single identified power law it holds for mixtures (white + flicker at the shortest
+    taus, flicker + random walk at the longest). inf where the model has no stochastic
+    term.
+    """
+    m = np.asarray(m, dtype=np.int64)
+    out = np.full(m.size, np.inf)
+    if not any(float(amp2.get(t, 0.0)) > 0 for t in (*_STOCHASTIC, "output_white")):
+        return out
+    for i in range(m.size):
+        c11, _, _ = _pair_cov(int(m[i]), int(m[i]), int(n_terms[i]), int(n_terms[i]), amp2,
+                              rate_hz, tau_c_s, bandwidth_hz, filter_order)
+        if c11 > 0:
+            out[i] = 2.0 * float(avar[i]) ** 2 / c11
+    return out
+
+
+__all__ = ["FFT_MAX", "MAX_RATIO", "oavar_correlation", "oavar_edf"]
