@@ -20,7 +20,7 @@ from lsm6ds_sim.temperature import (
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation
 
-from imubench.errors import ConfigError, ModelError
+from imubench.errors import ModelError, ProfileError
 
 DT = 1.0 / 104.0
 
@@ -107,11 +107,11 @@ def test_parse_profile(tmp_path: Path) -> None:
     csv.write_text("# logged\ntime,T\n0,21\n100,23\n", encoding="utf-8")
     rep = parse_profile(f"replay:{csv}:time:T")
     assert rep.at(np.array([50.0]))[0] == pytest.approx(22.0)
-    with pytest.raises(ConfigError, match="unknown kind 'cube'"):
+    with pytest.raises(ProfileError, match="unknown kind 'cube'"):
         parse_profile("cube:1")
-    with pytest.raises(ConfigError, match="malformed"):
+    with pytest.raises(ProfileError, match="malformed"):
         parse_profile("ramp:1")
-    with pytest.raises(ConfigError, match="needs columns"):
+    with pytest.raises(ProfileError, match="needs columns"):
         parse_profile(f"replay:{csv}")
 
 

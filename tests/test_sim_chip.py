@@ -114,9 +114,9 @@ def test_output_registers_and_status_section_3_12_and_5() -> None:
 def test_temperature_scale_section_6(chip: str, lsb: int) -> None:
     class Warm:
         def generate(self, n: int, dt_s: float):
-            from lsm6ds_sim.chip import _QuietSamples
+            from lsm6ds_sim.physics import TrueSamples
 
-            return _QuietSamples(np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, 35.0))
+            return TrueSamples(np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, 35.0))
 
     clock, _, bus = make(chip, physics=Warm())
     bus.write_byte_data(A, 0x10, 0x40)
@@ -306,9 +306,9 @@ def test_reserved_and_readonly_writes_section_3() -> None:
 def test_saturation_at_full_scale_section_4_2() -> None:
     class Spin:
         def generate(self, n: int, dt_s: float):
-            from lsm6ds_sim.chip import _QuietSamples
+            from lsm6ds_sim.physics import TrueSamples
 
-            return _QuietSamples(np.full((n, 3), 400.0), np.zeros((n, 3)), np.full(n, 25.0))
+            return TrueSamples(np.full((n, 3), 400.0), np.zeros((n, 3)), np.full(n, 25.0))
 
     clock, _, bus = make(physics=Spin())
     bus.write_byte_data(A, 0x11, 0x40)  # 250 dps full scale

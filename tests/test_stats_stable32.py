@@ -2,10 +2,9 @@
 
 Deviations within 1e-4 relative (2e-3 for the OCXO ``*_octave`` runs, made by Stable32 on
 frequency ratios near 1.0, see the README), term counts exact (Theo1: as Stable32 prints
-them, 5 significant digits). CI limits are checked when engineer B's EDF/CI (and, for the
-bias-corrected files, bias) modules are importable: within 1e-3 given Stable32's alpha,
-and within 1e-2 with our own noise identification wherever our alpha equals Stable32's (the
-rows where it does not are listed exactly in ``OWN_ALPHA_DIFFERS``).
+them, 5 significant digits). CI limits: within 1e-3 given Stable32's alpha, and within
+1e-2 with our own noise identification wherever our alpha equals Stable32's (the rows
+where it does not are listed exactly in ``OWN_ALPHA_DIFFERS``).
 """
 
 from __future__ import annotations

@@ -73,29 +73,11 @@ class Physics(Protocol):
     def generate(self, n: int, dt_s: float) -> Any: ...
 
 
-@dataclass
-class _QuietSamples:
-    gyro_dps: np.ndarray
-    accel_g: np.ndarray
-    temp_c: np.ndarray
-
-
-class QuietPhysics:
-    """Fallback used only if :mod:`lsm6ds_sim.physics` is missing: a noiseless sensor at
-    rest, gravity +1 g on Z, 25 degC (the contract's ``SensorPhysics()`` default)."""
-
-    def generate(self, n: int, dt_s: float) -> _QuietSamples:
-        accel = np.zeros((n, 3))
-        accel[:, 2] = 1.0
-        return _QuietSamples(np.zeros((n, 3)), accel, np.full(n, 25.0))
-
-
 def default_physics(seed: int = 0) -> Physics:
-    """``SensorPhysics(seed=seed)`` (engineer D) if available, else :class:`QuietPhysics`."""
-    try:
-        from lsm6ds_sim.physics import SensorPhysics
-    except ImportError:
-        return QuietPhysics()
+    """The sensor physics of a chip built without one: ``SensorPhysics(seed=seed)``, a
+    quiet sensor (no model: no noise) at rest, gravity on +z."""
+    from lsm6ds_sim.physics import SensorPhysics  # physics imports the model, not the chip
+
     return SensorPhysics(seed=seed)
 
 

@@ -48,9 +48,9 @@ from pathlib import Path
 from typing import Any
 
 import tomli_w
+from lsm6ds.channels import CHANNELS
 
-from imubench.batch import CHANNELS
-from imubench.errors import ModelError
+from lsm6ds_sim.errors import ModelError
 
 GYRO_CHANNELS: tuple[str, ...] = ("gx", "gy", "gz")
 ACCEL_CHANNELS: tuple[str, ...] = ("ax", "ay", "az")

@@ -34,11 +34,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from lsm6ds.channels import CHANNELS
 from scipy.signal import butter, lfilter, lfilter_zi
 
-from imubench.batch import CHANNELS
-from imubench.errors import ModelError
-
+from .errors import ModelError
 from .model import ChannelModel, NoiseModel
 from .noise import (
     FlickerNoise,

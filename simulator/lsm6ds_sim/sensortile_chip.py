@@ -3,9 +3,10 @@
 The firmware only needs :class:`ChipPort` — "give me the current output registers as the
 BSP converts them" — so it runs against:
 
-* :class:`I2cChipPort`: a simulated LSM6DSM (engineer C's chip, or anything on a bus that
-  satisfies :class:`lsm6ds.bus.I2CBus`) read like the ST BSP does: STATUS_REG (0x1E) for
-  data-ready, then a 14-byte burst from OUT_TEMP_L (0x20): temp, gyro, accel int16 LE.
+* :class:`I2cChipPort`: a simulated LSM6DSM (:class:`lsm6ds_sim.chip.SimChip`, or
+  anything on a bus that satisfies :class:`lsm6ds.bus.I2CBus`) read like the ST BSP
+  does: STATUS_REG (0x1E) for data-ready, then a 14-byte burst from OUT_TEMP_L (0x20):
+  temp, gyro, accel int16 LE.
   :func:`simulated_lsm6dsm` builds that chip (``lsm6ds_sim.chip.SimChip`` with
   ``lsm6ds_sim.physics.SensorPhysics``).
 
@@ -118,7 +119,7 @@ def simulated_lsm6dsm(
     crystal_ppm: float = 0.0,
     bus_hz: float | None = 400_000.0,
 ) -> I2cChipPort:
-    """Engineer C's :class:`lsm6ds_sim.chip.SimChip` (LSM6DSM) with engineer D's physics on
+    """:class:`lsm6ds_sim.chip.SimChip` (LSM6DSM) with :class:`SensorPhysics` on
     the simulated I2C bus (:class:`lsm6ds_sim.i2c.SimI2CBus`, ``bus_hz`` timing model),
     configured like the DataLogExtended firmware (``odr_code`` 4 = 104 Hz, +-2 g, 250 dps,
     BDU + IF_INC)."""

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imubench.errors import ConfigError
+from lsm6ds_sim.errors import ProfileError
 
 
 class TemperatureProfile(abc.ABC):
@@ -71,9 +71,9 @@ class StepTemperature(TemperatureProfile):
 
     def __post_init__(self) -> None:
         if len(self.times_s) != len(self.temps_c) or not self.times_s:
-            raise ConfigError("steps temperature profile: need as many times as temperatures")
+            raise ProfileError("steps temperature profile: need as many times as temperatures")
         if any(b <= a for a, b in zip(self.times_s, self.times_s[1:], strict=False)):
-            raise ConfigError("steps temperature profile: times must increase strictly")
+            raise ProfileError("steps temperature profile: times must increase strictly")
 
     def at(self, t_s: np.ndarray) -> np.ndarray:
         idx = np.searchsorted(np.asarray(self.times_s), np.asarray(t_s), side="right") - 1
@@ -91,7 +91,7 @@ class SineTemperature(TemperatureProfile):
 
     def __post_init__(self) -> None:
         if not self.period_s > 0:
-            raise ConfigError(
+            raise ProfileError(
                 f"sine temperature profile: period_s must be > 0, got {self.period_s}"
             )
 
@@ -107,13 +107,13 @@ class ReplayTemperature(TemperatureProfile):
         t = np.asarray(t_s, dtype=np.float64)
         v = np.asarray(temp_c, dtype=np.float64)
         if t.ndim != 1 or t.shape != v.shape or len(t) == 0:
-            raise ConfigError(f"{name}: replayed temperature needs equal-length 1-D arrays")
+            raise ProfileError(f"{name}: replayed temperature needs equal-length 1-D arrays")
         ok = np.isfinite(t) & np.isfinite(v)
         t, v = t[ok], v[ok]
         if len(t) == 0:
-            raise ConfigError(f"{name}: replayed temperature has no finite sample")
+            raise ProfileError(f"{name}: replayed temperature has no finite sample")
         if np.any(np.diff(t) <= 0):
-            raise ConfigError(f"{name}: replayed temperature times must increase strictly")
+            raise ProfileError(f"{name}: replayed temperature times must increase strictly")
         self.t_s = t
         self.temp_c = v
         self.name = name
@@ -131,7 +131,7 @@ class ReplayTemperature(TemperatureProfile):
             with p.open(newline="", encoding="utf-8") as fh:
                 rows = csv.DictReader(line for line in fh if not line.lstrip().startswith("#"))
                 if rows.fieldnames is None or not {time_col, temp_col} <= set(rows.fieldnames):
-                    raise ConfigError(
+                    raise ProfileError(
                         f"{p}: needs columns {time_col!r} and {temp_col!r} in its header,"
                         f" found {rows.fieldnames}"
                     )
@@ -141,11 +141,11 @@ class ReplayTemperature(TemperatureProfile):
                         t.append(float(row[time_col]))
                         v.append(float(row[temp_col]))
                     except (TypeError, ValueError):
-                        raise ConfigError(
+                        raise ProfileError(
                             f"{p}, data row {lineno}: {time_col}/{temp_col} are not numbers"
                         ) from None
         except OSError as exc:
-            raise ConfigError(f"{p}: cannot read temperature file ({exc.strerror})") from exc
+            raise ProfileError(f"{p}: cannot read temperature file ({exc.strerror})") from exc
         return cls(np.array(t), np.array(v), name=str(p))
 
 
@@ -159,7 +159,7 @@ def as_profile(value: TemperatureProfile | float | str | None) -> TemperaturePro
         return ConstantTemperature(float(value))
     if isinstance(value, str):
         return parse_profile(value)
-    raise ConfigError(f"cannot use {value!r} as a temperature profile")
+    raise ProfileError(f"cannot use {value!r} as a temperature profile")
 
 
 def parse_profile(spec: str) -> TemperatureProfile:
@@ -191,12 +191,14 @@ def parse_profile(spec: str) -> TemperatureProfile:
             if len(cols) not in (0, 2):
                 raise ValueError
             return ReplayTemperature.from_csv(path, *cols)
+    except ProfileError:  # already precise (it is a ValueError too)
+        raise
     except ValueError:
-        raise ConfigError(
+        raise ProfileError(
             f"temperature profile {spec!r}: malformed; use e.g. 25, ramp:20:0.01[:40],"
             " steps:0=20,600=30, sine:25:5:3600 or replay:FILE.csv[:t_s:temp_c]"
         ) from None
-    raise ConfigError(
+    raise ProfileError(
         f"temperature profile {spec!r}: unknown kind {kind!r}; kinds are constant, ramp,"
         " steps, sine, replay"
     )

@@ -14,9 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
-CHANNELS: tuple[str, ...] = ("gx", "gy", "gz", "ax", "ay", "az")
-"""Channel order everywhere in imubench: gyro X Y Z (dps), accel X Y Z (g)."""
+from lsm6ds.channels import CHANNELS
 
 UNITS: dict[str, str] = {
     "gx": "dps", "gy": "dps", "gz": "dps", "ax": "g", "ay": "g", "az": "g", "temp": "degC",

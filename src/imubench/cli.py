@@ -13,7 +13,7 @@ import logging
 import sys
 
 from imubench import __version__
-from imubench.errors import ImubenchError
+from imubench.errors import USER_ERRORS
 
 COMMANDS: tuple[str, ...] = (
     "run", "convert", "allan", "acquire", "sim", "fit", "model", "report", "gap",
@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     try:
         return int(args.func(args) or 0)
-    except ImubenchError as exc:
+    except USER_ERRORS as exc:
         for line in str(exc).splitlines() or [type(exc).__name__]:
             print(f"imubench: {line}", file=sys.stderr)
         return 2

@@ -6,6 +6,9 @@ to do about it; the CLI prints ``str(error)`` on one line and exits non-zero.
 
 from __future__ import annotations
 
+from lsm6ds.errors import LSM6DSError
+from lsm6ds_sim.errors import ModelError, ProfileError, SimError
+
 
 class ImubenchError(Exception):
     """Base of every error raised by imubench on purpose."""
@@ -27,5 +30,20 @@ class StatsError(ImubenchError):
     """Invalid input to a statistic (too few samples, bad tau, unknown option)."""
 
 
-class ModelError(ImubenchError):
-    """A noise model file is invalid."""
+# The simulator's family (lsm6ds_sim knows nothing of imubench): re-exported here because
+# imubench reads and writes noise model files through it.
+USER_ERRORS: tuple[type[Exception], ...] = (ImubenchError, SimError, LSM6DSError)
+"""Every error family whose message the CLI prints on one line (exit code 2)."""
+
+__all__ = [
+    "USER_ERRORS",
+    "ConfigError",
+    "ImubenchError",
+    "LSM6DSError",
+    "ModelError",
+    "ProfileError",
+    "RecordingError",
+    "SimError",
+    "SourceError",
+    "StatsError",
+]

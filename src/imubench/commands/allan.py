@@ -18,7 +18,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from imubench.errors import ImubenchError, RecordingError, StatsError
+from imubench.errors import USER_ERRORS, RecordingError, StatsError
 from imubench.stats import STATISTICS, compute
 
 
@@ -200,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
                 print(text)
             else:
                 Path(args.json).write_text(text + "\n", encoding="utf-8")
-    except ImubenchError as exc:
+    except USER_ERRORS as exc:
         print(f"imubench allan: error: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -13,7 +13,7 @@ import json
 import sys
 from pathlib import Path
 
-from imubench.errors import ImubenchError
+from imubench.errors import USER_ERRORS
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
 from imubench.noisefit.units import kalibr_yaml
@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
             args.kalibr.write_text(kalibr_yaml(result.to_dict()["kalibr"]), encoding="utf-8")
         if args.json != "-":
             print(format_summary(result))
-    except ImubenchError as exc:
+    except USER_ERRORS as exc:
         print(f"imubench fit: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:

@@ -24,7 +24,7 @@ from lsm6ds_sim.model import ChannelModel, NoiseModel, load_model
 
 from imubench.batch import CHANNELS
 from imubench.commands.allan import parse_taus
-from imubench.errors import ImubenchError
+from imubench.errors import USER_ERRORS
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.identify import local_slopes
 from imubench.noisefit.model_avar import model_avar_m
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
                 print(text)
             else:
                 Path(args.json).write_text(text + "\n", encoding="utf-8")
-    except ImubenchError as exc:
+    except USER_ERRORS as exc:
         print(f"imubench model: error: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from imubench.errors import ImubenchError
+from imubench.errors import USER_ERRORS
 from imubench.noisefit.fit import METHODS
 
 
@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         files = write_report(args.recording, args.out, terms=args.terms, method=args.method)
-    except ImubenchError as exc:
+    except USER_ERRORS as exc:
         print(f"imubench report: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:

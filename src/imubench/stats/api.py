@@ -21,6 +21,7 @@ import numpy as np
 
 from imubench.errors import StatsError
 from imubench.stats import allan as _allan
+from imubench.stats import bias, ci, edf, noise_id
 from imubench.stats import theo as _theo
 from imubench.stats import total as _total
 from imubench.stats.edf import VAR_NAME as _VAR_NAME
@@ -111,44 +112,34 @@ def _alpha_per_tau(alpha: int | Sequence[int] | np.ndarray | None, size: int) ->
 
 
 class _Confidence:
-    """Late-bound access to engineer B's noise-ID, bias, EDF and CI modules."""
+    """Per-tau noise identification, bias factor and confidence limits of one result;
+    collects a note wherever one of them cannot be computed (it is then NaN)."""
 
     def __init__(self) -> None:
         self.notes: list[str] = []
-        self.mods: dict[str, Any] = {}
-        for name in ("noise_id", "bias", "edf", "ci"):
-            try:
-                self.mods[name] = __import__(f"imubench.stats.{name}", fromlist=[name])
-            except ImportError as exc:
-                self.notes.append(f"imubench.stats.{name} unavailable ({exc})")
 
     def alpha(self, x: np.ndarray, m: int, data_type: str, var_stat: str) -> int:
         """Stable32's rule: identify on the series the user supplied (phase or freq)."""
-        mod = self.mods.get("noise_id")
-        if mod is None:
-            return ALPHA_UNKNOWN
         try:
-            return int(mod.identify_alpha(x, m, data_type, var_stat))
-        except Exception as exc:  # noise ID may legitimately fail at the longest taus
+            return int(noise_id.identify_alpha(x, m, data_type, var_stat))
+        except StatsError as exc:  # noise ID may legitimately fail at the longest taus
             self.notes.append(f"noise id failed at m={m}: {exc}")
             return ALPHA_UNKNOWN
 
     def bias(self, var_stat: str, alpha: int, m: int, n_phase: int) -> float:
-        mod = self.mods.get("bias")
-        if mod is None or alpha == ALPHA_UNKNOWN:
+        if alpha == ALPHA_UNKNOWN:
             return float("nan")
-        return float(mod.bias_factor(var_stat, alpha, m, n_phase))
+        return float(bias.bias_factor(var_stat, alpha, m, n_phase))
 
     def limits(
         self, var_stat: str, alpha: int, m: int, n_phase: int, var: float, confidence: float
     ) -> tuple[float, float, float]:
-        e_mod, c_mod = self.mods.get("edf"), self.mods.get("ci")
-        if e_mod is None or c_mod is None or alpha == ALPHA_UNKNOWN or not np.isfinite(var):
+        if alpha == ALPHA_UNKNOWN or not np.isfinite(var):
             return float("nan"), float("nan"), float("nan")
         try:
-            e = float(e_mod.edf(var_stat, alpha, m, n_phase))
-            lo, hi = c_mod.chi2_limits(var, e, confidence)
-        except Exception as exc:
+            e = float(edf.edf(var_stat, alpha, m, n_phase))
+            lo, hi = ci.chi2_limits(var, e, confidence)
+        except StatsError as exc:
             self.notes.append(f"EDF/CI failed for {var_stat} alpha={alpha} m={m}: {exc}")
             return float("nan"), float("nan"), float("nan")
         return e, float(lo), float(hi)
