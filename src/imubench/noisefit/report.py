@@ -31,6 +31,18 @@ def _plt():  # type: ignore[no-untyped-def]
     return plt
 
 
+def _finish(plt, fig, ax, stem: Path) -> list[Path]:  # type: ignore[no-untyped-def]
+    """Grid, legend and layout of one plot; save it as ``stem.png`` and ``stem.svg``."""
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    paths = [stem.with_suffix(".png"), stem.with_suffix(".svg")]
+    for p in paths:
+        fig.savefig(p, dpi=110)
+    plt.close(fig)
+    return paths
+
+
 def sigma_tau_plot(result: RecordingFit, data: dict[str, np.ndarray], sensor: str,
                    out: Path) -> list[Path]:
     """Write ``sigma_tau_<sensor>.png/.svg``; return the paths (none if no channel)."""
@@ -68,14 +80,7 @@ def sigma_tau_plot(result: RecordingFit, data: dict[str, np.ndarray], sensor: st
     ax.set_ylabel(f"Allan deviation ({unit})")
     ax.set_title(f"{sensor}: {Path(result.source).name}  ({result.rate_hz:g} Hz; "
                  "dashed: fitted terms; numbers: local ADEV slope)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=3)
-    fig.tight_layout()
-    paths = [out / f"sigma_tau_{sensor}.png", out / f"sigma_tau_{sensor}.svg"]
-    for p in paths:
-        fig.savefig(p, dpi=110)
-    plt.close(fig)
-    return paths
+    return _finish(plt, fig, ax, out / f"sigma_tau_{sensor}")
 
 
 def psd_plot(result: RecordingFit, data: dict[str, np.ndarray], sensor: str,
@@ -101,14 +106,7 @@ def psd_plot(result: RecordingFit, data: dict[str, np.ndarray], sensor: str,
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"PSD ({unit}^2/Hz, one-sided)")
     ax.set_title(f"{sensor} PSD: {Path(result.source).name}")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=3)
-    fig.tight_layout()
-    paths = [out / f"psd_{sensor}.png", out / f"psd_{sensor}.svg"]
-    for p in paths:
-        fig.savefig(p, dpi=110)
-    plt.close(fig)
-    return paths
+    return _finish(plt, fig, ax, out / f"psd_{sensor}")
 
 
 def _html(result: RecordingFit, doc: dict, images: list[Path]) -> str:
