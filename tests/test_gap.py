@@ -10,6 +10,7 @@ end test runs it as a subprocess.
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -23,6 +24,15 @@ from lsm6ds_sim.temperature import SineTemperature
 from imubench.batch import CHANNELS, Batch
 from imubench.errors import ImubenchError
 from imubench.gap import MAIN_PARAM, GapError, GapOptions, Series, diagnose_channel
+from imubench.gap.curves import (
+    ALPHA_FAMILY,
+    Z_REGION,
+    Comparison,
+    Features,
+    SimFeatures,
+    compare,
+    family_z,
+)
 from imubench.gap.evidence import fit_outliers, fit_sine, fit_temperature
 from imubench.recording import open_writer
 
@@ -89,6 +99,59 @@ def test_null_case_gives_none() -> None:
     # under the null gap^2 / gap_null^2 is about chi2(n) / n (n ~ 14 taus): below 2^2
     assert 0 < out["gap_before"] < 2.0 * out["gap_null"]
     assert out["gap_excess_before"] < out["gap_null"]
+
+
+def _null_comparison(m: int, k: int, spike_z: float | None) -> Comparison:
+    """compare() on m taus and 6 bands: the real curve is the realisations' mean, except
+    (spike_z) one tau moved to that z; line, tails and slopes neutral."""
+    rng = np.random.default_rng(8)
+    tau = np.logspace(-2, 3, m)
+    curve = 1e-5 / tau + 1e-8 * tau
+    avar = curve * np.exp(2 * 0.1 * rng.standard_normal((k, m)))
+    bands = np.exp(0.2 * rng.standard_normal((k, 6)))
+    sims = SimFeatures(avar, bands, np.ones((k, 8)), np.zeros(k), np.zeros(k), np.zeros(k),
+                       rng.standard_normal(k), rng.standard_normal(k),
+                       rng.standard_normal(k), rng.standard_normal(k))
+    edges = np.logspace(-2, 1, 7)
+
+    def run(real_avar: np.ndarray) -> Comparison:
+        real = Features(real_avar, bands.mean(axis=0), np.ones(8), 0, line_ln=0.0,
+                        temp_corr=0.0, trend_corr=0.0, level_corr=0.0)
+        return compare(real, np.full(m, np.nan), sims, tau, edges[:-1], edges)
+
+    base = run(avar.mean(axis=0))
+    if spike_z is None:
+        return base
+    d = np.zeros(m)
+    d[m // 2] = spike_z * base.sigma[m // 2]
+    return run(avar.mean(axis=0) * np.exp(2 * d))
+
+
+def test_family_wise_threshold_keeps_a_null_with_many_taus_none() -> None:
+    """One tau at z 3.8 among 40 (> Z_REGION, the old per-tau threshold) is what a null
+    record shows about once in eight: no region, not significant, so the verdict is none;
+    the same tau at z 6 is a region."""
+    m = 40
+    assert Z_REGION < 3.8 < family_z(m)
+    null = _null_comparison(m, 10, 3.8)
+    assert abs(null.z[m // 2] - 3.8) < 1e-6
+    assert null.regions == [] and null.bands == [] and not null.significant
+    strong = _null_comparison(m, 10, 6.0)
+    assert len(strong.regions) == 1 and strong.significant
+
+
+def test_family_z_is_sidak_by_monte_carlo() -> None:
+    """max |z| of m independent normals exceeds family_z(m) with probability
+    ALPHA_FAMILY (counted on 400 000 simulated families, not from the formula)."""
+    rng = np.random.default_rng(21)
+    m, n = 30, 400_000
+    hits = 0
+    for _ in range(8):
+        zmax = np.abs(rng.standard_normal((n // 8, m))).max(axis=1)
+        hits += int((zmax > family_z(m)).sum())
+    expected = ALPHA_FAMILY * n  # 1080, binomial sd ~33
+    assert abs(hits - expected) < 5 * math.sqrt(expected), (hits, expected)
+    assert family_z(1) == Z_REGION and family_z(0) == Z_REGION
 
 
 def test_gap_excess_is_the_systematic_part() -> None:

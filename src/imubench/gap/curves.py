@@ -15,7 +15,8 @@ the uncertainty of a mean of K. ``z = d / s``.
 
 The **gap** is ``sqrt(mean(d^2))`` over the analysed taus (the issue's measure).
 A **region** is a maximal run of consecutive taus with ``|z| > Z_EDGE`` of one sign that
-holds at least one ``|z| > Z_REGION``. The spectra (Welch, Hann, 50 % overlap) are
+holds at least one ``|z|`` above the family-wise threshold :func:`family_z` (Sidak over
+the taus tested, at least Z_REGION). The spectra (Welch, Hann, 50 % overlap) are
 compared in log-spaced bands the same way; the highest narrow peak above the spectrum's
 own running-median continuum in a fine Welch spectrum (a spectral line) and the count
 of impulsive samples (beyond TAIL_SIGMAS robust sigmas of the high-passed series) are
@@ -38,7 +39,13 @@ from imubench.stats.prep import to_phase
 from imubench.stats.taus import averaging_factors
 
 Z_REGION = 3.5
-"""|z| a tau (or band) must exceed for a region to be significant."""
+"""Floor of the |z| a tau (or band) must exceed for a region to be significant; the
+threshold actually used is the family-wise one, :func:`family_z`."""
+ALPHA_FAMILY = 0.0027
+"""Family-wise two-sided false-alarm level of ONE family of tests (all taus of a
+channel's Allan curve, or all its spectral bands): the 3-sigma normal level. Without it
+each of the tens of taus and bands was tested at Z_REGION alone, and a null record
+crossed it somewhere about once in eight (issue 8)."""
 Z_EDGE = 2.0
 """|z| that extends a region to its neighbours."""
 TAIL_SIGMAS = 5.0
@@ -447,6 +454,21 @@ LINE_CONTINUUM_BINS = 64
 """Bins per block whose median (scaled to a mean) is the spectrum's local continuum."""
 
 
+def family_z(m: int) -> float:
+    """Per-test normal |z| threshold that keeps m tests at family-wise level ALPHA_FAMILY.
+
+    Sidak correction (Sidak 1967, J. Am. Stat. Assoc. 62, 626-633): m independent
+    two-sided tests each at ``p = 1 - (1 - ALPHA_FAMILY)^(1/m)`` exceed their threshold
+    somewhere with probability ALPHA_FAMILY; correlated tests (overlapping Allan taus,
+    neighbouring bands) exceed it less often, so the rule is conservative. Never below
+    Z_REGION (a family of one keeps the old per-test threshold). E.g. m = 30 gives 3.92.
+    """
+    if m < 1:
+        return Z_REGION
+    p = -math.expm1(math.log1p(-ALPHA_FAMILY) / m)
+    return max(Z_REGION, float(norm.isf(p / 2.0)))
+
+
 def line_peak(psd: np.ndarray) -> tuple[int, float]:
     """(bin, ln(psd / continuum)) of the highest narrow peak above the first block.
 
@@ -541,13 +563,16 @@ def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.
         trend_z=_z_against(real.trend_corr, sims.trend_corr),
         level_z=_z_against(real.level_corr, sims.level_corr), realisations=k,
     )
-    for i, j in _runs(z, d):
+    # family-wise significance: the threshold grows with the number of taus (bands) tested
+    z_taus = family_z(int(np.isfinite(z).sum()))
+    z_bands = t_threshold(family_z(int(np.isfinite(band_z).sum())), k - 1)
+    for i, j in _runs(z, d, Z_EDGE, z_taus):
         comp.regions.append(Region(
             float(tau_s[i]), float(tau_s[j]),
             "real_above" if d[i] > 0 else "real_below",
             float(np.sqrt(np.mean(d[i : j + 1] ** 2))), float(np.nanmax(np.abs(z[i : j + 1]))),
         ))
-    for i, j in _runs(band_z, db, t_threshold(Z_EDGE, k - 1), t_threshold(Z_REGION, k - 1)):
+    for i, j in _runs(band_z, db, t_threshold(Z_EDGE, k - 1), z_bands):
         comp.bands.append({
             "f_min_hz": float(edges[i]), "f_max_hz": float(edges[j + 1]),
             "direction": "real_above" if db[i] > 0 else "real_below",
