@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import gzip
 import json
 from pathlib import Path
@@ -10,15 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from imubench import cli
 from imubench.commands import allan as cmd
 
 
 def _run(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="imubench")
-    sub = parser.add_subparsers()
-    cmd.register(sub)
-    args = parser.parse_args(argv)
-    return args.func(args)
+    """The real CLI entry point (errors become exit code 2 there)."""
+    return cli.main(argv)
 
 
 def test_allan_json_matches_nbs14(reference_dir: Path, tmp_path: Path) -> None:

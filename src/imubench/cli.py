@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except USER_ERRORS as exc:
         for line in str(exc).splitlines() or [type(exc).__name__]:
-            print(f"imubench: {line}", file=sys.stderr)
+            print(f"imubench {args.command}: error: {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

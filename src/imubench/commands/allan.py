@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import gzip
-import json
 import sys
 import time
 from pathlib import Path
@@ -18,7 +17,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from imubench.errors import USER_ERRORS, RecordingError, StatsError
+from imubench.commands import write_json
+from imubench.errors import RecordingError, StatsError
 from imubench.stats import STATISTICS, compute
 
 
@@ -173,34 +173,26 @@ def format_table(res: Any) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    data, rec_rate = load_input(args.input, args.column)
+    rate = args.rate if args.rate is not None else (rec_rate or 1.0)
+    bar = ProgressBar(f"{args.stat}")
     try:
-        data, rec_rate = load_input(args.input, args.column)
-        rate = args.rate if args.rate is not None else (rec_rate or 1.0)
-        bar = ProgressBar(f"{args.stat}")
-        try:
-            res = compute(
-                args.stat,
-                data,
-                rate,
-                args.data_type,
-                parse_taus(args.taus),
-                confidence=args.ci,
-                alpha=args.alpha,
-                bias_correction=not args.no_bias_correction,
-                remove_drift=args.remove_drift,
-                progress=bar,
-            )
-        finally:
-            bar.close()
-        if args.json is None:
-            print(format_table(res))
-        else:
-            text = json.dumps(res.to_dict(), indent=1)
-            if args.json == "-":
-                print(text)
-            else:
-                Path(args.json).write_text(text + "\n", encoding="utf-8")
-    except USER_ERRORS as exc:
-        print(f"imubench allan: error: {exc}", file=sys.stderr)
-        return 2
+        res = compute(
+            args.stat,
+            data,
+            rate,
+            args.data_type,
+            parse_taus(args.taus),
+            confidence=args.ci,
+            alpha=args.alpha,
+            bias_correction=not args.no_bias_correction,
+            remove_drift=args.remove_drift,
+            progress=bar,
+        )
+    finally:
+        bar.close()
+    if args.json is None:
+        print(format_table(res))
+    else:
+        write_json(res.to_dict(), args.json)
     return 0

@@ -9,11 +9,10 @@ Kalibr ``imu.yaml``. See docs/noise-fit.md.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
-from imubench.errors import USER_ERRORS
+from imubench.commands import write_json
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
 from imubench.noisefit.units import kalibr_yaml
@@ -64,18 +63,11 @@ def run(args: argparse.Namespace) -> int:
         model = result.noise_model()
         args.output.write_text(model.to_toml(), encoding="utf-8")
         if args.json is not None:
-            text = json.dumps(result.to_dict(), indent=1)
-            if args.json == "-":
-                print(text)
-            else:
-                Path(args.json).write_text(text + "\n", encoding="utf-8")
+            write_json(result.to_dict(), args.json)
         if args.kalibr is not None:
             args.kalibr.write_text(kalibr_yaml(result.to_dict()["kalibr"]), encoding="utf-8")
         if args.json != "-":
             print(format_summary(result))
-    except USER_ERRORS as exc:
-        print(f"imubench fit: error: {exc}", file=sys.stderr)
-        return 2
     except OSError as exc:
         print(f"imubench fit: error: cannot write {exc.filename}: {exc.strerror}",
               file=sys.stderr)

@@ -12,13 +12,13 @@ See docs/gap.md. Exit status 0 on success, 2 on an imubench error.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from lsm6ds_sim.model import load_model
 
-from imubench.gap import EFFECTS, GapError, GapOptions, diagnose_recording
+from imubench.commands import write_json
+from imubench.gap import EFFECTS, GapOptions, diagnose_recording
 from imubench.recording import load_recording
 
 
@@ -81,14 +81,7 @@ def run(args: argparse.Namespace) -> int:
         from imubench.gap.report import write_report  # matplotlib only when asked
 
         out["report"] = str(write_report(args.report, out, diags, rec.rate_hz))
-    text = json.dumps(out, indent=1)
-    if args.json == "-":
-        print(text)
-    else:
-        try:
-            Path(args.json).write_text(text + "\n", encoding="utf-8")
-        except OSError as exc:
-            raise GapError(f"--json {args.json}: cannot write ({exc.strerror})") from exc
+    write_json(out, args.json)
     for ch, c in out["channels"].items():
         print(f"{ch}: verdict {c['verdict']}, gap {c['gap_before']:.3f} -> "
               f"{c['gap_after']:.3f}", file=sys.stderr)

@@ -14,8 +14,6 @@ autocovariance, i.e. its spectrum): see docs/noise-fit.md.
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +21,8 @@ import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel, load_model
 
 from imubench.batch import CHANNELS
+from imubench.commands import write_json
 from imubench.commands.allan import parse_taus
-from imubench.errors import USER_ERRORS
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.identify import local_slopes
 from imubench.noisefit.model_avar import model_avar_m
@@ -102,21 +100,13 @@ def predict(model: NoiseModel, rate_hz: float, spec: str, n: int | None) -> dict
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        doc = predict(load_model(args.model), args.rate, args.taus, args.n)
-        if args.json is None:
-            for ch, e in doc["channels"].items():
-                print(f"# {ch}")
-                print(f"{'tau_s':>12} {'dev':>12}")
-                for t, d in zip(e["tau_s"], e["dev"], strict=True):
-                    print(f"{t:>12.5e} {d:>12.5e}")
-        else:
-            text = json.dumps(doc, indent=1)
-            if args.json == "-":
-                print(text)
-            else:
-                Path(args.json).write_text(text + "\n", encoding="utf-8")
-    except USER_ERRORS as exc:
-        print(f"imubench model: error: {exc}", file=sys.stderr)
-        return 2
+    doc = predict(load_model(args.model), args.rate, args.taus, args.n)
+    if args.json is None:
+        for ch, e in doc["channels"].items():
+            print(f"# {ch}")
+            print(f"{'tau_s':>12} {'dev':>12}")
+            for t, d in zip(e["tau_s"], e["dev"], strict=True):
+                print(f"{t:>12.5e} {d:>12.5e}")
+    else:
+        write_json(doc, args.json)
     return 0

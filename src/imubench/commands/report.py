@@ -12,7 +12,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from imubench.errors import USER_ERRORS
 from imubench.noisefit.fit import METHODS
 
 
@@ -32,9 +31,6 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         files = write_report(args.recording, args.out, terms=args.terms, method=args.method)
-    except USER_ERRORS as exc:
-        print(f"imubench report: error: {exc}", file=sys.stderr)
-        return 2
     except OSError as exc:
         print(f"imubench report: error: {exc}", file=sys.stderr)
         return 2

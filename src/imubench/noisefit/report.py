@@ -43,13 +43,18 @@ def _finish(plt, fig, ax, stem: Path) -> list[Path]:  # type: ignore[no-untyped-
     return paths
 
 
+def _fitted_channels(result: RecordingFit, sensor: str) -> tuple[tuple[str, ...], str]:
+    """The channels of ``sensor`` ("gyro" or "accel") that were fitted, and their unit."""
+    chans, unit = SENSORS[sensor]
+    return tuple(c for c in chans if c in result.fits), unit
+
+
 def sigma_tau_plot(result: RecordingFit, data: dict[str, np.ndarray], sensor: str,
                    out: Path) -> list[Path]:
     """Write ``sigma_tau_<sensor>.png/.svg``; return the paths (none if no channel)."""
     from imubench.stats import mdev, oadev
 
-    chans, unit = SENSORS[sensor]
-    chans = tuple(c for c in chans if c in result.fits)
+    chans, unit = _fitted_channels(result, sensor)
     if not chans:
         return []
     plt = _plt()
@@ -88,8 +93,7 @@ def psd_plot(result: RecordingFit, data: dict[str, np.ndarray], sensor: str,
     """Write ``psd_<sensor>.png/.svg`` (Welch, Hann, 4096-sample segments)."""
     from scipy.signal import welch
 
-    chans, unit = SENSORS[sensor]
-    chans = tuple(c for c in chans if c in result.fits)
+    chans, unit = _fitted_channels(result, sensor)
     if not chans:
         return []
     plt = _plt()
