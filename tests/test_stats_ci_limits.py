@@ -16,7 +16,7 @@ import pytest
 
 from imubench.errors import StatsError
 from imubench.stats.ci import chi2_limits, chi2_ppf_stable32
-from imubench.stats.edf import edf, edf_greenhall, edf_simple
+from imubench.stats.edf import SIMPLE_EDF_OFFSET, edf, edf_greenhall, edf_simple
 
 SIGMA_TYPES = {
     "Allan": "avar",
@@ -64,13 +64,10 @@ CI_FILES = [
     ("ocxo/totdev_octave.txt", 5e-3),
 ]
 
-# Known disagreement: Stable32's HTOT limits at flicker PM (alpha 1; commented rows of the
-# phasedat file). The EDF Stable32 used there is not any published formula we could find;
-# the simple flicker-PM EDF gives limits off by 2.6e-3 (AF 128) and 1.4e-2 (AF 256).
-KNOWN_MISMATCH = {
-    ("phasedat/phase_dat_htotdev_octave.txt", 128),
-    ("phasedat/phase_dat_htotdev_octave.txt", 256),
-}
+# Known disagreements with Stable32's limits: none. The HTOT flicker-PM rows (phasedat
+# AF 128, 256; 2.6e-3 and 1.4e-2 with the bare simple formula) match once the simple EDF
+# gets Stable32's +2 (edf.SIMPLE_EDF_OFFSET; see test_htot_simple_edf_offset_needed).
+KNOWN_MISMATCH: set[tuple[str, int]] = set()
 
 
 def load_stable32(path: Path) -> tuple[dict[str, object], np.ndarray]:
@@ -133,21 +130,23 @@ def test_limits_match_stable32_with_its_chi2(reference_dir: Path, name: str, tol
     assert worst < tol
 
 
-def test_htot_flicker_pm_discrepancy_stays_documented(reference_dir: Path) -> None:
-    """The two HTOT alpha=1 rows we cannot reproduce: bounded, and still mismatched."""
+def test_htot_simple_edf_offset_needed(reference_dir: Path) -> None:
+    """The HTOT flicker-PM rows match with the +2 offset and not with the bare formula."""
     name = "phasedat/phase_dat_htotdev_octave.txt"
     header, rows = load_stable32(reference_dir / "allantools-stable32" / name)
-    errs = []
+    n_phase = int(header["n_phase"])  # type: ignore[call-overload]
+    with_offset, bare = [], []
     for af, _tau, _n, alpha, lo_ref, sigma, hi_ref in rows:
-        if (name, int(af)) not in KNOWN_MISMATCH:
+        if int(alpha) != 1:
             continue
-        assert int(alpha) == 1
-        e = edf("htotvar", 1, int(af), int(header["n_phase"]))  # type: ignore[call-overload]
-        lo, hi = chi2_limits(sigma * sigma, e)
-        errs.append(max(abs(lo / lo_ref - 1), abs(hi / hi_ref - 1)))
-    assert len(errs) == 2
-    assert max(errs) < 2e-2
-    assert max(errs) > 1e-3  # if this fails, the mismatch is gone: drop KNOWN_MISMATCH
+        e = edf("htotvar", 1, int(af), n_phase)
+        assert e == pytest.approx(edf_simple(1, int(af), n_phase) + SIMPLE_EDF_OFFSET)
+        for val, out in ((e, with_offset), (e - SIMPLE_EDF_OFFSET, bare)):
+            lo, hi = chi2_limits(sigma * sigma, val)
+            out.append(max(abs(lo / lo_ref - 1), abs(hi / hi_ref - 1)))
+    assert len(with_offset) == 2
+    assert max(with_offset) < 3e-4
+    assert min(bare) > 2e-3
 
 
 # --- Greenhall's algorithm against allantools (an independent implementation) ----------

@@ -174,14 +174,10 @@ def test_stable32_deviation_and_counts(reference_dir: Path, case: Case) -> None:
 
 
 # Rows whose Stable32 limits we do not reproduce to ci_rtol even with Stable32's alpha:
-# HTOT at flicker PM (alpha 1, commented rows of the file). SP 1065's HTOT EDF covers white
-# FM..RWFM only; for alpha 1 edf.py uses the simple flicker-PM formula, as Stable32's help
-# says, and its limits differ by 2.6e-3 (AF 128) and 1.4e-2 (AF 256): Stable32's exact
-# flicker-PM HTOT EDF is unpublished. Asserted to still differ, so the entry cannot go stale.
-CI_KNOWN_DIFFERS = {
-    ("phasedat/phase_dat_htotdev_octave.txt", 128),
-    ("phasedat/phase_dat_htotdev_octave.txt", 256),
-}
+# none. (HTOT at flicker PM, phasedat AF 128/256, was off by 2.6e-3 and 1.4e-2 until the
+# simple-formula EDF got Stable32's +2, edf.SIMPLE_EDF_OFFSET.) Kept as the mechanism to
+# list one, asserted to still differ so that an entry cannot go stale.
+CI_KNOWN_DIFFERS: set[tuple[str, int]] = set()
 
 CI_CASES = [pytest.param(c, id=c.rel) for c in CASES if c.has_ci]
 
@@ -211,35 +207,22 @@ def test_stable32_ci_given_alpha(reference_dir: Path, case: Case) -> None:
 
 
 # Rows where our noise identification (compute() with alpha=None) gives another alpha than
-# the file: (file, AF) -> (ours, Stable32's). Two causes, nothing else:
-# * "fixed": Stable32 was told the alpha (README: the phasedat *_octave runs used alpha 0,
-#   the HTOT nobias run alpha 2 on white FM, the _alpha0 MTOT run alpha 0), so the file's
-#   column is not a noise identification at all;
-# * "last": the longest AF of a run, where 3 to 9 frequency averages remain and both tools
-#   fall back to the B1 ratio; Stable32 keeps the previous tau's alpha there (every such row
-#   below equals the row before it in the file) while our B1 decides from 3..9 points.
-_FIXED0 = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
+# the file: (file, AF) -> (ours, Stable32's). One cause only, "fixed": Stable32 was told the
+# alpha (README: the phasedat *_octave runs used alpha 0, the HTOT nobias run alpha 2 on
+# white FM, the _alpha0 MTOT run alpha 0), so the file's column is not a noise
+# identification at all. (The longest AFs, where Stable32 keeps the previous tau's alpha
+# beyond half the largest AF, are reproduced by noise_id.identifies_at.)
+# The fixed-alpha-0 octave runs of ADEV..OHDEV agree with our identification (AF 128 is
+# beyond half their largest AF, so it keeps AF 64's alpha 0); TOTDEV's largest AF is 500.
 OWN_ALPHA_DIFFERS: dict[tuple[str, int], tuple[int, int]] = {
-    **{(f"phasedat/phase_dat_{s}_octave.txt", 128): (1, 0) for s in _FIXED0},  # fixed
-    ("phasedat/phase_dat_mtotdev_octave_alpha0.txt", 128): (1, 0),  # fixed
-    **{  # fixed: alpha 2 forced on white FM data
+    ("phasedat/phase_dat_totdev_octave.txt", 128): (1, 0),
+    ("phasedat/phase_dat_totdev_octave.txt", 256): (1, 0),
+    ("phasedat/phase_dat_mtotdev_octave_alpha0.txt", 128): (1, 0),
+    ("phasedat/phase_dat_mtotdev_octave_alpha0.txt", 256): (1, 0),
+    **{  # alpha 2 forced on white FM data
         ("phasedat/phase_dat_htotdev_octave_nobias.txt", m): (a, 2)
-        for m, a in ((1, 0), (2, 0), (4, 0), (8, 0), (16, 0), (32, 0), (64, 0), (128, 1), (256, 0))
+        for m, a in ((1, 0), (2, 0), (4, 0), (8, 0), (16, 0), (32, 0), (64, 0), (128, 1), (256, 1))
     },
-    ("phasedat/phase_dat_htotdev_octave.txt", 256): (0, 1),  # last
-    ("phasedat/phase_dat_mtotdev_octave.txt", 256): (0, 1),  # last
-    ("phasedat/phase_dat_ttotdev_octave.txt", 256): (0, 1),  # last
-    ("phasedat/phase_dat_mtotdev_decade.txt", 200): (0, 1),  # last
-    ("phasedat/phase_dat_ttotdev_decade.txt", 200): (0, 1),  # last
-    ("ocxo/adev_octave.txt", 2048): (-1, -2),  # last
-    ("ocxo/hdev_octave.txt", 2048): (-1, -2),  # last
-    **{(f"ocxo/{s}_octave.txt", 4096): (-1, 0) for s in ("oadev", "mdev", "tdev", "ohdev")},
-    ("Keysight53230A_ti_noise_floor/tic_oadev.txt", 8192): (0, 1),  # last
-    ("Keysight53230A_ti_noise_floor/tic_mdev.txt", 8192): (0, 1),  # last
-    ("Keysight53230A_ti_noise_floor/tic_tdev.txt", 8192): (0, 1),  # last
-    ("Keysight53230A_ti_noise_floor/tic_ohdev.txt", 8192): (0, 1),  # last
-    ("Keysight53230A_ti_noise_floor/tic_hdev.txt", 8192): (-1, 1),  # last
-    ("pink_frequency/s32_oadev_octave.txt", 2048): (1, 0),  # last
 }
 
 
@@ -271,9 +254,48 @@ def test_stable32_ci_own_noise_id(reference_dir: Path, case: Case) -> None:
     assert np.all(err[same] <= tol), dict(zip(rows[same, 0], err[same], strict=True))
 
 
+# The OCXO all-tau runs (no CIs) still carry Stable32's own per-tau noise identification,
+# except TOTDEV's, whose Alpha column is 0 throughout (README: no identification there).
+ALLTAU_ID = [
+    pytest.param(c, id=c.rel)
+    for c in CASES
+    if c.rel.endswith("_alltau.txt") and c.stat != "totdev"
+]
+
+
+@pytest.mark.parametrize("case", ALLTAU_ID)
+def test_stable32_alltau_noise_id(reference_dir: Path, case: Case) -> None:
+    """Every AF: lag-1 ACF, B1/R(n) below 30 points, and beyond half the largest AF the
+    previous tau's alpha (noise_id.identifies_at), as in the file's Alpha column."""
+    rows, _ = read_stable32(reference_dir / SET / case.rel)
+    data, dtype = load_data(reference_dir, case.data)
+    afs = rows[:, 0].astype(np.int64)
+    res = st.compute(case.stat, data, case.rate, dtype, afs=afs, bias_correction=False)
+    theirs = rows[:, 3].astype(int)
+    bad = res.alpha != theirs
+    pairs = zip(res.alpha[bad], theirs[bad], strict=True)
+    assert not bad.any(), dict(zip(afs[bad], pairs, strict=True))
+    held = afs[2 * afs > st.taus.max_af(case.stat, data.size)]
+    assert held.size >= 10  # the hold region is exercised, not only the identified one
+
+
 def test_gzip_reader_smoke(tmp_path: Path) -> None:
     """The reference loader path for .gz inputs works as numpy documents (README note)."""
     p = tmp_path / "x.txt.gz"
     with gzip.open(p, "wt") as fh:
         fh.write("# c\n1\n2\n3\n")
     assert np.loadtxt(p).tolist() == [1.0, 2.0, 3.0]
+
+
+def test_identify_alpha_holds_previous_only_beyond_half_max_af() -> None:
+    """``previous`` is returned (clipped) beyond m_max/2 and ignored up to it."""
+    x = np.cumsum(np.random.default_rng(7).standard_normal(4001))  # white FM phase
+    m_max = st.taus.max_af("oadev", x.size - 1)  # 1000
+    inside, beyond = m_max // 2, m_max // 2 + 1
+    assert st.noise_id.identifies_at("oavar", inside, x.size)
+    assert not st.noise_id.identifies_at("oavar", beyond, x.size)
+    own = st.noise_id.identify_alpha(x, inside, "phase", "oavar")
+    assert st.noise_id.identify_alpha(x, inside, "phase", "oavar", previous=own - 1) == own
+    assert st.noise_id.identify_alpha(x, beyond, "phase", "oavar", previous=-2) == -2
+    assert st.noise_id.identify_alpha(x, beyond, "phase", "oavar", previous=-4) == -2  # clipped
+    assert st.noise_id.identify_alpha(x, beyond, "phase", "hvar", previous=-4) == -4

@@ -5,11 +5,13 @@ confidence=0.683, alpha=None, bias_correction=True, remove_drift=False, max_af=N
 afs=None, progress=None) -> StatResult``
 
 Per averaging factor m: the raw variance from the kernels (``allan``, ``total``,
-``theo``), the noise type alpha (``noise_id.identify_alpha`` unless fixed by the caller),
-the bias factor Stable32 divides by (``bias.bias_factor``), the EDF (``edf.edf``) and the
-chi-squared deviation limits (``ci.chi2_limits``). If one of those modules is missing or
-fails for a tau, the affected columns are NaN (alpha -99) and a note says why; the
-deviations themselves never depend on them, except where a bias correction needs alpha.
+``theo``), the noise type alpha (``noise_id.identify_alpha`` unless fixed by the caller;
+beyond half the statistic's largest averaging factor it keeps the previous tau's alpha, as
+Stable32 does), the bias factor Stable32 divides by (``bias.bias_factor``), the EDF
+(``edf.edf``) and the chi-squared deviation limits (``ci.chi2_limits``). If one of those
+modules is missing or fails for a tau, the affected columns are NaN (alpha -99) and a note
+says why; the deviations themselves never depend on them, except where a bias correction
+needs alpha.
 """
 
 from __future__ import annotations
@@ -118,10 +120,14 @@ class _Confidence:
     def __init__(self) -> None:
         self.notes: list[str] = []
 
-    def alpha(self, x: np.ndarray, m: int, data_type: str, var_stat: str) -> int:
-        """Stable32's rule: identify on the series the user supplied (phase or freq)."""
+    def alpha(
+        self, x: np.ndarray, m: int, data_type: str, var_stat: str, previous: int | None
+    ) -> int:
+        """Stable32's rule: identify on the series the user supplied (phase or freq);
+        ``previous`` (alpha of the previous tau, None for the first or an unknown one) is
+        kept beyond half the largest averaging factor (``noise_id.identifies_at``)."""
         try:
-            return int(noise_id.identify_alpha(x, m, data_type, var_stat))
+            return int(noise_id.identify_alpha(x, m, data_type, var_stat, previous))
         except StatsError as exc:  # noise ID may legitimately fail at the longest taus
             self.notes.append(f"noise id failed at m={m}: {exc}")
             return ALPHA_UNKNOWN
@@ -237,7 +243,11 @@ def _compute_pd(
     var = var_raw.copy()
     for k, m in enumerate(ms):
         m = int(m)
-        a = int(fixed[k]) if fixed is not None else conf.alpha(xn, m, data_type, var_stat)
+        if fixed is not None:
+            a = int(fixed[k])
+        else:
+            prev = int(alphas[k - 1]) if k and alphas[k - 1] != ALPHA_UNKNOWN else None
+            a = conf.alpha(xn, m, data_type, var_stat, prev)
         alphas[k] = a
         if bias_correction and stat in BIAS_STATS:
             f = conf.bias(var_stat, a, m, pd.n_phase)

@@ -26,7 +26,9 @@ the bias correction of every statistic. Two estimators are used:
   PM, 3.37 / (1.04 + 3 ln(pi m)) for flicker PM with f_h = 1/(2 tau0)).
 
 Stable32 uses the lag-1 method when it has at least 30 points at the averaging time and
-B1 (with R(n)) otherwise; :func:`identify_alpha` does the same.
+B1 (with R(n)) otherwise; :func:`identify_alpha` does the same. Stable32 identifies only
+up to half of the statistic's largest averaging factor (:func:`identifies_at`); beyond it
+each tau keeps the alpha of the tau before it (see :func:`identify_alpha`).
 
 The input ``x`` is always the phase array (seconds, or for an IMU the integrated rate);
 ``data_type`` says what the user supplied, because Stable32 identifies on the frequency
@@ -49,6 +51,7 @@ __all__ = [
     "analysis_terms",
     "b1_alpha",
     "b1_expected",
+    "identifies_at",
     "identify_alpha",
     "lag1_acf",
     "lag1_alpha",
@@ -246,7 +249,8 @@ def b1_alpha(x: np.ndarray, m: int, data_type: str, n_terms: int | None = None) 
     ``n_terms`` is the N put into :func:`b1_expected`; by default the number K of
     frequency averages. Stable32 puts the statistic's number of analysis terms there
     (its "#" column; :func:`identify_alpha` passes :func:`analysis_terms`): with it the
-    OCXO all-tau OADEV alphas agree at 84 of 106 B1 AFs instead of 47, elsewhere no change.
+    OCXO all-tau OADEV alphas agree at 84 of 106 B1 AFs instead of 47, elsewhere no change;
+    the other 22 are AFs where Stable32 does not identify at all (:func:`identifies_at`).
     ``data_type`` is accepted for symmetry with :func:`lag1_alpha`; B1 works on the phase.
     """
     arr = _check(x, m, data_type)
@@ -282,15 +286,58 @@ def b1_alpha(x: np.ndarray, m: int, data_type: str, n_terms: int | None = None) 
     return 1 if rn > boundary else 2
 
 
-def identify_alpha(x: np.ndarray, m: int, data_type: str, stat: str) -> int:
+def identifies_at(stat: str, m: int, n_phase: int) -> bool:
+    """Whether Stable32 runs its noise identification at averaging factor m.
+
+    True when 2 m <= the largest m of ``stat`` (:func:`imubench.stats.taus.max_af`, the
+    Stable32 stop ratio r: m_max = floor((N - 1) / r)), i.e. when at least 2 r frequency
+    averages exist at this tau (10 for ADEV/HDEV, 8 for OADEV/MDEV/TDEV/OHDEV, 6 for
+    MTOT/TTOT/HTOT, 4 for TOTDEV). Beyond that Stable32 keeps the previous tau's alpha.
+
+    Not in Stable32's help or SP 1065: the rule is inferred from the reference runs in
+    allantools' test data (Stable32 1.53/1.60). The boundary lies between M/m = 10.41 and
+    9.65 for ADEV/HDEV and 8.14 and 7.00 for the OADEV family (OCXO all-tau runs), 7.8 and
+    5.0 for MTOT/TTOT/HTOT (phase.dat); TOTDEV on the Keysight TIC data identifies at
+    M/m = 6.8 where OADEV, with its longer stop ratio, already holds. With it our alpha
+    equals the Alpha column in all 4,389 rows of the auto-ID runs except the Keysight ADEV
+    run (248 of 260; its 12 misses are white/flicker PM calls well inside the identified
+    range), against 22 misses in the OCXO OADEV all-tau run alone before.
+    """
+    from imubench.stats.taus import max_af
+
+    name = _canonical(stat)
+    dev = {v: k for k, v in _var_names().items()}.get(name, name)
+    n_freq = int(n_phase) - 1
+    try:
+        m_max = max_af(dev, n_freq)
+    except StatsError:
+        return True
+    return 2 * int(m) <= m_max
+
+
+def _var_names() -> dict[str, str]:
+    from imubench.stats.edf import VAR_NAME
+
+    return VAR_NAME
+
+
+def identify_alpha(
+    x: np.ndarray, m: int, data_type: str, stat: str, previous: int | None = None
+) -> int:
     """Noise exponent alpha that ``stat`` should use at averaging factor m (Stable32's rule).
 
     Lag-1 ACF (:func:`lag1_alpha`, dmax = 3 for the Hadamard family, 2 otherwise) when at
     least :data:`LAG1_MIN_POINTS` points exist at this averaging time, else the B1 ratio
-    with R(n) (:func:`b1_alpha`). The result is clipped to :func:`alpha_range` of ``stat``.
+    with R(n) (:func:`b1_alpha`). ``previous`` is the alpha of the previous (shorter) tau
+    of the same run: where :func:`identifies_at` is false it is returned as it is, as
+    Stable32 does beyond half the largest averaging factor; without it (``None``, the
+    first tau of a run) alpha is identified anyway. The result is clipped to
+    :func:`alpha_range` of ``stat``.
     """
     lo, hi = alpha_range(stat)
     arr = _check(x, m, data_type)
+    if previous is not None and not identifies_at(stat, int(m), arr.size):
+        return int(min(max(int(previous), lo), hi))
     name = _canonical(stat)
     dmax = 3 if name in {"hvar", "ohvar", "htotvar"} else 2
     if _k.points_at_tau(arr, int(m), data_type == "freq", LAG1_MIN_POINTS) >= LAG1_MIN_POINTS:

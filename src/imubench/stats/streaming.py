@@ -754,7 +754,7 @@ class StreamingAllan:
         nch = int(self._nch or 0)
         if self.alpha is not None:
             return np.full((nch, ms.size), self.alpha, dtype=np.int64)
-        from imubench.stats.noise_id import alpha_range
+        from imubench.stats.noise_id import alpha_range, identifies_at
         from imubench.stats.streaming_noise import ALPHA_UNKNOWN
 
         var_stat = canonical_stat(stat)
@@ -782,6 +782,9 @@ class StreamingAllan:
                 else:
                     out[ch, i] = sums.identify(ch, var_stat, n_phase,
                                                self._noise_mvar(int(m), ch), float(c[ch]))
+            if i and not identifies_at(var_stat, int(m), n_phase):  # Stable32 holds alpha
+                held = out[:, i - 1] != ALPHA_UNKNOWN
+                out[held, i] = out[held, i - 1]
         return out
 
     def _noise_mvar(self, m: int, ch: int) -> float | None:
