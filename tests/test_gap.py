@@ -270,6 +270,11 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
     for f in ("index.html", "gx_adev.png", "gx_adev.svg", "gy_evidence.png",
               "gy_evidence.svg"):
         assert (rep / f).stat().st_size > 0, f
+    index = (rep / "index.html").read_text()
+    assert "Verdict temperature (temp_coeff = " in index  # the reasons, not only plots
+    assert "Verdict none: the model explains the recording" in index
+    assert "Held-out part (never used for the fit)" in index
+    assert "  Verdict temperature (temp_coeff = " in r.stderr  # and on the terminal
 
 
 def test_cli_replicate_holdout(csv_rec: tuple[Path, Path], tmp_path: Path,

@@ -19,6 +19,7 @@ from lsm6ds_sim.model import load_model
 
 from imubench.commands import write_json
 from imubench.gap import EFFECTS, GapOptions, diagnose_recording
+from imubench.gap.explain import explain_channel
 from imubench.recording import load_recording
 
 
@@ -85,4 +86,6 @@ def run(args: argparse.Namespace) -> int:
     for ch, c in out["channels"].items():
         print(f"{ch}: verdict {c['verdict']}, gap {c['gap_before']:.3f} -> "
               f"{c['gap_after']:.3f}", file=sys.stderr)
+        for line in explain_channel(c, out["realisations"]):
+            print(f"  {line}", file=sys.stderr)
     return 0

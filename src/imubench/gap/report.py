@@ -22,6 +22,7 @@ import numpy as np
 from imubench.gap.curves import Comparison
 from imubench.gap.diagnose import ChannelDiagnosis
 from imubench.gap.errors import GapError
+from imubench.gap.explain import explain_channel
 
 
 def _adev_panel(ax: Any, title: str, before: Comparison, after: Comparison | None,
@@ -142,6 +143,8 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
             f"<p>gap {_num(c['gap_before'])} &rarr; {_num(c['gap_after'])} (fit part); "
             f"held out {_num(hold.get('gap_before'))} &rarr; {_num(hold.get('gap_after'))}; "
             f"regions: {html.escape(_regions(c['regions']))}</p>"
+            "<ul>" + "".join(f"<li>{html.escape(s)}</li>"
+                             for s in explain_channel(c, result["realisations"])) + "</ul>"
             f"<img src='{ch}_adev.png'><img src='{ch}_evidence.png'>"
             "<table border=1><tr><th>effect</th><th>params</th><th>gap after</th>"
             f"<th>held-out gap after</th><th>score</th></tr>{eff_rows}</table>"

@@ -1,0 +1,117 @@
+"""Plain-language reasons behind a channel's verdict, from its JSON result.
+
+``explain_channel(c, realisations)`` turns one ``channels[<ch>]`` entry of ``imubench gap``
+into sentences a user can check against the plots: what fired on the fit part and how far
+above its threshold, why the verdict is what it is (the share of the excess chi-squared
+the best candidate removes against :data:`~imubench.gap.diagnose.MIN_CLOSURE`, and its
+score against the runner-up's), how the issue's gap splits into the scatter a perfect
+model would also show and the systematic part, and what the held-out part and the
+replicates say. It reads only the JSON keys, so it explains a saved result as well.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from imubench.gap.curves import Z_LINE, Z_SLOPE, Z_TAIL, t_threshold
+from imubench.gap.diagnose import MIN_CLOSURE
+
+
+def _f(v: float | None, digits: int = 3) -> str:
+    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}g}"
+
+
+def _detections(c: dict[str, Any], dof: int) -> list[str]:
+    """The fit part's statistics beyond their thresholds (Student t with ``dof``)."""
+    out = []
+    for r in c["regions"]:
+        out.append(f"Allan curve {r['direction'].replace('_', ' ')} over "
+                   f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s (largest |z| "
+                   f"{abs(r['z_max']):.1f}, region gap {_f(r['gap'])})")
+    for b in c.get("bands", []):
+        out.append(f"spectrum {b['direction'].replace('_', ' ')} over "
+                   f"{_f(b['f_min_hz'])}-{_f(b['f_max_hz'])} Hz")
+    checks = (("a spectral line", c["line"]["z"], Z_LINE, f" at {_f(c['line']['f_hz'], 4)} Hz"),
+              ("impulsive tails", c["impulses_z"], Z_TAIL, ""),
+              ("correlation with temperature", c["temperature_slope_z"], Z_SLOPE, ""),
+              ("a time trend", c["trend_z"], Z_SLOPE, ""))
+    for name, z, z_norm, where in checks:
+        thr = t_threshold(z_norm, dof)
+        if z is not None and math.isfinite(z) and abs(z) > thr and (z > 0 or name in (
+                "correlation with temperature", "a time trend")):
+            out.append(f"{name}{where} (t {z:.1f} against the threshold {thr:.1f})")
+    return out
+
+
+def _strongest(c: dict[str, Any], dof: int) -> str:
+    """The statistic closest to its threshold, as 'name t/threshold' (for `none`)."""
+    cand = [("line", c["line"]["z"], Z_LINE), ("tails", c["impulses_z"], Z_TAIL),
+            ("temperature", abs(c["temperature_slope_z"]), Z_SLOPE),
+            ("trend", abs(c["trend_z"]), Z_SLOPE)]
+    ratios = [(z / t_threshold(zn, dof), n, z, t_threshold(zn, dof)) for n, z, zn in cand
+              if z is not None and math.isfinite(z)]
+    if not ratios:
+        return ""
+    _, n, z, thr = max(ratios)
+    return f"; the closest to its threshold is {n} (t {z:.1f} against {thr:.1f})"
+
+
+def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
+    """Sentences explaining the verdict of one channel's JSON entry."""
+    dof = max(int(realisations) - 1, 1)
+    lines: list[str] = []
+    found = _detections(c, dof)
+    verdict = c["verdict"]
+    if found:
+        lines.append("Significant on the fit part: " + "; ".join(found) + ".")
+    else:
+        lines.append("Nothing on the fit part exceeds its threshold (family-wise Allan and "
+                     "band limits, line, tails, temperature, trend)"
+                     + _strongest(c, dof) + ".")
+    effects = c["effects"]
+    if verdict == "none":
+        lines.append("Verdict none: the model explains the recording within the scatter of "
+                     f"{realisations} realisations.")
+    elif verdict == "unexplained":
+        best = effects[0] if effects else None
+        if best is None:
+            lines.append("Verdict unexplained: no candidate effect applies to this evidence.")
+        else:
+            lines.append(
+                f"Verdict unexplained: the best candidate, {best['effect']}, removes "
+                f"{best['chi2_closed']:.0%} of the excess chi-squared (the verdict needs "
+                f"{MIN_CLOSURE:.0%}); an effect outside the candidate list, or two at once, "
+                "is likely.")
+    else:
+        w = effects[0]
+        params = ", ".join(f"{k} = {_f(v, 4)}" for k, v in w["params"].items())
+        txt = (f"Verdict {verdict} ({params}):"
+               f" it removes {w['chi2_closed']:.0%} of the excess chi-squared (needs "
+               f"{MIN_CLOSURE:.0%}) with score {w['score']:.1f}")
+        if len(effects) > 1:
+            r = effects[1]
+            txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
+                    f"BIC penalty ln(n) per parameter, {w['n_params']} against "
+                    f"{r['n_params']})")
+        lines.append(txt + ".")
+    g0, ge = c.get("gap_null"), c.get("gap_excess_before")
+    if g0 is not None and ge is not None:
+        lines.append(
+            f"Gap (RMS over all taus of ln ADEV_real/ADEV_sim) {_f(c['gap_before'])} -> "
+            f"{_f(c['gap_after'])}. A perfect model would still show about {_f(g0)} "
+            f"(the taus' scatter); the systematic part is {_f(ge)} -> "
+            f"{_f(c.get('gap_excess_after'))}.")
+    h = c.get("holdout")
+    if h and h.get("gap_before") is not None and "region_gap_before" in h:
+        txt = (f"Held-out part (never used for the fit): gap {_f(h['gap_before'])} -> "
+               f"{_f(h['gap_after'])}, systematic {_f(h['gap_excess_before'])} -> "
+               f"{_f(h['gap_excess_after'])}")
+        if c["regions"]:
+            txt += (f", over the fit part's regions {_f(h['region_gap_before'])} -> "
+                    f"{_f(h['region_gap_after'])}")
+        lines.append(txt + ".")
+    for r in (h or {}).get("recordings", []):
+        lines.append(f"Replicate {r['recording']}: gap {_f(r['gap_before'])} -> "
+                     f"{_f(r['gap_after'])}.")
+    return lines

@@ -1,0 +1,70 @@
+"""The report's plain-language reasons (imubench.gap.explain) for each kind of verdict."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from imubench.gap.curves import Z_SLOPE, t_threshold
+from imubench.gap.explain import explain_channel
+
+
+def _entry(verdict: str, **kw: Any) -> dict[str, Any]:
+    c: dict[str, Any] = {
+        "verdict": verdict, "gap_before": 0.5, "gap_after": 0.12, "gap_null": 0.1,
+        "gap_excess_before": 0.49, "gap_excess_after": 0.07,
+        "regions": [], "bands": [], "line": {"f_hz": 3.3, "z": 0.4}, "impulses_z": -0.1,
+        "temperature_slope_z": 0.2, "trend_z": -1.0, "effects": [],
+        "holdout": {"gap_before": 0.4, "gap_after": 0.11, "region_gap_before": 0.9,
+                    "region_gap_after": 0.1, "gap_excess_before": 0.39,
+                    "gap_excess_after": 0.02, "gap_null": 0.1, "chi2_closed": 0.9},
+    }
+    c.update(kw)
+    return c
+
+
+TEMP_EFFECT = {"effect": "temperature", "params": {"temp_coeff": 0.0081}, "gap_after": 0.12,
+               "n_params": 1, "score": 40.2, "chi2_closed": 0.93}
+RW_EFFECT = {"effect": "random_walk", "params": {"random_walk": 2e-4}, "gap_after": 0.3,
+             "n_params": 1, "score": 71.0, "chi2_closed": 0.41}
+
+
+def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
+    thr = t_threshold(Z_SLOPE, 9)
+    c = _entry("temperature", temperature_slope_z=11.7, effects=[TEMP_EFFECT, RW_EFFECT],
+               regions=[{"tau_min_s": 20.0, "tau_max_s": 315.0, "direction": "real_above",
+                         "gap": 1.3, "z_max": 7.4}])
+    text = "\n".join(explain_channel(c, 10))
+    assert f"correlation with temperature (t 11.7 against the threshold {thr:.1f})" in text
+    assert "Allan curve real above over 20-315 s (largest |z| 7.4" in text
+    assert "Verdict temperature (temp_coeff = 0.0081): it removes 93% " in text
+    assert "runner-up random_walk scores 71.0" in text
+    assert "systematic part is 0.49 -> 0.07" in text
+    assert "over the fit part's regions 0.9 -> 0.1" in text
+    # below-threshold statistics are not listed as evidence
+    assert "time trend" not in text and "spectral line" not in text
+
+
+def test_unexplained_gives_the_shortfall() -> None:
+    c = _entry("unexplained", effects=[RW_EFFECT],
+               bands=[{"f_min_hz": 0.01, "f_max_hz": 0.04, "direction": "real_above"}])
+    text = "\n".join(explain_channel(c, 10))
+    assert "spectrum real above over 0.01-0.04 Hz" in text
+    assert "best candidate, random_walk, removes 41% of the excess chi-squared (the verdict " \
+           "needs 50%)" in text
+
+
+def test_none_names_the_closest_statistic() -> None:
+    thr = t_threshold(Z_SLOPE, 9)
+    c = _entry("none", trend_z=-4.0, holdout=None, gap_after=0.5)
+    lines = explain_channel(c, 10)
+    assert lines[0].startswith("Nothing on the fit part exceeds its threshold")
+    assert f"closest to its threshold is trend (t 4.0 against {thr:.1f})" in lines[0]
+    assert any(s.startswith("Verdict none") for s in lines)
+    assert not any(s.startswith("Held-out") for s in lines)
+
+
+def test_replicates_are_listed() -> None:
+    h = dict(_entry("none")["holdout"])
+    h["recordings"] = [{"recording": "rep2", "gap_before": 0.25, "gap_after": 0.25}]
+    text = "\n".join(explain_channel(_entry("none", holdout=h), 10))
+    assert "Replicate rep2: gap 0.25 -> 0.25." in text
