@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+import pytest
+
 from imubench.gap.curves import Z_SLOPE, t_threshold
 from imubench.gap.explain import explain_channel
 
@@ -23,9 +26,11 @@ def _entry(verdict: str, **kw: Any) -> dict[str, Any]:
 
 
 TEMP_EFFECT = {"effect": "temperature", "params": {"temp_coeff": 0.0081}, "gap_after": 0.12,
-               "n_params": 1, "score": 40.2, "chi2_closed": 0.93}
+               "n_params": 1, "score": 40.2, "chi2_closed": 0.93,
+               "evidence_closed": 0.97}
 RW_EFFECT = {"effect": "random_walk", "params": {"random_walk": 2e-4}, "gap_after": 0.3,
-             "n_params": 1, "score": 71.0, "chi2_closed": 0.41}
+             "n_params": 1, "score": 71.0, "chi2_closed": 0.2,
+             "evidence_closed": 0.41}
 
 
 def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
@@ -36,7 +41,8 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     text = "\n".join(explain_channel(c, 10))
     assert f"correlation with temperature (t 11.7 against the threshold {thr:.1f})" in text
     assert "Allan curve real above over 20-315 s (largest |z| 7.4" in text
-    assert "Verdict temperature (temp_coeff = 0.0081): it removes 93% " in text
+    assert ("Verdict temperature (temp_coeff = 0.0081): it removes 97% of the significant "
+            "excess chi-squared (the verdict needs 50%; 93% of the total)") in text
     assert "runner-up random_walk scores 71.0" in text
     assert "systematic part is 0.49 -> 0.07" in text
     assert "over the fit part's regions 0.9 -> 0.1" in text
@@ -49,8 +55,8 @@ def test_unexplained_gives_the_shortfall() -> None:
                bands=[{"f_min_hz": 0.01, "f_max_hz": 0.04, "direction": "real_above"}])
     text = "\n".join(explain_channel(c, 10))
     assert "spectrum real above over 0.01-0.04 Hz" in text
-    assert "best candidate, random_walk, removes 41% of the excess chi-squared (the verdict " \
-           "needs 50%)" in text
+    assert ("best candidate, random_walk, removes 41% of the significant excess chi-squared "
+            "(the verdict needs 50%, without raising the total)") in text
 
 
 def test_none_names_the_closest_statistic() -> None:
@@ -68,3 +74,44 @@ def test_replicates_are_listed() -> None:
     h["recordings"] = [{"recording": "rep2", "gap_before": 0.25, "gap_after": 0.25}]
     text = "\n".join(explain_channel(_entry("none", holdout=h), 10))
     assert "Replicate rep2: gap 0.25 -> 0.25." in text
+
+
+# ------------------------------------------------------------ the verdict's closure measure
+def _comparison(z: list[float], line_z: float = 0.0, temp_z: float = 0.0,
+                regions: list[tuple[float, float]] = ()) -> Any:
+    from imubench.gap.curves import Comparison, Region
+
+    n = len(z)
+    tau = 2.0 ** np.arange(n)
+    zz = np.asarray(z, dtype=float)
+    one = np.ones(n)
+    return Comparison(
+        tau_s=tau, adev_real=one, adev_sim=one, adev_sim_lo=one, adev_sim_hi=one,
+        d=0.1 * zz, z=zz, sigma=0.1 * one, band_f_hz=np.array([0.1, 1.0]),
+        band_z=np.zeros(2), line_z=line_z, line_f_hz=3.3, tail_z=0.0, temp_z=temp_z,
+        trend_z=0.0, level_z=0.0, realisations=10,
+        regions=[Region(a, b, "real_above", 0.5, 6.0) for a, b in regions])
+
+
+def test_evidence_closed_counts_only_the_terms_that_fired() -> None:
+    """A loose base model leaves sub-threshold z ~ 3 at 14 other taus; the effect's region (z 6
+    and 5 at taus 4 and 8 s) is what the verdict must explain. An effect that removes the
+    region closes ALL of the significant excess, though under half of the total."""
+    loose = [3.0] * 16
+    before = _comparison([*loose[:2], 6.0, 5.0, *loose[4:]], regions=[(4.0, 8.0)])
+    after = _comparison([*loose[:2], 0.3, -0.2, *loose[4:]])
+    assert after.evidence_closed(before) == pytest.approx(1.0)
+    assert after.excess_closed(before) < 0.5  # the old, total measure
+    half = _comparison([*loose[:2], 4.0, 3.0, *loose[4:]])
+    expected = 1.0 - ((16 - 1) + (9 - 1)) / ((36 - 1) + (25 - 1))
+    assert half.evidence_closed(before) == pytest.approx(expected)
+
+
+def test_evidence_closed_uses_fired_statistics_one_sided_for_the_line() -> None:
+    thr = t_threshold(3.5, 9)
+    before = _comparison([0.0] * 6, line_z=2 * thr, temp_z=0.9 * thr)  # line fired only
+    assert before.evidence_closed(before) == pytest.approx(0.0)
+    gone = _comparison([0.0] * 6, line_z=-3.0, temp_z=0.0)  # a line below is no excess
+    assert gone.evidence_closed(before) == pytest.approx(1.0)
+    nothing = _comparison([0.0] * 6, line_z=0.5 * thr, temp_z=0.5 * thr)
+    assert np.isnan(nothing.evidence_closed(nothing))

@@ -202,6 +202,48 @@ class Comparison:
         sel &= np.isfinite(self.d)
         return float(np.sqrt(np.mean(self.d[sel] ** 2))) if sel.any() else float("nan")
 
+    def _fired_z(self, before: Comparison) -> np.ndarray:
+        """This comparison's z at the terms that fired in ``before`` (same taus and bands).
+
+        Terms: the taus of ``before``'s regions, the bands of its band runs, and the
+        line (one-sided), tail (one-sided), temperature and trend statistics that exceeded
+        their thresholds there (:attr:`significant`).
+        """
+        taus = np.zeros(self.tau_s.size, dtype=bool)
+        for r in before.regions:
+            taus |= (self.tau_s >= r.tau_min_s * 0.999) & (self.tau_s <= r.tau_max_s * 1.001)
+        bands = np.zeros(self.band_f_hz.size, dtype=bool)
+        for b in before.bands:
+            bands |= (self.band_f_hz >= float(b["f_min_hz"])) & (
+                self.band_f_hz <= float(b["f_max_hz"]))
+        dof = before.realisations - 1
+        z = [*self.z[taus], *self.band_z[bands]]
+        for name, z_norm, one_sided in (("line_z", Z_LINE, True), ("tail_z", Z_TAIL, True),
+                                        ("temp_z", Z_SLOPE, False),
+                                        ("trend_z", Z_SLOPE, False)):
+            zb = getattr(before, name)
+            if math.isfinite(zb) and (zb if one_sided else abs(zb)) > t_threshold(z_norm, dof):
+                za = getattr(self, name)
+                z.append(max(za, 0.0) if one_sided else za)
+        arr = np.asarray(z, dtype=float)
+        return arr[np.isfinite(arr)]
+
+    def evidence_closed(self, before: Comparison) -> float:
+        """Share of the SIGNIFICANT excess chi-squared of ``before`` this comparison removes.
+
+        ``1 - sum max(z_after^2 - 1, 0) / sum max(z_before^2 - 1, 0)`` over the terms that
+        fired in ``before`` (:meth:`_fired_z`): the gap the verdict has to explain, without
+        the sub-threshold scatter of every other tau and band (a loose base model spreads
+        chi-squared over terms no single effect could or should remove). NaN when nothing
+        fired.
+        """
+        zb = before._fired_z(before)
+        excess0 = float(np.sum(np.maximum(zb * zb - 1.0, 0.0)))
+        if not excess0 > 0:
+            return float("nan")
+        za = self._fired_z(before)
+        return 1.0 - float(np.sum(np.maximum(za * za - 1.0, 0.0))) / excess0
+
     def excess_closed(self, before: Comparison) -> float:
         """1 - excess chi2 after / excess chi2 before (excess = chi2 - n_terms, >= 0)."""
         excess0 = before.chi2 - before.n_terms

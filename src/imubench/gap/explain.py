@@ -22,6 +22,10 @@ def _f(v: float | None, digits: int = 3) -> str:
     return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}g}"
 
 
+def _pct(v: float | None) -> str:
+    return "-" if v is None or not math.isfinite(v) else f"{v:.0%}"
+
+
 def _detections(c: dict[str, Any], dof: int) -> list[str]:
     """The fit part's statistics beyond their thresholds (Student t with ``dof``)."""
     out = []
@@ -80,15 +84,16 @@ def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
         else:
             lines.append(
                 f"Verdict unexplained: the best candidate, {best['effect']}, removes "
-                f"{best['chi2_closed']:.0%} of the excess chi-squared (the verdict needs "
-                f"{MIN_CLOSURE:.0%}); an effect outside the candidate list, or two at once, "
-                "is likely.")
+                f"{_pct(best.get('evidence_closed'))} of the significant excess chi-squared "
+                f"(the verdict needs {MIN_CLOSURE:.0%}, without raising the total); an "
+                "effect outside the candidate list, or two at once, is likely.")
     else:
         w = effects[0]
         params = ", ".join(f"{k} = {_f(v, 4)}" for k, v in w["params"].items())
         txt = (f"Verdict {verdict} ({params}):"
-               f" it removes {w['chi2_closed']:.0%} of the excess chi-squared (needs "
-               f"{MIN_CLOSURE:.0%}) with score {w['score']:.1f}")
+               f" it removes {_pct(w.get('evidence_closed'))} of the significant excess "
+               f"chi-squared (the verdict needs {MIN_CLOSURE:.0%}; "
+               f"{_pct(w['chi2_closed'])} of the total) with score {w['score']:.1f}")
         if len(effects) > 1:
             r = effects[1]
             txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
