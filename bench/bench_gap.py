@@ -230,14 +230,18 @@ def fitted_model(y: np.ndarray, fs: float, channel: str, terms: str = "auto") ->
     return NoiseModel.single_term(channel, **keys)
 
 
-REALFX: dict[str, dict[str, float]] = {
-    "sine": {"sine_amplitude": 0.02, "sine_freq": 2.7},
-    "outliers": {"outlier_rate": 0.1, "outlier_amplitude": 3.0},
-    "temperature": {"temp_coeff": 0.01},
-    "ramp": {"ramp": 1e-5},
-    "random_walk": {"random_walk": 1e-3},
-    "markov": {"markov_sigma": 0.02, "markov_tau": 10.0},
+REALFX: dict[str, list[dict[str, float]]] = {
+    "sine": [{"sine_amplitude": 0.02, "sine_freq": 2.7}],
+    "outliers": [{"outlier_rate": 0.1, "outlier_amplitude": 3.0}],
+    "temperature": [{"temp_coeff": 0.01}],
+    "ramp": [{"ramp": 1e-5}, {"ramp": 1e-4}],
+    "random_walk": [{"random_walk": 1e-3}, {"random_walk": 3e-3}],
+    "markov": [{"markov_sigma": 0.02, "markov_tau": 10.0}],
 }
+"""Effects added to the real ADIS hour (same noise draw for both magnitudes of an effect).
+The first ramp (1e-5 dps/s) and random walk (1e-3 dps/sqrt(s)) are below the detection
+limit on this background (2026-11-21: no Allan region, trend t 2.5 / 0.7 against 5.3; the
+ADIS hour has its own drift, trend t -3.9 on the null); the second magnitudes are clear."""
 
 
 def realfx_cases() -> list[Case]:
@@ -253,14 +257,15 @@ def realfx_cases() -> list[Case]:
     c = run_case(Case("realfx", "none", {}), Series(y0, temp, fs, "adis"), model, "gx", 3, None)
     out.append(c)
     _show(c)
-    for i, (eff, p) in enumerate(REALFX.items()):
-        rng = np.random.default_rng(99_000 + i)
-        y = y0 + indep_series(rng, n, fs, eff, p, temp) - indep_series(
-            np.random.default_rng(99_000 + i), n, fs, "none", {}, temp)
-        c = run_case(Case("realfx", eff, p), Series(y, temp, fs, "adis"), model, "gx", 3,
-                     p[MAIN_PARAM[eff]])
-        out.append(c)
-        _show(c)
+    for i, (eff, mags) in enumerate(REALFX.items()):
+        for p in mags:
+            rng = np.random.default_rng(99_000 + i)
+            y = y0 + indep_series(rng, n, fs, eff, p, temp) - indep_series(
+                np.random.default_rng(99_000 + i), n, fs, "none", {}, temp)
+            c = run_case(Case("realfx", eff, p), Series(y, temp, fs, "adis"), model, "gx",
+                         3, p[MAIN_PARAM[eff]])
+            out.append(c)
+            _show(c)
     return out
 
 
