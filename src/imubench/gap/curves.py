@@ -218,11 +218,8 @@ class Comparison:
                 self.band_f_hz <= float(b["f_max_hz"]))
         dof = before.realisations - 1
         z = [*self.z[taus], *self.band_z[bands]]
-        for name, z_norm, one_sided in (("line_z", Z_LINE, True), ("tail_z", Z_TAIL, True),
-                                        ("temp_z", Z_SLOPE, False),
-                                        ("trend_z", Z_SLOPE, False)):
-            zb = getattr(before, name)
-            if math.isfinite(zb) and (zb if one_sided else abs(zb)) > t_threshold(z_norm, dof):
+        for name, z_norm, one_sided in STAT_TESTS:
+            if stat_fired(getattr(before, name), z_norm, one_sided, dof):
                 za = getattr(self, name)
                 z.append(max(za, 0.0) if one_sided else za)
         arr = np.asarray(z, dtype=float)
@@ -270,11 +267,9 @@ class Comparison:
     @property
     def significant(self) -> bool:
         dof = self.realisations - 1
-        return bool(self.regions or self.bands
-                    or self.line_z > t_threshold(Z_LINE, dof)
-                    or self.tail_z > t_threshold(Z_TAIL, dof)
-                    or abs(self.temp_z) > t_threshold(Z_SLOPE, dof)
-                    or abs(self.trend_z) > t_threshold(Z_SLOPE, dof))
+        return bool(self.regions or self.bands or any(
+            stat_fired(getattr(self, name), z_norm, one_sided, dof)
+            for name, z_norm, one_sided in STAT_TESTS))
 
 
 Z_LINE = 3.5
@@ -285,6 +280,16 @@ Z_TAIL = 5.0
 """z of the impulse count against the realisations that flags impulsive outliers."""
 Z_SLOPE = 3.5
 """|z| of the temperature slope or of the linear trend against the realisations."""
+STAT_TESTS: tuple[tuple[str, float, bool], ...] = (
+    ("line_z", Z_LINE, True), ("tail_z", Z_TAIL, True),
+    ("temp_z", Z_SLOPE, False), ("trend_z", Z_SLOPE, False))
+"""The single-statistic tests of a :class:`Comparison`: (attribute, normal-equivalent
+threshold, one-sided). Line and tails only count upwards (more line, more impulses)."""
+
+
+def stat_fired(z: float, z_norm: float, one_sided: bool, dof: int) -> bool:
+    """Whether a Student-t statistic with ``dof`` exceeds the normal-equivalent ``z_norm``."""
+    return math.isfinite(z) and (z if one_sided else abs(z)) > t_threshold(z_norm, dof)
 TEMP_BLOCK_S = 10.0
 """Shortest block (s) of the means the temperature and trend regressions use."""
 N_BLOCKS = 64

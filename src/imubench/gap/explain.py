@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from imubench.gap.curves import Z_LINE, Z_SLOPE, Z_TAIL, t_threshold
+from imubench.gap.curves import STAT_TESTS, stat_fired, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
 
 
@@ -36,25 +36,34 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
     for b in c.get("bands", []):
         out.append(f"spectrum {b['direction'].replace('_', ' ')} over "
                    f"{_f(b['f_min_hz'])}-{_f(b['f_max_hz'])} Hz")
-    checks = (("a spectral line", c["line"]["z"], Z_LINE, f" at {_f(c['line']['f_hz'], 4)} Hz"),
-              ("impulsive tails", c["impulses_z"], Z_TAIL, ""),
-              ("correlation with temperature", c["temperature_slope_z"], Z_SLOPE, ""),
-              ("a time trend", c["trend_z"], Z_SLOPE, ""))
-    for name, z, z_norm, where in checks:
-        thr = t_threshold(z_norm, dof)
-        if z is not None and math.isfinite(z) and abs(z) > thr and (z > 0 or name in (
-                "correlation with temperature", "a time trend")):
-            out.append(f"{name}{where} (t {z:.1f} against the threshold {thr:.1f})")
+    names = {"line_z": f"a spectral line at {_f(c['line']['f_hz'], 4)} Hz",
+             "tail_z": "impulsive tails", "temp_z": "correlation with temperature",
+             "trend_z": "a time trend"}
+    for key, z_norm, one_sided in STAT_TESTS:
+        z = _stat(c, key)
+        if stat_fired(z, z_norm, one_sided, dof):
+            out.append(f"{names[key]} (t {z:.1f} against the threshold "
+                       f"{t_threshold(z_norm, dof):.1f})")
     return out
+
+
+def _stat(c: dict[str, Any], key: str) -> float:
+    """A :data:`STAT_TESTS` statistic from the JSON entry (NaN when absent or null)."""
+    v = {"line_z": c["line"]["z"], "tail_z": c["impulses_z"],
+         "temp_z": c["temperature_slope_z"], "trend_z": c["trend_z"]}[key]
+    return float("nan") if v is None else float(v)
 
 
 def _strongest(c: dict[str, Any], dof: int) -> str:
     """The statistic closest to its threshold, as 'name t/threshold' (for `none`)."""
-    cand = [("line", c["line"]["z"], Z_LINE), ("tails", c["impulses_z"], Z_TAIL),
-            ("temperature", abs(c["temperature_slope_z"]), Z_SLOPE),
-            ("trend", abs(c["trend_z"]), Z_SLOPE)]
-    ratios = [(z / t_threshold(zn, dof), n, z, t_threshold(zn, dof)) for n, z, zn in cand
-              if z is not None and math.isfinite(z)]
+    names = {"line_z": "line", "tail_z": "tails", "temp_z": "temperature", "trend_z": "trend"}
+    ratios = []
+    for key, z_norm, one_sided in STAT_TESTS:
+        z = _stat(c, key)
+        z = z if one_sided else abs(z)
+        if math.isfinite(z):
+            thr = t_threshold(z_norm, dof)
+            ratios.append((z / thr, names[key], z, thr))
     if not ratios:
         return ""
     _, n, z, thr = max(ratios)
