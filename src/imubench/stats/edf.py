@@ -80,35 +80,43 @@ _GREENHALL_PARAMS: dict[str, tuple[int, bool, bool]] = {
 }
 
 #: TOTVAR, SP 1065 section 5.2.11 table (Howe 1999): alpha -> (b, c), edf = b N/m - c.
+#: TOTVAR: alpha -> (b, c) in edf = b N/m - c (Howe & Greenhall, "Total variance: a
+#: progress report on a new frequency stability characterization", 29th PTTI, 1997), with
+#: the unrounded values of W. J. Riley's EDF library (``TotvarEDF`` in edf4.c, the
+#: functions Stable32 calls); SP 1065 section 5.2.11 prints them rounded (1.50, 0), (1.17,
+#: 0.22), (0.93, 0.36).
 TOTVAR_EDF_COEFFICIENTS: dict[int, tuple[float, float]] = {
-    0: (1.50, 0.0),
-    -1: (1.17, 0.22),
-    -2: (0.93, 0.36),
+    0: (1.500, 0.0),
+    -1: (1.16832, 0.222),
+    -2: (0.92715, 0.358),
 }
 
 #: MTOTVAR and TTOTVAR: alpha -> (b, c) in edf = b N/m - c.
-#: SP 1065 section 5.2.12 lists (1.90, 2.10) WPM, (1.20, 1.40) FPM, (1.10, 1.20) WFM,
-#: (0.85, 0.50) FFM, (0.75, 0.31) RWFM. Stable32 1.60's own limits (phasedat
-#: ``phase_dat_mtotdev_*`` and ``phase_dat_ttotdev_*``) are NOT reproduced by those numbers
-#: for WFM and FPM; the WFM and FPM pairs below are least-squares fits to those files
-#: (they reproduce every listed limit within 1e-3). The other noise types keep SP 1065's
-#: values: no Stable32 reference exists here to check them.
+#: SP 1065 section 5.2.12 lists the ORIGINAL values (1.90, 2.10) WPM, (1.20, 1.40) FPM,
+#: (1.10, 1.20) WFM, (0.85, 0.50) FFM, (0.75, 0.31) RWFM, which do not reproduce Stable32's
+#: limits. Stable32 uses D. A. Howe's revised values (e-mail of 2000-05-20, as recorded in
+#: W. J. Riley's EDF library, ``ModTotvarEDF`` in edf4.c, "New values per D. Howe"), below.
+#: Session 2 had fitted (1.334, 1.90) WFM and (1.731, 2.99) FPM to the phasedat MTOT/TTOT
+#: files before this source was found: the same numbers to the printed precision.
 MTOT_EDF_COEFFICIENTS: dict[int, tuple[float, float]] = {
-    2: (1.90, 2.10),
-    1: (1.731, 2.99),
-    0: (1.334, 1.90),
-    -1: (0.85, 0.50),
-    -2: (0.75, 0.31),
+    2: (2.16, 2.28),
+    1: (1.73, 2.99),
+    0: (1.33, 1.89),
+    -1: (0.92, 0.76),
+    -2: (0.79, 0.37),
 }
 #: Stable32 uses the MVAR EDF for MTOT/TTOT below this averaging factor.
 MTOT_MIN_M = 10
 
 #: HTOTVAR, Howe et al. 2000 / SP 1065 section 5.2.14: alpha -> (b0, b1),
-#: edf = (N/m) / (b0 + b1 m/N).
+#: edf = (N/m) / (b0 + b1 m/N); flicker-walk and random-run FM (alpha -3, -4) from the
+#: final draft of that paper as recorded in Riley's EDF library (``HadTotvarEDF``, edf4.c).
 HTOTVAR_EDF_COEFFICIENTS: dict[int, tuple[float, float]] = {
     0: (0.559, 1.004),
     -1: (0.868, 1.140),
     -2: (0.938, 1.696),
+    -3: (0.974, 2.554),
+    -4: (1.276, 3.149),
 }
 #: Stable32 uses the simple formulas for HTOT below this averaging factor.
 HTOT_MIN_M = 16
@@ -383,13 +391,14 @@ def edf(stat: str, alpha: int, m: int, n_phase: int) -> float:
         b, c = MTOT_EDF_COEFFICIENTS[alpha]
         return b * ratio - c
     if name == "htotvar":
+        if m >= HTOT_MIN_M and alpha in HTOTVAR_EDF_COEFFICIENTS:
+            b0, b1 = HTOTVAR_EDF_COEFFICIENTS[alpha]
+            return ratio / (b0 + b1 / ratio)
         if alpha < -2:
-            # no published HTOT EDF for FWFM/RRFM: use the OHVAR EDF (same d = 3 kernel).
+            # the simple formulas stop at RWFM: below HTOT_MIN_M use the OHVAR EDF (same
+            # d = 3 kernel), as Stable32 does for the overlapping Hadamard variance.
             return edf_greenhall(alpha, 3, m, n_phase, False, True)
-        if m < HTOT_MIN_M or alpha not in HTOTVAR_EDF_COEFFICIENTS:
-            return edf_simple(alpha, m, n_phase) + SIMPLE_EDF_OFFSET
-        b0, b1 = HTOTVAR_EDF_COEFFICIENTS[alpha]
-        return ratio / (b0 + b1 / ratio)
+        return edf_simple(alpha, m, n_phase) + SIMPLE_EDF_OFFSET
     if name in ("theo1var", "theobrvar", "theohvar"):
         return _edf_theo1(alpha, m, n_phase)
     if name == "stdvar":
