@@ -71,9 +71,18 @@ def test_none_names_the_closest_statistic() -> None:
 
 def test_replicates_are_listed() -> None:
     h = dict(_entry("none")["holdout"])
-    h["recordings"] = [{"recording": "rep2", "gap_before": 0.25, "gap_after": 0.25}]
+    h["recordings"] = [{"recording": "rep2", "gap_before": 0.25, "gap_after": 0.25,
+                        "gap_null": 0.095, "gap_excess_before": 0.23, "significant": True},
+                       {"recording": "rep3", "gap_before": 0.09, "gap_after": 0.09,
+                        "gap_null": 0.1, "gap_excess_before": 0.0, "significant": False}]
     text = "\n".join(explain_channel(_entry("none", holdout=h), 10))
-    assert "Replicate rep2: gap 0.25 -> 0.25." in text
+    assert ("Replicate rep2: gap 0.25 -> 0.25 (a perfect model ~0.095, systematic 0.23; "
+            "significant departures from the model).") in text
+    assert "rep3: gap 0.09 -> 0.09 (a perfect model ~0.1, systematic 0; not significant" in text
+    assert "recording-to-recording variation" in text
+    h["recordings"] = h["recordings"][1:]
+    text = "\n".join(explain_channel(_entry("none", holdout=h), 10))
+    assert "recording-to-recording variation" not in text
 
 
 # ------------------------------------------------------------ the verdict's closure measure

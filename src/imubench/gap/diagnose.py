@@ -215,7 +215,9 @@ class ChannelDiagnosis:
             }
         if self.replicates:
             reps = [{"recording": name, "gap_before": b.gap,
-                     "gap_after": (a.gap if a is not None else b.gap)}
+                     "gap_after": (a.gap if a is not None else b.gap),
+                     "gap_null": b.gap_null, "gap_excess_before": b.gap_excess,
+                     "significant": b.significant}
                     for name, b, a in self.replicates]
             out["holdout"] = dict(out["holdout"] or {})
             out["holdout"]["recordings"] = reps

@@ -125,7 +125,18 @@ def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
             txt += (f", over the fit part's regions {_f(h['region_gap_before'])} -> "
                     f"{_f(h['region_gap_after'])}")
         lines.append(txt + ".")
-    for r in (h or {}).get("recordings", []):
-        lines.append(f"Replicate {r['recording']}: gap {_f(r['gap_before'])} -> "
-                     f"{_f(r['gap_after'])}.")
+    reps = (h or {}).get("recordings", [])
+    for r in reps:
+        txt = f"Replicate {r['recording']}: gap {_f(r['gap_before'])} -> {_f(r['gap_after'])}"
+        if r.get("gap_null") is not None:
+            txt += (f" (a perfect model ~{_f(r['gap_null'])}, systematic "
+                    f"{_f(r.get('gap_excess_before'))}; "
+                    f"{'significant' if r.get('significant') else 'not significant'} "
+                    "departures from the model)")
+        lines.append(txt + ".")
+    if verdict in ("none", "unexplained") and any(r.get("significant") for r in reps):
+        lines.append("Replicates depart from the model beyond their scatter"
+                     + (" although this recording does not" if verdict == "none" else "")
+                     + ": recording-to-recording variation of the sensor, which no single "
+                     "effect fitted to this recording captures.")
     return lines
