@@ -300,7 +300,7 @@ def identifies_at(stat: str, m: int, n_phase: int) -> bool:
     5.0 for MTOT/TTOT/HTOT (phase.dat); TOTDEV on the Keysight TIC data identifies at
     M/m = 6.8 where OADEV, with its longer stop ratio, already holds. With it our alpha
     equals the Alpha column in all 4,389 rows of the auto-ID runs except the Keysight ADEV
-    run (248 of 260; its 12 misses are white/flicker PM calls well inside the identified
+    run (248 of 260; its 12 misses are white PM/flicker PM/white FM calls inside the identified
     range), against 22 misses in the OCXO OADEV all-tau run alone before.
     """
     from imubench.stats.taus import max_af
