@@ -181,24 +181,16 @@ def compute(
     if stat == "theoh":
         return _theoh(pd, drift, data_type, rate, taus, confidence, alpha, max_af, afs, progress)
     return _compute_pd(
-        stat,
-        pd,
-        drift,
-        data_type,
-        rate,
-        taus,
-        confidence,
-        alpha,
-        bias_correction,
-        max_af,
-        afs,
-        progress,
+        stat, pd, drift=drift, data_type=data_type, rate=rate, taus=taus,
+        confidence=confidence, alpha=alpha, bias_correction=bias_correction, max_af=max_af,
+        afs=afs, progress=progress,
     )
 
 
 def _compute_pd(
     stat: str,
     pd: PhaseData,
+    *,
     drift: float | None,
     data_type: str,
     rate: float,
@@ -325,18 +317,9 @@ def _theoh(
         raise StatsError("theoh takes a single alpha (or None), not one per tau")
     parts = [
         _compute_pd(
-            name,
-            pd,
-            drift,
-            data_type,
-            rate,
-            taus,
-            confidence,
-            alpha,
-            True,
-            max_af,
-            sel,
-            progress,
+            name, pd, drift=drift, data_type=data_type, rate=rate, taus=taus,
+            confidence=confidence, alpha=alpha, bias_correction=True, max_af=max_af,
+            afs=sel, progress=progress,
         )
         for name, sel in (("oadev", m_av), ("theobr", m_br))
         if sel.size
