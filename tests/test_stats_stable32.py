@@ -145,22 +145,20 @@ MTOT_BIAS_S32_153 = {2: 0.94, 1: 0.83, 0: 0.73, -1: 0.70, -2: 0.69}
 S32_153_BIASED = {"phasedat/phase_dat_mtotdev.txt", "phasedat/phase_dat_ttotdev_all.txt"}
 
 
+def _compute_case(reference_dir: Path, case: Case, rows: np.ndarray,
+                  alpha: np.ndarray | None) -> st.StatResult:
+    """compute() on the case's data at the file's AFs (alpha None: our own noise ID)."""
+    data, dtype = load_data(reference_dir, case.data)
+    return st.compute(case.stat, data, case.rate, dtype, afs=rows[:, 0].astype(np.int64),
+                      alpha=alpha, bias_correction=case.bias)
+
+
 @pytest.mark.parametrize("case", CASES, ids=[c.rel for c in CASES])
 def test_stable32_deviation_and_counts(reference_dir: Path, case: Case) -> None:
     rows, _ = read_stable32(reference_dir / SET / case.rel)
     assert rows.shape[0] >= 5
-    data, dtype = load_data(reference_dir, case.data)
-    afs = rows[:, 0].astype(np.int64)
-    res = st.compute(
-        case.stat,
-        data,
-        case.rate,
-        dtype,
-        afs=afs,
-        alpha=rows[:, 3].astype(int),
-        bias_correction=case.bias,
-    )
-    np.testing.assert_array_equal(res.m, afs)
+    res = _compute_case(reference_dir, case, rows, rows[:, 3].astype(int))
+    np.testing.assert_array_equal(res.m, rows[:, 0].astype(np.int64))
     tau = rows[:, 1]
     np.testing.assert_allclose(res.tau_s, tau, rtol=1e-4)
     if case.stat == "theo1":
@@ -173,12 +171,9 @@ def test_stable32_deviation_and_counts(reference_dir: Path, case: Case) -> None:
     np.testing.assert_allclose(dev, rows[:, 5], rtol=case.rtol)
 
 
-# Rows whose Stable32 limits we do not reproduce to ci_rtol even with Stable32's alpha:
-# none. (HTOT at flicker PM, phasedat AF 128/256, was off by 2.6e-3 and 1.4e-2 until the
-# simple-formula EDF got Stable32's +2, edf.SIMPLE_EDF_OFFSET.) Kept as the mechanism to
-# list one, asserted to still differ so that an entry cannot go stale.
-CI_KNOWN_DIFFERS: set[tuple[str, int]] = set()
-
+# Every Stable32 limit is reproduced to ci_rtol with Stable32's alpha (HTOT at flicker PM,
+# phasedat AF 128/256, was off by 2.6e-3 and 1.4e-2 until the simple-formula EDF got
+# Stable32's +2, edf.SIMPLE_EDF_OFFSET).
 CI_CASES = [pytest.param(c, id=c.rel) for c in CASES if c.has_ci]
 
 
@@ -190,20 +185,9 @@ def _ci_rel_err(res: st.StatResult, rows: np.ndarray) -> np.ndarray:
 def test_stable32_ci_given_alpha(reference_dir: Path, case: Case) -> None:
     rows, _ = read_stable32(reference_dir / SET / case.rel)
     assert np.all(rows[:, 4] > 0), "a file listed with CIs has a row without them"
-    data, dtype = load_data(reference_dir, case.data)
-    res = st.compute(
-        case.stat,
-        data,
-        case.rate,
-        dtype,
-        afs=rows[:, 0].astype(np.int64),
-        alpha=rows[:, 3].astype(int),
-        bias_correction=case.bias,
-    )
-    known = np.array([(case.rel, int(m)) in CI_KNOWN_DIFFERS for m in rows[:, 0]])
+    res = _compute_case(reference_dir, case, rows, rows[:, 3].astype(int))
     err = _ci_rel_err(res, rows)
-    assert np.all(err[~known] <= case.ci_rtol), dict(zip(rows[~known, 0], err[~known], strict=True))
-    assert np.all(err[known] > case.ci_rtol), "a known CI difference is gone: update the list"
+    assert np.all(err <= case.ci_rtol), dict(zip(rows[:, 0], err, strict=True))
 
 
 # Rows where our noise identification (compute() with alpha=None) gives another alpha than
@@ -230,15 +214,7 @@ OWN_ALPHA_DIFFERS: dict[tuple[str, int], tuple[int, int]] = {
 def test_stable32_ci_own_noise_id(reference_dir: Path, case: Case) -> None:
     """Acceptance 1: CI limits within 1e-2 with our own noise identification."""
     rows, _ = read_stable32(reference_dir / SET / case.rel)
-    data, dtype = load_data(reference_dir, case.data)
-    res = st.compute(
-        case.stat,
-        data,
-        case.rate,
-        dtype,
-        afs=rows[:, 0].astype(np.int64),
-        bias_correction=case.bias,
-    )
+    res = _compute_case(reference_dir, case, rows, None)
     theirs = rows[:, 3].astype(int)
     differs = {
         (case.rel, int(m)): (int(a), int(b))
@@ -248,7 +224,6 @@ def test_stable32_ci_own_noise_id(reference_dir: Path, case: Case) -> None:
     expected = {k: v for k, v in OWN_ALPHA_DIFFERS.items() if k[0] == case.rel}
     assert differs == expected
     same = res.alpha == theirs
-    same &= ~np.array([(case.rel, int(m)) in CI_KNOWN_DIFFERS for m in rows[:, 0]])
     err = _ci_rel_err(res, rows)
     tol = max(1e-2, case.ci_rtol)
     assert np.all(err[same] <= tol), dict(zip(rows[same, 0], err[same], strict=True))
