@@ -341,20 +341,28 @@ def lag1_r1(z: np.ndarray) -> tuple[float, int]:
             n += 1
     if n == 0:
         return np.nan, 0
-    mean = s / n
-    num = 0.0
-    den = 0.0
-    for i in range(z.size):
-        a = z[i] - mean
-        if a == a:
-            den += a * a
-            if i + 1 < z.size:
-                b = z[i + 1] - mean
-                if b == b:
-                    num += a * b
+    num, den = _lag1_pair_sums(z, z.size, z.size, s / n, 0.0, 0.0)
     if den == 0.0:
         return np.nan, n
     return num / den, n
+
+
+@njit(cache=True, fastmath=_FM)
+def _lag1_pair_sums(buf: np.ndarray, cnt: int, ext: int, mean: float, num: float,
+                    den: float) -> tuple[float, float]:
+    """NaN-aware sums of :func:`lag1_r1` over points 0..cnt-1 of ``buf`` (``ext`` points
+    valid, so pairs (j, j+1) with j + 1 < ext), added in order to the running ``num``
+    (sum a_j a_{j+1}) and ``den`` (sum a_j^2), a = buf - mean; pairs or points with a NaN
+    skipped."""
+    for j in range(cnt):
+        a = buf[j] - mean
+        if a == a:
+            den += a * a
+            if j + 1 < ext:
+                b = buf[j + 1] - mean
+                if b == b:
+                    num += a * b
+    return num, den
 
 
 @njit(cache=True, fastmath=_FM)
@@ -489,14 +497,7 @@ def lag1_r1_diff(x: np.ndarray, m: int, freq: bool, d: int) -> tuple[float, int]
             for j in range(ext - 1):
                 num += (buf[j] - mean) * (buf[j + 1] - mean)
         else:
-            for j in range(cnt):
-                a = buf[j] - mean
-                if a == a:
-                    den += a * a
-                    if j + 1 < ext:
-                        b = buf[j + 1] - mean
-                        if b == b:
-                            num += a * b
+            num, den = _lag1_pair_sums(buf, cnt, ext, mean, num, den)
     if den == 0.0:
         return np.nan, n
     return num / den, n

@@ -126,22 +126,20 @@ def to_phase(
         x[0] = 0.0
         y = x[1:]
         np.subtract(arr, mean, out=y)
-        gp = None
-        if has_gaps:
-            bad = np.isnan(y)
-            y[bad] = 0.0
-            # span a..b of phase uses y[a:b]; G[k] = #NaN in y[:k]
-            gp = np.zeros(arr.size + 1, dtype=np.int64)
-            np.cumsum(bad, out=gp[1:])
+        # span a..b of phase uses y[a:b]; G[k] = #NaN in y[:k]
+        gp = _zero_gaps(y) if has_gaps else None
         if tau0 != 1.0:
             y *= tau0
         np.cumsum(y, out=y)
         return PhaseData(x, tau0, gp, gap_end_offset=0), drift
     x = np.subtract(arr, mean)
-    gp = None
-    if has_gaps:
-        bad = np.isnan(x)
-        x[bad] = 0.0
-        gp = np.zeros(x.size + 1, dtype=np.int64)
-        np.cumsum(bad, out=gp[1:])
-    return PhaseData(x, tau0, gp), drift
+    return PhaseData(x, tau0, _zero_gaps(x) if has_gaps else None), drift
+
+
+def _zero_gaps(v: np.ndarray) -> np.ndarray:
+    """Set the NaN samples of ``v`` to 0 in place; return G with G[k] = #NaN in v[:k]."""
+    bad = np.isnan(v)
+    v[bad] = 0.0
+    gp = np.zeros(v.size + 1, dtype=np.int64)
+    np.cumsum(bad, out=gp[1:])
+    return gp
