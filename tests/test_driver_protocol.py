@@ -158,6 +158,10 @@ def test_bus_budget_refuses_6660_on_400khz() -> None:
         FifoStream(dev, ImuConfig(odr_hz=6660), bus_hz=400e3)
     degraded = FifoStream(dev, ImuConfig(odr_hz=6660), bus_hz=400e3, on_overbudget="degrade")
     assert degraded.odr_hz == 3330 and degraded.degraded_from_hz == 6660
+    # an explicit, equal accelerometer ODR is degraded with the gyro's (one FIFO ODR)
+    both = FifoStream(dev, ImuConfig(odr_hz=6660, accel_odr_hz=6660), bus_hz=400e3,
+                      on_overbudget="degrade")
+    assert both.cfg.odr_hz == both.cfg.odr_xl_hz == 3330
     fits = FifoStream(dev, ImuConfig(odr_hz=3330), bus_hz=400e3)
     # 3330 x (12 + 6/16) = 41 209 B/s <= 95 % of 400e3 / 9; with /8 it would not fit
     assert fits.ts_decimation == 16 and fits.bytes_per_s <= 0.95 * 400e3 / 9

@@ -193,7 +193,8 @@ class FifoStream:
                 msg + "; lower odr_hz, raise the bus speed, or set on_overbudget=degrade"
             )
         self.degraded_from_hz = cfg.odr_hz
-        new = ImuConfig(**{**cfg.__dict__, "odr_hz": best})
+        # both sensors move: the constructor only admits accel_odr_hz equal to odr_hz
+        new = ImuConfig(**{**cfg.__dict__, "odr_hz": best, "accel_odr_hz": None})
         return self._plan(new)
 
     def _layout(self) -> None:
