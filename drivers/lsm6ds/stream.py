@@ -151,7 +151,6 @@ class FifoStream:
         self._tick_s_est = TICK_S
         self._drift_cur: tuple[float, float] | None = None  # this epoch: (host s, ticks)
         self._drift_sum: tuple[float, float] = (0.0, 0.0)  # finished epochs, summed
-        self._drift_raw = 0  # last raw 24-bit counter read this epoch
         self._last_sample_host_t: float | None = None
         self._pending_gap_reason: str | None = None
         self._last_verify_t = 0.0
@@ -209,8 +208,6 @@ class FifoStream:
             if s == 0 and self.ts_decimation:
                 self._ts_offset = offset
                 offset += 3
-        self._gyro_idx = gyro
-        self._accel_idx = accel
         # columns of one pattern's words holding gx gy gz ax ay az of slot 0, 1, ...
         self._body_cols = np.concatenate([gyro, accel], axis=1).reshape(-1)
         self.ticks_per_slot = 1.0 / (self.odr_hz * TICK_S)
@@ -257,7 +254,6 @@ class FifoStream:
         if new_epoch and self.ts_decimation:
             self._epoch_t_ref = self.dev.reset_timestamp()
             self._last_ticks = None
-            self._drift_raw = 0
             if self._drift_cur is not None:  # bank the finished epoch's baseline
                 self._drift_sum = (
                     self._drift_sum[0] + self._drift_cur[0],
@@ -395,11 +391,11 @@ class FifoStream:
         raw = self.dev.read_timestamp_ticks()
         t_read = 0.5 * (t0 + self.dev.monotonic())
         prev_ticks = self._drift_cur[1] if self._drift_cur is not None else 0.0
-        ticks = prev_ticks + ((raw - self._drift_raw) % TICKS_WRAP)
+        # the epoch's tick count is congruent to the raw 24-bit counter (both start at 0)
+        ticks = prev_ticks + ((raw - int(prev_ticks) % TICKS_WRAP) % TICKS_WRAP)
         span_t = t_read - self._epoch_t_ref
         if span_t <= 0 or ticks <= 0 or abs(span_t / (ticks * TICK_S) - 1.0) > 0.1:
             return  # counter reset under us (a chip reset the next poll will see)
-        self._drift_raw = raw
         self._drift_cur = (span_t, float(ticks))
         tot_t, tot_k = self._drift_sum[0] + span_t, self._drift_sum[1] + ticks
         if tot_k * TICK_S >= 0.5:

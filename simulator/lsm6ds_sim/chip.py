@@ -99,7 +99,6 @@ class _Config:
     timer_en: bool = False
     timer_hr: bool = False
     pattern_slots: int = 1
-    pos_table: np.ndarray = field(default_factory=lambda: np.zeros((1, 4), dtype=np.int64))
     slot_offset: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
     pattern_words: int = 0
     word_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -290,10 +289,7 @@ class SimChip:
                 present[::d, i] = True
         counts = present.sum(axis=1)
         slot_offset = np.concatenate([[0], np.cumsum(counts * 3)[:-1]]).astype(np.int64)
-        rank = np.cumsum(present, axis=1) - 1
-        pos_table = np.where(present, slot_offset[:, None] + 3 * rank, -1)
         c.pattern_slots = slots
-        c.pos_table = pos_table
         c.word_cols = np.nonzero(np.repeat(present, 3, axis=1).reshape(-1))[0]
         c.slot_offset = slot_offset
         c.pattern_words = int(counts.sum() * 3)
@@ -399,7 +395,7 @@ class SimChip:
         n_pat = -(-(lead + m) // S)
         j = np.arange(j_from - lead, j_from - lead + n_pat * S, dtype=np.int64)
         # latest base sample at each slot time
-        idx = j - (k0 - 1) if r == 1 else (j * r.denominator) // r.numerator - (k0 - 1)
+        idx = (j * r.denominator) // r.numerator - (k0 - 1)
         np.maximum(idx, 0, out=idx)
         np.minimum(idx, len(src) - 1, out=idx)
         vals = np.zeros((n_pat * S, 12), dtype=np.uint16)  # gyro, accel, DS3, DS4 words
