@@ -109,7 +109,7 @@ def _null_comparison(m: int, k: int, spike_z: float | None) -> Comparison:
     curve = 1e-5 / tau + 1e-8 * tau
     avar = curve * np.exp(2 * 0.1 * rng.standard_normal((k, m)))
     bands = np.exp(0.2 * rng.standard_normal((k, 6)))
-    sims = SimFeatures(avar, bands, np.ones((k, 8)), np.zeros(k), np.zeros(k), np.zeros(k),
+    sims = SimFeatures(avar, bands, np.ones((k, 8)), np.zeros(k),
                        rng.standard_normal(k), rng.standard_normal(k),
                        rng.standard_normal(k), rng.standard_normal(k))
     edges = np.logspace(-2, 1, 7)
@@ -117,7 +117,7 @@ def _null_comparison(m: int, k: int, spike_z: float | None) -> Comparison:
     def run(real_avar: np.ndarray) -> Comparison:
         real = Features(real_avar, bands.mean(axis=0), np.ones(8), 0, line_ln=0.0,
                         temp_corr=0.0, trend_corr=0.0, level_corr=0.0)
-        return compare(real, np.full(m, np.nan), sims, tau, edges[:-1], edges)
+        return compare(real, np.full(m, np.nan), sims, tau, edges)
 
     base = run(avar.mean(axis=0))
     if spike_z is None:

@@ -85,10 +85,9 @@ class Features:
     band_psd: np.ndarray
     psd: np.ndarray
     impulses: int
-    temp_slope: float = float("nan")
-    """Least-squares slope of block means of the rate on temperature (unit/degC)."""
     trend_slope: float = float("nan")
-    """Least-squares slope of the rate against time (unit/s)."""
+    """Least-squares slope of the block means of the rate against time (unit/s): the
+    ramp candidate's parameter."""
     line_ln: float = 0.0
     """ln(peak / continuum) of the highest narrow line of the fine spectrum."""
     line_f_hz: float = 0.0
@@ -114,8 +113,6 @@ class SimFeatures:
     band_psd: np.ndarray
     psd: np.ndarray
     impulses: np.ndarray
-    temp_slope: np.ndarray
-    trend_slope: np.ndarray
     temp_corr: np.ndarray
     trend_corr: np.ndarray
     line_ln: np.ndarray
@@ -364,11 +361,6 @@ def detrended_lag1(t_s: np.ndarray, yb: np.ndarray) -> float:
     return fisher_z(r[:-1], r[1:])
 
 
-def trend_slope(y: np.ndarray, rate_hz: float) -> float:
-    """Least-squares slope (unit/s) of the block means of y against the blocks' mid times."""
-    return slope(*trend_blocks(y, rate_hz))
-
-
 def analysis_afs(n: int, rate_hz: float) -> np.ndarray:
     """Octave averaging factors 1, 2, 4, ... up to the statistics' own OADEV limit."""
     return averaging_factors("oadev", n, "octave", 1.0 / rate_hz)
@@ -458,17 +450,19 @@ def features(y: np.ndarray, rate_hz: float, afs: np.ndarray, edges: np.ndarray,
     """ADEV (as AVAR) at ``afs``, band PSD, Welch PSD, impulse count, slopes of one series."""
     avar = oavar_at(y, rate_hz, afs)
     f, p = welch_psd(y, rate_hz, nperseg)
-    ts = tz = float("nan")
+    tz = float("nan")
     if temp_c is not None and np.isfinite(temp_c).any():
         yb, tb = temperature_blocks(y, temp_c, rate_hz)
         if len(tb) >= 5 and np.ptp(tb) > 1e-6:
-            ts, tz = slope(tb, yb), fisher_z(np.diff(tb), np.diff(yb))
+            tz = fisher_z(np.diff(tb), np.diff(yb))
     tt, yt = trend_blocks(y, rate_hz)
     nl = line_segment(len(y))
     fl, pl = welch_psd(y, rate_hz, nl)
     ib, ln_peak = line_peak(pl)
-    return Features(avar, band_means(f, p, edges), p, impulse_count(y), ts, slope(tt, yt),
-                    ln_peak, float(fl[ib]), tz, fisher_z(tt, yt), detrended_lag1(tt, yt))
+    return Features(avar, band_means(f, p, edges), p, impulse_count(y),
+                    trend_slope=slope(tt, yt), line_ln=ln_peak, line_f_hz=float(fl[ib]),
+                    temp_corr=tz, trend_corr=fisher_z(tt, yt),
+                    level_corr=detrended_lag1(tt, yt))
 
 
 def stack(feats: list[Features]) -> SimFeatures:
@@ -477,8 +471,6 @@ def stack(feats: list[Features]) -> SimFeatures:
         np.array([f.band_psd for f in feats]),
         np.array([f.psd for f in feats]),
         np.array([f.impulses for f in feats], dtype=float),
-        np.array([f.temp_slope for f in feats]),
-        np.array([f.trend_slope for f in feats]),
         np.array([f.temp_corr for f in feats]),
         np.array([f.trend_corr for f in feats]),
         np.array([f.line_ln for f in feats]),
@@ -548,7 +540,7 @@ def _z_against(value: float, sims: np.ndarray) -> float:
     return float((value - sims[ok].mean()) / sd)
 
 
-def _runs(z: np.ndarray, d: np.ndarray, z_edge: float = Z_EDGE, z_region: float = Z_REGION
+def _runs(z: np.ndarray, z_edge: float = Z_EDGE, z_region: float = Z_REGION
           ) -> list[tuple[int, int]]:
     """Index ranges [i, j] of runs with |z| > z_edge, one sign, holding |z| > z_region."""
     out: list[tuple[int, int]] = []
@@ -570,7 +562,7 @@ def _runs(z: np.ndarray, d: np.ndarray, z_edge: float = Z_EDGE, z_region: float 
 
 
 def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.ndarray,
-            f_hz: np.ndarray, edges: np.ndarray) -> Comparison:
+            edges: np.ndarray) -> Comparison:
     """Real features against K realisations (see the module docstring for z and regions).
 
     ``real_ci_s``: the real curve's one-sigma spread in ln ADEV from its confidence
@@ -613,13 +605,13 @@ def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.
     # family-wise significance: the threshold grows with the number of taus (bands) tested
     z_taus = family_z(int(np.isfinite(z).sum()))
     z_bands = t_threshold(family_z(int(np.isfinite(band_z).sum())), k - 1)
-    for i, j in _runs(z, d, Z_EDGE, z_taus):
+    for i, j in _runs(z, Z_EDGE, z_taus):
         comp.regions.append(Region(
             float(tau_s[i]), float(tau_s[j]),
             "real_above" if d[i] > 0 else "real_below",
             float(np.sqrt(np.mean(d[i : j + 1] ** 2))), float(np.nanmax(np.abs(z[i : j + 1]))),
         ))
-    for i, j in _runs(band_z, db, t_threshold(Z_EDGE, k - 1), z_bands):
+    for i, j in _runs(band_z, t_threshold(Z_EDGE, k - 1), z_bands):
         comp.bands.append({
             "f_min_hz": float(edges[i]), "f_max_hz": float(edges[j + 1]),
             "direction": "real_above" if db[i] > 0 else "real_below",

@@ -154,13 +154,6 @@ class Candidate:
 
 
 @dataclass
-class Realisations:
-    """K simulated series over the whole record (rows), cached per model variant."""
-
-    values: np.ndarray
-
-
-@dataclass
 class ChannelDiagnosis:
     channel: str
     before: Comparison
@@ -276,7 +269,7 @@ class _PartSetup:
                                self.series.temp_c) for s in sims])
 
     def compare(self, sims: SimFeatures) -> Comparison:
-        return compare(self.real, self.ci_s, sims, self.tau_s, self.f_hz, self.edges)
+        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges)
 
 
 def _additive(cm: ChannelModel, effect: str) -> bool:
@@ -327,7 +320,7 @@ def fit_candidates(cm: ChannelModel, fit: _PartSetup, before: Comparison,
     model_avar = base_feats.avar.mean(axis=0)
     sig = before.sigma
     for eff in effects:
-        if eff in avarfit.BASES and eff != "ramp":
+        if eff in avarfit.BASES:
             p = avarfit.fit_single(eff, fit.tau_s, fit.real.avar, model_avar, sig)
             p0 = getattr(cm, eff)
             cands.append(Candidate(eff, {eff: math.sqrt(p0 * p0 + p * p)}, 1))
@@ -399,10 +392,11 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     ev["psd"] = (fit.f_hz, fit.real.psd, base_fit.psd.mean(axis=0))
     penalty = math.log(before.n_terms)
     excess0 = before.chi2 - before.n_terms
-    cache: dict[int, np.ndarray] = {}
+    held_sims: dict[int, np.ndarray] = {}  # the held-out part of each candidate's realisations
     for i, c in enumerate(cands):
         sims = _effect_realisations(model, channel, c.effect, c.params, series, seeds, base)
-        cache[i] = sims
+        if hold is not None:
+            held_sims[i] = sims[:, n_fit:].copy()  # the fit part is not kept
         c.fit = fit.compare(fit.sim_features(sims[:, :n_fit]))
         c.score = c.fit.chi2 + penalty * c.n_params
         c.closure = c.fit.excess_closed(before) if excess0 > 1e-9 else 0.0
@@ -424,8 +418,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     top = ranked[:HOLDOUT_TOP]
     if hold is not None and base_hold is not None:
         for c in top:
-            sims = cache[cands.index(c)]
-            c.holdout = hold.compare(hold.sim_features(sims[:, n_fit:]))
+            c.holdout = hold.compare(hold.sim_features(held_sims[cands.index(c)]))
     diag = ChannelDiagnosis(channel, before, hold_before, ranked, verdict, ev)
     for rep in replicates or []:
         rs = _PartSetup(rep)

@@ -12,7 +12,7 @@
   amplifies its quantization and noise and biases the slope toward zero (errors in
   variables).
 * ramp: least-squares slope of the rate against time (unit/s; the model's ``ramp``; computed
-  with the features, :func:`imubench.gap.curves.trend_slope`).
+  with the features, ``imubench.gap.curves.Features.trend_slope``).
 * sine: the largest line of the Welch spectrum's ratio to the model's; frequency refined
   on the zero-padded periodogram of the whole fit part, amplitude by least squares of a
   sine and cosine at that frequency (Kay, Modern Spectral Estimation, sec. 13.3).
