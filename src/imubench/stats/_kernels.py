@@ -25,11 +25,6 @@ LAG1_CHUNK = 2048  # series points formed at a time by lag1_r1_diff (a 16 kB scr
 
 
 @njit(cache=True, fastmath=_FM)
-def _ok(gp: np.ndarray, goff: int, a: int, b: int) -> bool:
-    return gp.size == 0 or gp[b + goff] - gp[a] == 0
-
-
-@njit(cache=True, fastmath=_FM)
 def sumsq_diff(
     x: np.ndarray, m: int, step: int, count: int, order: int, gp: np.ndarray, goff: int
 ) -> tuple[float, int]:

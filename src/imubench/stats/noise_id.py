@@ -44,6 +44,8 @@ import numpy as np
 
 from imubench.errors import StatsError
 from imubench.stats import _kernels as _k
+from imubench.stats.edf import VAR_NAME, canonical_stat
+from imubench.stats.taus import max_af
 
 __all__ = [
     "LAG1_MIN_POINTS",
@@ -51,6 +53,7 @@ __all__ = [
     "analysis_terms",
     "b1_alpha",
     "b1_expected",
+    "dmax_for",
     "identifies_at",
     "identify_alpha",
     "lag1_acf",
@@ -61,7 +64,8 @@ __all__ = [
 #: Minimum number of points at the averaging time for the lag-1 ACF method.
 LAG1_MIN_POINTS = 30
 
-_HADAMARD_STATS = {"hvar", "ohvar", "htotvar", "hdev", "ohdev", "htotdev"}
+_HADAMARD_VARS = {"hvar", "ohvar", "htotvar"}
+_DEV_NAME = {v: k for k, v in VAR_NAME.items()}  # variance name -> deviation name
 
 #: Noise exponents each statistic's EDF (and bias) supports, as (lowest, highest).
 _ALPHA_RANGE = {
@@ -84,15 +88,14 @@ _ALPHA_RANGE = {
 _MODIFIED_STATS = {"mvar", "tvar", "mtotvar", "ttotvar"}
 
 
-def _canonical(stat: str) -> str:
-    from imubench.stats.edf import canonical_stat
-
-    return canonical_stat(stat)
+def dmax_for(stat: str) -> int:
+    """Lag-1 dmax of :func:`identify_alpha`: 3 for the Hadamard family, 2 otherwise."""
+    return 3 if canonical_stat(stat) in _HADAMARD_VARS else 2
 
 
 def alpha_range(stat: str) -> tuple[int, int]:
     """(lowest, highest) noise exponent that ``stat``'s EDF and bias support."""
-    name = _canonical(stat)
+    name = canonical_stat(stat)
     if name not in _ALPHA_RANGE:
         raise StatsError(
             f"noise identification: unknown statistic {stat!r}; expected one of "
@@ -220,7 +223,7 @@ def _mvar(x: np.ndarray, m: int) -> float:
 
 def analysis_terms(stat: str, m: int, n_phase: int) -> int:
     """Number of terms ("#" column of Stable32) of ``stat`` at m for N phase points."""
-    name = _canonical(stat)
+    name = canonical_stat(stat)
     n = n_phase
     table = {
         "avar": (n - 1) // m - 1,
@@ -303,22 +306,14 @@ def identifies_at(stat: str, m: int, n_phase: int) -> bool:
     run (248 of 260; its 12 misses are white PM/flicker PM/white FM calls inside the identified
     range), against 22 misses in the OCXO OADEV all-tau run alone before.
     """
-    from imubench.stats.taus import max_af
-
-    name = _canonical(stat)
-    dev = {v: k for k, v in _var_names().items()}.get(name, name)
+    name = canonical_stat(stat)
+    dev = _DEV_NAME.get(name, name)
     n_freq = int(n_phase) - 1
     try:
         m_max = max_af(dev, n_freq)
     except StatsError:
         return True
     return 2 * int(m) <= m_max
-
-
-def _var_names() -> dict[str, str]:
-    from imubench.stats.edf import VAR_NAME
-
-    return VAR_NAME
 
 
 def identify_alpha(
@@ -338,8 +333,7 @@ def identify_alpha(
     arr = _check(x, m, data_type)
     if previous is not None and not identifies_at(stat, int(m), arr.size):
         return int(min(max(int(previous), lo), hi))
-    name = _canonical(stat)
-    dmax = 3 if name in {"hvar", "ohvar", "htotvar"} else 2
+    dmax = dmax_for(stat)
     if _k.points_at_tau(arr, int(m), data_type == "freq", LAG1_MIN_POINTS) >= LAG1_MIN_POINTS:
         alpha = lag1_alpha(arr, int(m), data_type, dmin=0, dmax=dmax)
     else:

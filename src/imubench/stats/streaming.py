@@ -77,12 +77,8 @@ import numpy as np
 from imubench.errors import StatsError
 from imubench.stats._stream_kernels import level_sums, mvar_sums
 from imubench.stats.edf import canonical_stat
-from imubench.stats.streaming_noise import (
-    LAG1_MIN_POINTS,
-    RunningNoiseSums,
-    concat_f,
-    dmax_for,
-)
+from imubench.stats.noise_id import dmax_for
+from imubench.stats.streaming_noise import LAG1_MIN_POINTS, RunningNoiseSums, concat_f
 from imubench.stats.taus import averaging_factors
 
 # statistic (deviation name) -> (variance family, overlapping?)

@@ -43,6 +43,7 @@ from imubench.stats.noise_id import (
     alpha_range,
     analysis_terms,
     b1_expected,
+    dmax_for,
     rn_expected,
 )
 
@@ -70,11 +71,6 @@ def concat_f(parts: list[np.ndarray], dtype: np.dtype | type | None = None) -> n
         out[i:i + p.shape[0]] = p
         i += p.shape[0]
     return out
-
-
-def dmax_for(var_stat: str) -> int:
-    """Lag-1 dmax of ``noise_id.identify_alpha``: 3 for the Hadamard family, 2 otherwise."""
-    return 3 if var_stat in {"hvar", "ohvar", "htotvar"} else 2
 
 
 class RunningNoiseSums:
