@@ -77,8 +77,8 @@ import numpy as np
 from imubench.errors import StatsError
 from imubench.stats._stream_kernels import level_sums, mvar_sums
 from imubench.stats.edf import canonical_stat
-from imubench.stats.noise_id import dmax_for
-from imubench.stats.streaming_noise import LAG1_MIN_POINTS, RunningNoiseSums, concat_f
+from imubench.stats.noise_id import LAG1_MIN_POINTS, alpha_range, dmax_for, identifies_at
+from imubench.stats.streaming_noise import ALPHA_UNKNOWN, RunningNoiseSums, concat_f
 from imubench.stats.taus import averaging_factors
 
 # statistic (deviation name) -> (variance family, overlapping?)
@@ -750,8 +750,6 @@ class StreamingAllan:
         nch = int(self._nch or 0)
         if self.alpha is not None:
             return np.full((nch, ms.size), self.alpha, dtype=np.int64)
-        from imubench.stats.noise_id import alpha_range, identifies_at
-        from imubench.stats.streaming_noise import ALPHA_UNKNOWN
 
         var_stat = canonical_stat(stat)
         lo, hi = alpha_range(var_stat)
@@ -762,6 +760,13 @@ class StreamingAllan:
         with np.errstate(invalid="ignore", divide="ignore"):
             c = self._x_last[0].astype(np.float64) / (self._n_proc - self._g_last[0])
         for i, m in enumerate(ms):
+            # beyond half the largest m Stable32 keeps the previous tau's alpha (where known)
+            held = np.zeros(nch, dtype=bool)
+            if i and not identifies_at(var_stat, int(m), n_phase):
+                held = out[:, i - 1] != ALPHA_UNKNOWN
+                out[held, i] = out[held, i - 1]
+            if held.all():
+                continue
             sums = self._noise[int(m)]
             pts = sums.points()
             lag1 = lag1_cache.get((int(m), dmax))
@@ -771,16 +776,13 @@ class StreamingAllan:
                     with contextlib.suppress(StatsError):  # stays ALPHA_UNKNOWN
                         lag1[ch] = sums.lag1_alpha(int(ch), dmax, float(c[ch]))
                 lag1_cache[(int(m), dmax)] = lag1
-            for ch in range(nch):
+            for ch in np.nonzero(~held)[0]:
                 if pts[ch] >= LAG1_MIN_POINTS:
                     a = int(lag1[ch])
                     out[ch, i] = a if a == ALPHA_UNKNOWN else min(max(a, lo), hi)
                 else:
-                    out[ch, i] = sums.identify(ch, var_stat, n_phase,
-                                               self._noise_mvar(int(m), ch), float(c[ch]))
-            if i and not identifies_at(var_stat, int(m), n_phase):  # Stable32 holds alpha
-                held = out[:, i - 1] != ALPHA_UNKNOWN
-                out[held, i] = out[held, i - 1]
+                    out[ch, i] = sums.b1_identify(int(ch), var_stat, n_phase,
+                                                  self._noise_mvar(int(m), int(ch)), float(c[ch]))
         return out
 
     def _noise_mvar(self, m: int, ch: int) -> float | None:

@@ -39,11 +39,9 @@ import numpy as np
 from imubench.errors import StatsError
 from imubench.stats._stream_kernels import noise_sums_finite
 from imubench.stats.noise_id import (
-    LAG1_MIN_POINTS,
     alpha_range,
     analysis_terms,
     b1_expected,
-    dmax_for,
     rn_expected,
 )
 
@@ -308,16 +306,13 @@ class RunningNoiseSums:
         rn = mvar / avar
         return 1 if rn > math.sqrt(rn_expected(self.m, 2) * rn_expected(self.m, 1)) else 2
 
-    def identify(self, ch: int, var_stat: str, n_phase: int, mvar: float | None,
-                 c: float = 0.0) -> int:
-        """``noise_id.identify_alpha(x, m, "freq", var_stat)``; -99 where it fails."""
+    def b1_identify(self, ch: int, var_stat: str, n_phase: int, mvar: float | None,
+                    c: float = 0.0) -> int:
+        """The B1 branch of ``noise_id.identify_alpha(x, m, "freq", var_stat)`` (fewer than
+        LAG1_MIN_POINTS points at m), clipped to the statistic's range; -99 where it fails."""
         lo, hi = alpha_range(var_stat)
         try:
-            if self.points()[ch] >= LAG1_MIN_POINTS:
-                alpha = self.lag1_alpha(ch, dmax_for(var_stat), c)
-            else:
-                n_terms = analysis_terms(var_stat, self.m, n_phase)
-                alpha = self.b1_alpha(ch, n_terms, mvar, c)
+            alpha = self.b1_alpha(ch, analysis_terms(var_stat, self.m, n_phase), mvar, c)
         except StatsError:
             return ALPHA_UNKNOWN
         return int(min(max(alpha, lo), hi))
