@@ -61,13 +61,11 @@ def _factors(spec: str, rate_hz: float, n: int | None) -> np.ndarray:
 
 
 def _expected_ci(tau: np.ndarray, avar: np.ndarray, m: np.ndarray, n: int) -> dict[str, Any]:
-    from imubench.stats.ci import chi2_limits
-    from imubench.stats.edf import edf
+    from imubench.stats.confidence import confidence_arrays
 
     slope = local_slopes(tau, np.sqrt(avar)) if tau.size > 1 else np.array([-0.5])
     alpha = np.clip(np.rint(-2.0 * slope - 1.0), -2, 2).astype(int)
-    edfs = np.array([edf("oavar", int(a), int(mm), n) for a, mm in zip(alpha, m, strict=True)])
-    lo, hi = chi2_limits(avar, edfs, 0.683)
+    edfs, lo, hi = confidence_arrays("oavar", alpha, m, n, avar, 0.683)
     return {"edf": edfs.tolist(), "ci_low": np.asarray(lo).tolist(),
             "ci_high": np.asarray(hi).tolist(), "alpha": alpha.tolist()}
 
