@@ -6,7 +6,7 @@ import datetime as _dt
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from lsm6ds_sim.model import ChannelModel, NoiseModel
 
@@ -18,6 +18,9 @@ from imubench.noisefit.units import (
     datasheet_units,
     kalibr_imu,
 )
+
+if TYPE_CHECKING:
+    from imubench.recording import Recording
 
 
 @dataclass(frozen=True)
@@ -84,14 +87,20 @@ def fit_recording(path: str | Path, *, channels: str | Sequence[str] | None = No
     """Load a recording (.imbr / .csv) and fit the chosen channels."""
     from imubench.recording import load_recording
 
-    rec = load_recording(path)
+    return fit_loaded(load_recording(path), str(path), channels=channels, terms=terms,
+                      method=method)
+
+
+def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | None = None,
+               terms: str = "auto", method: str = "wls") -> RecordingFit:
+    """:func:`fit_recording` on a recording already in memory (``source`` names it)."""
     chans = parse_channels(channels, rec.channels)
     if not chans:
-        raise FitError(f"{path}: no gyro or accel channel with data to fit")
+        raise FitError(f"{source}: no gyro or accel channel with data to fit")
     fits = {ch: fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
                             channel=ch) for ch in chans}
     chip = rec.metadata.get("chip")
-    return RecordingFit(str(path), rec.rate_hz, str(chip) if chip else None, method, fits)
+    return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits)
 
 
-__all__ = ["RecordingFit", "fit_recording", "parse_channels"]
+__all__ = ["RecordingFit", "fit_loaded", "fit_recording", "parse_channels"]

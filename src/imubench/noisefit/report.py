@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imubench.noisefit.recording_fit import RecordingFit, fit_recording
+from imubench.noisefit.recording_fit import RecordingFit, fit_loaded
 from imubench.noisefit.units import kalibr_yaml
 
 SENSORS = {"gyro": (("gx", "gy", "gz"), "dps"), "accel": (("ax", "ay", "az"), "g")}
@@ -152,8 +152,8 @@ def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "au
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    result = fit_recording(recording, terms=terms, method=method)
     rec = load_recording(recording)
+    result = fit_loaded(rec, str(recording), terms=terms, method=method)
     data = {ch: rec.channel(ch) for ch in result.fits}
     files: list[Path] = []
     for sensor in SENSORS:
