@@ -250,6 +250,7 @@ class _Level:
     bs_live: bool = True  # block sums still needed (MVAR stats, or young noise-ID m)
     qs: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # m // stride
     rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.int64))
+    mv_rows: dict[int, np.ndarray] = field(default_factory=dict)  # per m: mdev, tdev rows
 
 
 class StreamingAllan:
@@ -398,6 +399,8 @@ class StreamingAllan:
             lv.rows = np.array(
                 [[self._row.get((st, m), -1) for st in ("oadev", "adev", "ohdev", "hdev")]
                  for m in lv.ms], np.int64).reshape(len(lv.ms), 4)
+            lv.mv_rows = {m: np.array([self._row.get((st, m), -1) for st in ("mdev", "tdev")],
+                                      np.int64) for m in lv.ms}
 
     # -- update ---------------------------------------------------------------------
     def update(self, chunk: np.ndarray | Sequence[float], gaps: np.ndarray | None = None) -> None:
@@ -679,7 +682,7 @@ class StreamingAllan:
         s = lv.stride
         q = m // s
         assert lv.bs is not None and lv.g_end is not None
-        rows = np.array([self._row.get((st, m), -1) for st in ("mdev", "tdev")], np.int64)
+        rows = lv.mv_rows[m]
         noise_row = self._row[("_nmvar", m)] if self._nid_young.get(m, False) else -1
         tab = self._tab
         if self._gaps_seen:
