@@ -1,0 +1,150 @@
+"""The captures of the acceptance run, each taken once per run and shared by the tests
+that need it (:class:`Procedures` caches them):
+
+* static: the board at rest, ``+Z`` up, ``capture.static_s`` seconds (noise, zero-rate
+  level, FIFO and timestamp integrity, temperature sensor at ambient);
+* six positions: ``+X -X +Y -Y +Z -Z`` up, ``capture.position_s`` each (accelerometer
+  calibration, zero-g offset);
+* rate table: each axis vertical, at rest and at ``+-r`` for every ``r`` of
+  ``capture.rates_dps``, ``capture.rate_s`` each (gyro sensitivity, cross-axis);
+* temperature sweep: for each chamber set point of ``capture.temperatures_c`` the die
+  temperature is left to settle (stable within ``temp_stable_c`` over ``temp_window_s``)
+  and the board is captured ``+Z`` and ``-Z`` up (``temp_capture_s`` each): the flip
+  separates the Z accelerometer's offset from its gain; the chamber returns to ambient.
+
+Every capture is preceded by the fixture move and ``capture.settle_s`` of settling.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imubench.batch import CHANNELS
+from imubench.calibration.accel import SIX_POSITIONS
+from imubench.calibration.means import MeanEstimate, capture_mean
+from imubench.jig.dut import Capture, Dut
+from imubench.jig.fixtures.base import AXES, Fixture
+from imubench.jig.station import CaptureSection
+
+
+@dataclass(frozen=True)
+class Point:
+    """One capture at a known input with the mean of each channel."""
+
+    label: str
+    capture: Capture
+    means: tuple[MeanEstimate, ...]
+    specific_force_g: np.ndarray
+    rate_dps: np.ndarray
+
+    def mean(self, cols: slice) -> np.ndarray:
+        return np.array([m.mean for m in self.means[cols]])
+
+    def stderr(self, cols: slice) -> np.ndarray:
+        return np.array([m.stderr for m in self.means[cols]])
+
+    @property
+    def die_temp_c(self) -> float:
+        return float(np.nanmean(self.capture.temp_c))
+
+
+@dataclass(frozen=True)
+class TemperaturePoint:
+    """One chamber set point: the two flipped captures and the chamber's reading."""
+
+    set_point_c: float
+    chamber_c: float
+    settle_s: float
+    up: Point
+    down: Point
+
+    @property
+    def die_temp_c(self) -> float:
+        return 0.5 * (self.up.die_temp_c + self.down.die_temp_c)
+
+    def offsets(self, cols: slice) -> tuple[np.ndarray, np.ndarray]:
+        """(3,) offsets and standard errors: the mean of the flipped pair (for the
+        accelerometer, (A(+Z) + A(-Z)) / 2 removes gravity on every axis)."""
+        m = 0.5 * (self.up.mean(cols) + self.down.mean(cols))
+        se = 0.5 * np.hypot(self.up.stderr(cols), self.down.stderr(cols))
+        return m, se
+
+
+def point(label: str, cap: Capture, force: np.ndarray, rate: np.ndarray) -> Point:
+    means = tuple(capture_mean(cap.channel(ch), cap.odr_hz, float(cap.lsb[i]),
+                               f"{label} {ch}") for i, ch in enumerate(CHANNELS))
+    return Point(label, cap, means, np.asarray(force, float), np.asarray(rate, float))
+
+
+class Procedures:
+    """The run's captures, each taken on first use (module docstring)."""
+
+    def __init__(self, dut: Dut, fixture: Fixture, cfg: CaptureSection) -> None:
+        self.dut = dut
+        self.fixture = fixture
+        self.cfg = cfg
+        self._static: Point | None = None
+        self._six: list[Point] | None = None
+        self._rates: list[tuple[str, float, Point]] | None = None
+        self._sweep: list[TemperaturePoint] | None = None
+
+    def _at_face(self, face: str, seconds: float, label: str) -> Point:
+        self.fixture.face(face)
+        self.dut.settle(self.cfg.settle_s)
+        cap = self.dut.capture(seconds, label)
+        return point(label, cap, np.array(SIX_POSITIONS[face]), np.zeros(3))
+
+    def static(self) -> Point:
+        if self._static is None:
+            self._static = self._at_face("+Z", self.cfg.static_s, "static +Z up")
+        return self._static
+
+    def six_position(self) -> list[Point]:
+        if self._six is None:
+            self._six = [self._at_face(face, self.cfg.position_s, f"position {face} up")
+                         for face in SIX_POSITIONS]
+        return self._six
+
+    def rate_table(self) -> list[tuple[str, float, Point]]:
+        """(axis, rate_dps, point) for each axis at 0 and +-r."""
+        if self._rates is None:
+            out = []
+            for axis in AXES:
+                for rate in (0.0, *(s * r for r in self.cfg.rates_dps for s in (1, -1))):
+                    self.fixture.spin(axis, rate)
+                    self.dut.settle(self.cfg.settle_s)
+                    label = f"rate {rate:+g} dps about {axis}"
+                    cap = self.dut.capture(self.cfg.rate_s, label)
+                    u = np.zeros(3)
+                    u[AXES.index(axis)] = rate
+                    force = np.zeros(3)
+                    force[AXES.index(axis)] = 1.0
+                    out.append((axis, rate, point(label, cap, force, u)))
+                self.fixture.spin(axis, 0.0)
+            self.fixture.face("+Z")
+            self._rates = out
+        return self._rates
+
+    def temperature_sweep(self) -> list[TemperaturePoint]:
+        if self._sweep is None:
+            c = self.cfg
+            out = []
+            for set_point in c.temperatures_c:
+                self.fixture.set_chamber(set_point)
+                self.fixture.face("+Z")
+                self.dut.settle(0.0)
+                waited, _ = self.dut.wait_temperature_stable(
+                    c.temp_stable_c, c.temp_window_s, c.temp_timeout_s)
+                chamber = self.fixture.chamber_temperature_c()
+                up = self._at_face("+Z", c.temp_capture_s, f"{set_point:g} degC +Z up")
+                down = self._at_face("-Z", c.temp_capture_s, f"{set_point:g} degC -Z up")
+                out.append(TemperaturePoint(set_point, chamber, waited, up, down))
+            self.fixture.set_chamber(c.ambient_c)
+            self.fixture.face("+Z")
+            self._sweep = out
+        return self._sweep
+
+
+__all__ = ["Point", "Procedures", "TemperaturePoint", "point"]

@@ -1,0 +1,173 @@
+"""Calibration fits against independent references (hand-built data, numpy.polyfit),
+the calibration file (round trip, provenance, errors naming file and key, application
+that leaves raw counts alone), and the capture-mean intervals (coverage on white noise)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imubench.batch import Batch
+from imubench.calibration import Calibration, CalibrationError, SensorCalibration
+from imubench.calibration.accel import SIX_POSITIONS, flip_two_point, one_point_offset, six_position
+from imubench.calibration.gyro import rate_table
+from imubench.calibration.means import capture_mean
+from imubench.calibration.temperature import polynomial, three_point_exact, three_point_note
+
+PROV = {"serial": "SN1", "date_utc": "2026-11-23T00:00:00+00:00", "station": "bench1"}
+FACES = list(SIX_POSITIONS)
+
+
+def _readings(u: np.ndarray, M: np.ndarray, b: np.ndarray, q: np.ndarray) -> np.ndarray:
+    return u @ M.T + q * u**2 + b
+
+
+def test_six_position_recovers_a_hand_built_sensor() -> None:
+    M = np.array([[1.02, 0.004, -0.003], [0.002, 0.985, 0.006], [-0.005, 0.001, 1.01]])
+    b, q = np.array([0.03, -0.02, 0.05]), np.array([0.004, -0.002, 0.003])
+    u = np.array([SIX_POSITIONS[f] for f in FACES])
+    fit = six_position(FACES, _readings(u, M, b, q), np.full((6, 3), 1e-4), quadratic=True)
+    assert np.allclose(fit.matrix, M, atol=1e-12) and np.allclose(fit.offset, b, atol=1e-12)
+    assert np.allclose(fit.nonlinearity, q, atol=1e-12)
+    assert np.allclose(fit.residuals, 0.0, atol=1e-12)
+    assert np.allclose(fit.cross_axis[0], [0.0, 0.004 / 1.02, -0.003 / 1.02])
+    # the 12-parameter fit cannot tell q from an offset seen along gravity: the offset
+    # takes q/3 (q in 2 of 6 positions) and the residuals are 2q/3 and -q/3
+    lin = six_position(FACES, _readings(u, M, b, q), np.full((6, 3), 1e-4))
+    assert np.allclose(lin.offset, b + q / 3.0, atol=1e-12)
+    assert np.allclose(lin.residuals[:2, 0], 2.0 * q[0] / 3.0, atol=1e-12)
+    assert np.allclose(lin.residuals[2:, 0], -q[0] / 3.0, atol=1e-12)
+    # the correction inverts the model
+    from imubench.calibration.sensor import correct
+
+    probe = np.array([[0.3, -0.5, 0.81], [0.0, 0.0, 1.0]])
+    assert np.allclose(correct(_readings(probe, M, b, q), M, b, q), probe, atol=1e-9)
+
+
+def test_one_point_and_flip() -> None:
+    assert np.allclose(one_point_offset([0.01, -0.02, 1.03], [0, 0, 1]), [0.01, -0.02, 0.03])
+    off, gain = flip_two_point(np.array([1.02, 0.99, 1.05]), np.array([-0.98, -1.01, -0.97]))
+    assert np.allclose(off, [0.02, -0.01, 0.04]) and np.allclose(gain, [1.0, 1.0, 1.01])
+    with pytest.raises(CalibrationError, match="reads no more at \\+1 g"):
+        flip_two_point(np.array([1.0, -1.0, 1.0]), np.array([-1.0, 1.0, -1.0]))
+
+
+def test_degenerate_designs_are_refused() -> None:
+    with pytest.raises(CalibrationError, match=r"faces \['-Z'\] were not measured"):
+        six_position(FACES[:5], np.zeros((5, 3)), np.ones((5, 3)))
+    with pytest.raises(CalibrationError, match="were not measured"):
+        six_position(["+Z"] * 6, np.zeros((6, 3)), np.ones((6, 3)))
+    from imubench.calibration.sensor import fit_sensor
+
+    with pytest.raises(CalibrationError, match=r"axis x: the positions or rates do not"
+                                               r" determine every parameter \(rank 2 < 4\)"):
+        fit_sensor(np.tile([0.0, 0.0, 1.0], (6, 1)) * [[1], [-1], [1], [-1], [1], [-1]],
+                   np.zeros((6, 3)), np.ones((6, 3)), quadratic=False, what="t")
+    rates = np.zeros((4, 3))
+    rates[:, 0] = [0.0, 100.0, -100.0, 0.0]
+    with pytest.raises(CalibrationError, match="4 observations cannot determine 5 parameters"):
+        rate_table(rates, np.zeros((4, 3)), np.ones((4, 3)))
+
+
+def test_temperature_fits() -> None:
+    a, beta, c0 = 0.01, 1e-4, 0.3
+    temps = np.array([25.0, 45.0, 65.0, 85.0, 0.0, -20.0, -40.0])
+    d = temps - 25.0
+    y = np.stack([c0 + a * d + beta * d**2] * 3, axis=1)
+    note = three_point_note(temps, y, 25.0, 85.0, -40.0)
+    # the literal sequential procedure: c1 = a + beta dT_hot, c2 = beta (dTc - dTh) / dTc
+    assert note.coeff1[0] == pytest.approx(a + beta * 60.0)
+    assert note.coeff2[0] == pytest.approx(beta * (-65.0 - 60.0) / -65.0)
+    # ...and misses the hot point by beta dTh^2 (dTh - dTc) / dTc: 1.92 x the quadratic
+    r_hot = note.residuals(temps, y)[3, 0]
+    assert r_hot == pytest.approx(beta * 60.0**2 * (60.0 + 65.0) / -65.0)
+    assert r_hot / (beta * 60.0**2) == pytest.approx(-1.923, abs=1e-3)
+    exact = three_point_exact(temps, y, 25.0, 85.0, -40.0)
+    assert exact.coeff1[0] == pytest.approx(a) and exact.coeff2[0] == pytest.approx(beta)
+    assert np.allclose(exact.residuals(temps, y), 0.0, atol=1e-12)
+    # weighted least squares against numpy.polyfit (weights 1/sigma)
+    rng = np.random.default_rng(5)
+    noisy = y + rng.normal(0, 0.002, y.shape)
+    sigma = np.full(y.shape, 0.002)
+    poly = polynomial(temps, noisy, sigma, 25.0)
+    ref = np.polyfit(d, noisy[:, 1], 2, w=1.0 / sigma[:, 1])
+    assert poly.coeff2[1] == pytest.approx(ref[0]) and poly.coeff1[1] == pytest.approx(ref[1])
+    assert poly.offset[1] == pytest.approx(ref[2])
+    _, cov = np.polyfit(d, noisy[:, 1], 2, w=1.0 / sigma[:, 1], cov="unscaled")
+    assert poly.stderr1 is not None and poly.stderr2 is not None
+    scale = math.sqrt(max(1.0, poly.chi2 / poly.dof))  # Birge ratio: at least 1 here
+    assert poly.stderr1[1] >= math.sqrt(cov[1, 1]) * 0.999
+    assert poly.stderr1[1] <= math.sqrt(cov[1, 1]) * scale * 3.0
+
+
+def _sensor(unit: str, **kw: object) -> SensorCalibration:
+    args: dict[str, object] = {"unit": unit, "method": "test", "temp_ref_c": 25.0,
+                               "offset": np.array([0.01, 0.02, -0.03]),
+                               "matrix": np.diag([1.01, 0.99, 1.02])}
+    args.update(kw)
+    return SensorCalibration(**args)  # type: ignore[arg-type]
+
+
+def test_calibration_file_round_trip_and_application(tmp_path: Path) -> None:
+    cal = Calibration(PROV, gyro=_sensor("dps", temp_coeff1=np.array([0.01, 0.0, 0.0])),
+                      accel=_sensor("g", nonlinearity=np.array([0.004, 0.0, 0.0]),
+                                    residuals={"six_position_mg": [[0.1, 0.2, 0.3]]}))
+    saved = cal.save(tmp_path / "cal.toml")
+    back = Calibration.load(saved.path)
+    assert back.sha256 == saved.sha256 and back.provenance == PROV
+    assert back.accel is not None and back.gyro is not None
+    assert np.allclose(back.accel.nonlinearity, [0.004, 0, 0])
+    assert back.accel.residuals["six_position_mg"] == [[0.1, 0.2, 0.3]]
+    again = Calibration.from_description(back.describe())
+    assert again.describe()["accel"] == back.describe()["accel"]
+    n = 5
+    raw = np.tile(np.array([100, -200, 300, 1000, 2000, 16000], np.int16), (n, 1))
+    values = raw * np.array([8.75e-3] * 3 + [0.061e-3] * 3)
+    batch = Batch(np.arange(n), np.arange(n) / 104.0, values, np.full(n, 35.0), raw)
+    out = back.apply(batch)
+    assert out.raw is batch.raw and np.array_equal(out.index, batch.index)
+    # gyro x at 35 degC: (y - b - c1 dT) / M_xx
+    assert out.values[0, 0] == pytest.approx((values[0, 0] - 0.01 - 0.01 * 10.0) / 1.01)
+    # accel: M u + q u^2 + b = y, checked by putting u back
+    u = out.values[0, 3:6]
+    y = np.diag([1.01, 0.99, 1.02]) @ u + np.array([0.004, 0, 0]) * u**2 + [0.01, 0.02, -0.03]
+    assert np.allclose(y, values[0, 3:6], atol=1e-12)
+    no_temp = Batch(batch.index, batch.t_s, values, np.full(n, np.nan), raw)
+    with pytest.raises(CalibrationError, match="temperature terms"):
+        back.apply(no_temp)
+
+
+def test_calibration_file_errors_name_file_and_key(tmp_path: Path) -> None:
+    p = tmp_path / "c.toml"
+    good = Calibration(PROV, accel=_sensor("g")).to_toml()
+    p.write_text(good.replace('unit = "g"', 'unit = "m/s2"'))
+    with pytest.raises(CalibrationError, match=r"c\.toml: \[accel\] key 'unit' must be 'g'"):
+        Calibration.load(p)
+    p.write_text(good.replace("offset = ", "ofset = "))
+    with pytest.raises(CalibrationError, match=r"c\.toml: \[accel\]: unknown keys \['ofset'\]"):
+        Calibration.load(p)
+    p.write_text(good.replace('serial = "SN1"\n', ""))
+    with pytest.raises(CalibrationError, match=r"lacks \['serial'\]"):
+        Calibration.load(p)
+    with pytest.raises(CalibrationError, match="an axis does not respond"):
+        Calibration(PROV, gyro=_sensor("dps", matrix=np.diag([1.0, 0.0, 1.0])))
+
+
+def test_capture_mean_interval_covers_on_white_noise() -> None:
+    rng = np.random.default_rng(11)
+    hits = 0
+    trials = 400
+    for _ in range(trials):
+        y = 0.3 + 0.04 * rng.standard_normal(208)
+        lo, hi = capture_mean(y, 104.0, 8.75e-3, "t").ci(0.95)
+        hits += lo <= 0.3 <= hi
+    # binomial(400, 0.95): 3 sd = 13 trials
+    assert abs(hits / trials - 0.95) < 0.035
+    # a constant output: the LSB floor, never a zero interval
+    m = capture_mean(np.full(300, 0.5), 104.0, 0.01, "stuck")
+    assert m.stderr == pytest.approx(0.01 / math.sqrt(12.0))
+    with pytest.raises(CalibrationError, match="at least 16"):
+        capture_mean(np.full(10, 1.0), 104.0, 0.01, "few")
