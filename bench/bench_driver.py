@@ -3,7 +3,7 @@ issue 5 item 3). Run: ``.venv/bin/python bench/bench_driver.py [--quick]``.
 
 Speed (issue 5 acceptance 3: >= 5e5 sample sets/s through the real driver in virtual
 time, 24 h at 104 Hz in < 20 s) is measured with the shipped datasheet model
-(``config/model-lsm6dsl.toml``: white + flicker + random walk + temperature on all six
+(``datasheet:lsm6dsl``: white + flicker + random walk + temperature on all six
 channels, what ``imubench sim --model`` users run) and, in the same run, two references:
 the same path with the quiet sensor (driver + chip cost alone) and the physics alone
 (``SensorPhysics.generate`` in FIFO-sized calls). Wall and CPU time are both printed:
@@ -62,7 +62,7 @@ def main() -> None:
     import imubench.sources.chip  # noqa: F401 - imports outside the timed region
 
     hours = 1 if args.quick else 24
-    model = "config/model-lsm6dsl.toml"
+    model = "datasheet:lsm6dsl"
     target = 5e5
     base = f"sim://lsm6dsl?odr_hz=104&duration_s={hours * 3600}"
     runs = (("quiet sensor (reference)", base), ("datasheet model", f"{base}&model={model}"))
@@ -105,7 +105,7 @@ def main() -> None:
             f"delivered {c['samples']} + lost {c['lost_samples']} = "
             f"{c['samples'] + c['lost_samples']} (expected {104 * 600}); gaps {c['gaps']}, "
             f"overruns {c['overruns']}, io_errors {c['io_errors']}, retries {c['retries']}, "
-            f"measured ODR {src.measured_odr_hz:.3f} Hz, injected {src.sim_bus.faults.injected}"
+            f"measured ODR {src.measured_odr_hz:.3f} Hz, injected {src.sim.bus.faults.injected}"
         )
 
 

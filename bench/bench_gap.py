@@ -363,7 +363,7 @@ def timing() -> None:
     from imubench.gap import diagnose_recording
     from imubench.recording import Recording
 
-    model = load_model(Path(__file__).resolve().parents[1] / "config" / "model-lsm6dsl.toml")
+    model = load_model("datasheet:lsm6dsl")
     n = int(DURATION_S * RATE)
     truth = model.with_channel("gy", sine_amplitude=0.003, sine_freq=2.0)
     t0 = time.perf_counter()

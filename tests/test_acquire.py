@@ -69,7 +69,7 @@ def test_acceptance_3_faults_every_sample_accounted(tmp_path: Path) -> None:
     n = 104 * 60
     assert stats["samples"] + stats["lost_samples"] == n
     assert stats["overruns"] == 1 and stats["io_errors"] > 0 and stats["retries"] > 0
-    injected = src.sim_bus.faults.injected  # type: ignore[attr-defined]
+    injected = src.sim.bus.faults.injected  # type: ignore[attr-defined]
     assert injected["resets"] == 6 and injected["nacks"] == stats["io_errors"]
     assert src.stream.counters["chip_resets"] >= 5
     rec = load_recording(out)
@@ -86,7 +86,7 @@ def test_acceptance_3_faults_every_sample_accounted(tmp_path: Path) -> None:
             strict=True,
         )
     }
-    assert all(holes.get(g.at_index, g.lost) == g.lost for g in rec.gaps)
+    assert all(holes.get(g.at, g.lost) == g.lost for g in rec.gaps)
     check_identity(rec.index, rec.raw[:, 0].astype(np.int64) & 0xFFFF)
 
 
@@ -175,7 +175,8 @@ def test_cli_acquire_and_sim(tmp_path: Path, capsys: pytest.CaptureFixture[str])
         "bad_frames",
         "reconnects",
     }
-    assert s["samples"] == 52 * 20 and 0 < s["bus_utilization"] < 0.05
+    # two 4-byte status reads per poll (the second checks the burst's alignment)
+    assert s["samples"] == 52 * 20 and 0 < s["bus_utilization"] < 0.08
     rec = load_recording(out)
     assert rec.metadata["chip"] == "lsm6dsl" and rec.rate_hz == 52
     assert np.allclose(rec.values[:, 5], round(1 / 0.061e-3) * 0.061e-3)  # raw storage
@@ -205,15 +206,15 @@ def test_cli_acquire_and_sim(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 
 
 def test_lost_samples_at_the_end_are_in_the_recording(tmp_path: Path) -> None:
-    """A chip reset 0.2 s before the end: the last samples are lost, written as a gap
+    """A chip reset 0.03 s before the end: the last samples are lost, written as a gap
     after the last sample, and counted by the recording as by the stats."""
     src = open_source(
-        "sim://lsm6dsl?odr_hz=104&reset_every_s=19.8&duration_s=20&watermark_s=0.25&counting=1"
+        "sim://lsm6dsl?odr_hz=104&reset_every_s=19.97&duration_s=20&watermark_s=0.25&counting=1"
     )
     out = tmp_path / "end.imbr"
     stats = acquire_cmd.record(src, out)
     rec = load_recording(out)
     assert stats["lost_samples"] > 0 and rec.gaps[-1].reason == "chip reset"
-    assert rec.gaps[-1].at_index - rec.gaps[-1].lost > rec.index[-1]  # after the last sample
+    assert rec.gaps[-1].at - rec.gaps[-1].lost > rec.index[-1]  # after the last sample
     assert rec.lost_samples == stats["lost_samples"]
     assert len(rec) + rec.lost_samples == 104 * 20

@@ -125,6 +125,7 @@ def test_fifo_start_and_read_transactions() -> None:
     assert bus.log == [
         ("rdwr", 0x3A, 4),  # FIFO_STATUS1..4
         ("rdwr", 0x3E, 204),  # two whole patterns (2 x 51 words) in one i2c_rdwr burst
+        ("rdwr", 0x3A, 4),  # FIFO_STATUS1..4 again: where the burst really began
         ("rdwr", 0x20, 2),  # temperature
     ]
     assert chunk is not None and list(chunk.index) == list(range(16)) and left == 27

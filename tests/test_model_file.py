@@ -10,8 +10,6 @@ from lsm6ds_sim.model import KEYS, ChannelModel, NoiseModel, load_model
 
 from imubench.errors import ModelError
 
-REPO = Path(__file__).resolve().parents[1]
-
 ISSUE_EXAMPLE = """\
 [defaults]               # optional, applies to every channel
 [channels.gx]            # gx gy gz in dps, ax ay az in g; omitted keys are zero
@@ -58,7 +56,7 @@ def test_defaults_apply_to_every_channel_and_channels_override(tmp_path: Path) -
 
 @pytest.mark.parametrize("chip", ["lsm6dsl", "lsm6dsm", "lsm6ds3h"])
 def test_shipped_models_load(chip: str) -> None:
-    m = load_model(REPO / "config" / f"model-{chip}.toml")
+    m = load_model(f"datasheet:{chip}")
     assert m.meta["chip"] == chip
     assert "unverified" in m.meta["white_source"]
     for ch in ("gx", "gy", "gz"):
@@ -129,7 +127,7 @@ def test_signed_keys_accept_negative_values(tmp_path: Path) -> None:
 
 
 def test_to_toml_round_trip(tmp_path: Path) -> None:
-    m = load_model(REPO / "config" / "model-lsm6dsm.toml")
+    m = load_model("datasheet:lsm6dsm")
     m2 = m.with_channel("gx", markov_sigma=0.01, markov_tau=30.0, bandwidth_hz=20.0)
     p = write(tmp_path, m2.to_toml())
     back = load_model(p)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imubench.batch import Batch
+from imubench.batch import Batch, Gap
 from imubench.cli import main
 from imubench.errors import RecordingError
 from imubench.recording import load_recording, open_writer
@@ -24,7 +24,9 @@ def make_batches(n: int = 1000, hole_at: int = 400, lost: int = 7, seed: int = 0
     out = []
     for lo in range(0, n, 128):
         sl = slice(lo, lo + 128)
-        out.append(Batch(idx[sl], idx[sl] / 104.0, raw[sl] * SENS, temp[sl], raw[sl]))
+        here = lost and lo <= hole_at < lo + 128
+        gaps = (Gap(hole_at + lost, lost, "fifo overrun"),) if here else ()
+        out.append(Batch(idx[sl], idx[sl] / 104.0, raw[sl] * SENS, temp[sl], raw[sl], gaps))
     return out
 
 
@@ -45,7 +47,7 @@ def test_native_round_trip_raw_keeps_counts_and_gaps(tmp_path: Path) -> None:
     np.testing.assert_array_equal(rec.raw, ref.raw)
     np.testing.assert_array_equal(rec.index, ref.index)
     np.testing.assert_allclose(rec.values, ref.values, rtol=0, atol=0)
-    assert [(g.at_index, g.lost) for g in rec.gaps] == [(407, 7)]
+    assert [(g.at, g.lost) for g in rec.gaps] == [(407, 7)]
     gx = rec.channel("gx")
     assert len(gx) == 1007 and np.isnan(gx[400:407]).all() and not np.isnan(gx[:400]).any()
     assert rec.metadata["chip"] == "lsm6dsl" and rec.rate_hz == 104.0
@@ -77,7 +79,7 @@ def test_csv_round_trip_and_convert_cli(tmp_path: Path, capsys: pytest.CaptureFi
     np.testing.assert_array_equal(c.index, a.index)
     np.testing.assert_allclose(c.values, a.values, rtol=1e-8)
     np.testing.assert_array_equal(b.index, a.index)
-    assert [(g.at_index, g.lost) for g in c.gaps] == [(407, 7)]
+    assert [(g.at, g.lost) for g in c.gaps] == [(407, 7)]
     header = (tmp_path / "a.csv").read_text().splitlines()
     assert "t,gx,gy,gz,ax,ay,az,temp,index" in header
     assert "1000 samples, 1 gaps" in capsys.readouterr().out
@@ -136,14 +138,16 @@ def test_lost_samples_count_gaps_before_first_and_after_last_sample(
     whose last samples were lost) keeps every lost sample in ``Recording.lost_samples``."""
     batches = make_batches()  # indices 0..1006 with 7 lost before index 407
     shifted = [
-        Batch(b.index + 5, b.t_s, b.values, b.temp_c, b.raw, lost_before=5 if i == 0 else 0)
+        Batch(b.index + 5, b.t_s, b.values, b.temp_c, b.raw,
+              (Gap(5, 5, "chip reset"),) if i == 0 else tuple(
+                  Gap(g.at + 5, g.lost, g.reason) for g in b.gaps))
         for i, b in enumerate(batches)
     ]
     path = tmp_path / f"r{suffix}"
     storage = {"storage": "raw_int16"} if suffix == ".imbr" else {}
     with open_writer(path, meta(**storage)) as w:
         for b in shifted:
-            w.write(b, {})
+            w.write(b)
         w.write_gap(1012 + 30, 30, "chip reset")  # indices 1012..1041 lost at the end
     rec = load_recording(path)
     assert (int(rec.index[0]), int(rec.index[-1])) == (5, 1011)

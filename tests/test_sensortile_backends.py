@@ -38,9 +38,10 @@ def tile_port(request: pytest.FixtureRequest) -> Iterator[str]:
     if request.param != "sim":
         yield request.param
         return
-    from lsm6ds_sim.sensortile_fw import SensorTileFirmware, make_clock
+    from lsm6ds_sim.clock import SimClock
+    from lsm6ds_sim.sensortile_fw import SensorTileFirmware
 
-    with SensorTileFirmware(clock=make_clock("wall"), seed=5) as fw:
+    with SensorTileFirmware(clock=SimClock("wall"), seed=5) as fw:
         yield fw.url
 
 

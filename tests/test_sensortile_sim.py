@@ -254,9 +254,9 @@ def test_bad_uris(uri: str, match: str) -> None:
 
 def test_real_scheme_on_a_pty_and_wall_clock() -> None:
     """``sensortile://PATH`` (the real-kit source) against a wall-clock firmware."""
-    from lsm6ds_sim.sensortile_fw import make_clock
+    from lsm6ds_sim.clock import SimClock
 
-    with SensorTileFirmware(clock=make_clock("wall"), seed=9) as fw:
+    with SensorTileFirmware(clock=SimClock("wall"), seed=9) as fw:
         src = open_source(f"sensortile://{fw.url}?duration_s=0.3")
         batch = _collect(src)
     assert len(batch) > 0

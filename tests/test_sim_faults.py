@@ -56,7 +56,7 @@ def test_stuck_output_repeats_the_last_sample_for_its_duration() -> None:
     still delivers every index (the timestamps keep running), so the fault shows as a
     run of identical sample sets about 2 s x 104 Hz long, and nowhere else."""
     src, batches = read_all(
-        "sim://lsm6dsl?odr_hz=104&model=config/model-lsm6dsl.toml&duration_s=12"
+        "sim://lsm6dsl?odr_hz=104&model=datasheet:lsm6dsl&duration_s=12"
         "&stuck_output_at_s=5&stuck_output_for_s=2&watermark_s=0.25&seed=2"
     )
     raw = np.concatenate([b.raw for b in batches]).astype(np.int64)
@@ -68,7 +68,7 @@ def test_stuck_output_repeats_the_last_sample_for_its_duration() -> None:
     assert np.all(np.diff(runs) == 1)  # one contiguous run
     t_run = np.concatenate([b.t_s for b in batches])[runs[[0, -1]]]
     assert t_run[0] == pytest.approx(5.0, abs=0.15) and t_run[1] == pytest.approx(7.0, abs=0.15)
-    assert src.sim_bus.faults.injected["stuck_outputs"] == 1  # type: ignore[attr-defined]
+    assert src.sim.bus.faults.injected["stuck_outputs"] == 1  # type: ignore[attr-defined]
 
 
 def test_temperature_glitches_are_spikes_on_the_temperature_output() -> None:
@@ -83,7 +83,7 @@ def test_temperature_glitches_are_spikes_on_the_temperature_output() -> None:
     excess = temp - 25.0
     assert np.allclose(excess / 10.0, np.round(excess / 10.0), atol=1e-3)
     spikes = np.abs(excess) > 5
-    injected = src.sim_bus.faults.injected["temp_glitches"]  # type: ignore[attr-defined]
+    injected = src.sim.bus.faults.injected["temp_glitches"]  # type: ignore[attr-defined]
     assert injected >= 3
     polls_per_s = len(batches) / 400.0  # one temperature read per poll
     assert 0.7 * injected * polls_per_s <= spikes.sum() <= 1.1 * injected * polls_per_s

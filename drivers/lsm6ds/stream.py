@@ -4,22 +4,33 @@
 accelerometer not decimated, and (by default) the timestamp as 4th data set every ``d``
 slots (``d`` chosen so that the bus budget holds). One :meth:`FifoStream.poll`:
 
-1. reads FIFO_STATUS1-4 in one 4-byte transfer;
-2. on OVER_RUN: restarts the FIFO (bypass then continuous, as ST's DS3H driver does) and
-   lets the timestamps size the gap (samples lost are reported, never silent);
-3. reads the whole patterns present (FIFO_STATUS3/4 must show pattern position 0, else
-   it realigns) in one ``i2c_rdwr`` burst from FIFO_DATA_OUT_L, at most 4092 bytes;
-4. decodes them vectorised into sample indices (nominal ODR periods since the first
-   sample), raw int16, host times, and reads the temperature once.
+1. reads FIFO_STATUS1-4 in one 4-byte transfer (level, flags, pattern position);
+2. on OVER_RUN (the FIFO overwrote its oldest data sets, continuous mode §9.3) keeps the
+   data still held: they are valid, only their first pattern may be cut; the timestamps
+   size the gap (samples lost are reported, never silent);
+3. reads whole patterns (a pattern cut by an overwrite or a previous read is completed
+   from the words kept from that read, or skipped) in one ``i2c_rdwr`` burst from
+   FIFO_DATA_OUT_L, at most 4092 bytes;
+4. reads FIFO_STATUS1-4 again: the pattern position after the burst tells where the
+   burst really began. If the host stalled between the status and the data read long
+   enough for the FIFO to overwrite (a busy host, a GIL-holding thread: 48 ms at
+   6660 Hz), the burst began after the overwritten data sets, not at a pattern start;
+   the words are then re-aligned on that position instead of being decoded shifted;
+5. decodes the words vectorised into sample indices (nominal ODR periods since the first
+   sample), raw int16 and host times, checks the timestamps (successive patterns exactly
+   one pattern apart; the first one after the previous poll's within the host time that
+   passed), and reads the temperature once. A chunk whose timestamps fail the check is
+   discarded and the FIFO restarted (``resyncs``); the next chunk's timestamps size the
+   whole hole, so nothing is counted twice and no index is invented.
 
 Sample index. Inside one FIFO run slots are consecutive. Each pattern's timestamp
-(25 us ticks, unwrapped modulo 2^24) checks that and gives the exact number of slots
-skipped across an overrun restart: ``round(delta_ticks / ticks_per_slot)`` with
-``ticks_per_slot = 40 000 / odr`` (timestamp and ODR share the chip's oscillator, so this
-holds whatever its frequency error). After a chip reset the counter restarts; the gap
-is then sized from host time, mapping ticks to host seconds with the tick period
-estimated against the host clock (the sensor clock's drift). Without timestamps, gaps at
-restarts are sized from the host clock alone (±1 sample).
+(25 us ticks, unwrapped modulo 2^24 with the number of wraps taken from the host clock)
+gives the exact number of slots skipped across an overwrite or restart:
+``round(delta_ticks / ticks_per_slot)`` with ``ticks_per_slot = 40 000 / odr`` (timestamp
+and ODR share the chip's oscillator, so this holds whatever its frequency error). After a
+chip reset the counter restarts; the gap is then sized from host time, mapping ticks to
+host seconds with the tick period estimated against the host clock (the sensor clock's
+drift). Without timestamps, gaps are sized from the host clock alone (±1 sample).
 
 Chip resets are detected by reading back CTRL1_XL/CTRL2_G every ``verify_every_s`` and
 whenever the FIFO is empty when data were due; then the stream re-probes, reconfigures
@@ -42,11 +53,12 @@ TICK_S = 25e-6
 TICKS_WRAP = 1 << 24
 MAX_BURST_BYTES = 4092
 """One FIFO burst at most: the whole FIFO (§9.2)."""
+HOST_JITTER_S = 0.002
+"""Host timing error allowed when the words a FIFO dropped are estimated from the host
+clock (between two status reads), s."""
 BITS_PER_BYTE = 9
 BUDGET_FRACTION = 0.95
 """Share of the bus payload limit the stream may plan to use."""
-POLL_OVERHEAD_BYTES = 16
-"""Wire bytes per poll besides the FIFO data (status and temperature reads, addresses)."""
 
 
 def ds4_decimation_code(factor: int) -> int:
@@ -141,8 +153,12 @@ class FifoStream:
             "overruns": 0,
             "chip_resets": 0,
             "realigns": 0,
+            "overwrites": 0,
+            "resyncs": 0,
             "fifo_bytes": 0,
         }
+        self._carry: np.ndarray | None = None
+        """Words of a pattern cut by the end of the previous burst (its first words)."""
         self.started = False
         self._next_index: int | None = None  # index of the next slot expected
         self._last_ticks: int | None = None  # unwrapped ticks of the last pattern start
@@ -155,6 +171,7 @@ class FifoStream:
         self._pending_gap_reason: str | None = None
         self._last_verify_t = 0.0
         self._last_data_t = 0.0
+        self._t_read_end = 0.0
 
     # ---------------------------------------------------------------- planning
     def _plan(self, cfg: ImuConfig) -> tuple[ImuConfig, int | None]:
@@ -265,7 +282,7 @@ class FifoStream:
         self._last_verify_t = now
         self._last_data_t = now
 
-    def _restart_after_overrun(self) -> None:
+    def _restart_fifo(self) -> None:
         d = self.dev
         d.write_reg("FIFO_CTRL5", FIFO_MODES["bypass"])
         d.write_reg("FIFO_CTRL5", self.continuous_value())
@@ -284,6 +301,11 @@ class FifoStream:
                 self.dev.write_reg("FIFO_CTRL5", FIFO_MODES["bypass"])
             self.started = False
 
+    def verify_soon(self) -> None:
+        """Read the configuration back at the next poll (after an I/O error: a chip that
+        reset under a failing bus is found at once)."""
+        self._last_verify_t = -float("inf")
+
     @property
     def words_per_s(self) -> float:
         return self.odr_hz * self.pattern_words / self.pattern_slots
@@ -293,8 +315,18 @@ class FifoStream:
         return max(0.0, (self.watermark_words - level_words) / self.words_per_s)
 
     # ---------------------------------------------------------------- polling
+    def _status(self) -> tuple[int, bool, int]:
+        """FIFO_STATUS1-4 in one transfer: (level in words, OVER_RUN, pattern position)."""
+        dev = self.dev
+        status = dev.read_block("FIFO_STATUS1", 4)
+        level = (status[0] | (status[1] << 8)) & ((1 << dev.map.fifo_diff_bits) - 1)
+        if status[1] & 0x10:  # FIFO_EMPTY
+            level = 0
+        return level, bool(status[1] & 0x40), status[2] | ((status[3] & 0x03) << 8)
+
     def poll(self) -> tuple[StreamChunk | None, int]:
-        """One status read and (if whole patterns are there) one burst.
+        """One status read, one burst of whole patterns (if there are any), one status
+        read to check the burst's alignment.
 
         Returns (chunk or None, FIFO level in words left after the read).
         """
@@ -310,56 +342,110 @@ class FifoStream:
                 return None, 0
             if self.ts_decimation:
                 self._measure_drift()
-        status = dev.read_block("FIFO_STATUS1", 4)
+        t_before = dev.monotonic()  # the level is sampled after this, before t_status
+        level, overrun, pattern_pos = self._status()
         t_status = dev.monotonic()
-        diff_mask = (1 << dev.map.fifo_diff_bits) - 1
-        level = (status[0] | (status[1] << 8)) & diff_mask
-        if status[1] & 0x10:
-            level = 0
-        pattern_pos = status[2] | ((status[3] & 0x03) << 8)
-        if status[1] & 0x40:  # OVER_RUN (§9.1)
+        P = self.pattern_words
+        if overrun:  # §9.3: the oldest data sets were overwritten; the rest is valid
             self.counters["overruns"] += 1
             self._pending_gap_reason = "fifo overrun"
-            self._restart_after_overrun()
-            return None, 0
+            self._carry = None
         if level == 0:
-            due = 2.0 * self.watermark_words / (6 * self.odr_hz) + 0.05
+            # a running FIFO holds a pattern within two pattern periods of the last read:
+            # an empty one after that means the chip reset (its FIFO went to bypass)
+            due = 2.0 * self.pattern_slots / self.odr_hz + 0.05
             if t_status - self._last_data_t > due and not dev.config_intact():
                 self._recover_chip_reset()
             return None, 0
-        if pattern_pos != 0:  # realign to the pattern start (§9.4)
-            skip = self.pattern_words - pattern_pos
-            if skip > level:
-                return None, level
-            dev.read_block("FIFO_DATA_OUT_L", 2 * skip)
-            self.counters["realigns"] += 1
-            self._pending_gap_reason = self._pending_gap_reason or "fifo realign"
-            level -= skip
-        n_patterns = min(level // self.pattern_words, MAX_BURST_BYTES // (2 * self.pattern_words))
-        if n_patterns == 0:
+        head = 0  # words completing the pattern the previous burst cut
+        if pattern_pos != 0:
+            carry = self._carry
+            if carry is not None and len(carry) == pattern_pos:
+                head = P - pattern_pos
+                if head > level:
+                    return None, level
+            else:  # realign to the pattern start (§9.4), losing the cut pattern
+                self._carry = None
+                skip = P - pattern_pos
+                if skip > level:
+                    return None, level
+                dev.read_block("FIFO_DATA_OUT_L", 2 * skip)
+                self.counters["realigns"] += 1
+                self._pending_gap_reason = self._pending_gap_reason or "fifo realign"
+                level -= skip
+        elif self._carry is not None:  # the cut pattern was overwritten meanwhile
+            self._carry = None
+        n_patterns = min(
+            (level - head) // P, (MAX_BURST_BYTES // 2 - head) // P
+        )
+        if n_patterns == 0 and head == 0:
             return None, level
-        n_words = n_patterns * self.pattern_words
+        n_words = head + n_patterns * P
         data = dev.read_block("FIFO_DATA_OUT_L", 2 * n_words)
+        level_after, _, pos_after = self._status()
+        t_after = dev.monotonic()
         temp_c = dev.read_temperature_c()
         self._last_data_t = t_status
         self.counters["fifo_bytes"] += 2 * n_words
-        words = np.frombuffer(data, dtype="<i2").reshape(n_patterns, self.pattern_words)
-        # slots produced after the newest one read, up to the status read (+ half a slot)
-        newest_lag = (level - n_words) * self.pattern_slots / self.pattern_words + 0.5
-        chunk = self._decode(words, t_status - newest_lag / self.odr_hz, temp_c)
-        # words that arrived while this poll read the bus count too (else the next sleep
+        burst = np.frombuffer(data, dtype="<i2")
+        # words the FIFO dropped between the two status reads: what was there, plus what
+        # arrived, minus what was read and what is left (host timing error allowed for)
+        arrived = (t_after - t_before) * self.words_per_s
+        discarded = level + arrived - n_words - level_after
+        slack = P + 0.02 * arrived + HOST_JITTER_S * self.words_per_s
+        if pos_after == 0 and discarded <= slack:
+            words = burst if head == 0 else np.concatenate([self._carry, burst])
+            self._carry = None
+        elif pos_after == 0:
+            # whole patterns were overwritten before the burst: it is aligned, but the words
+            # that were to complete the cut pattern now belong to a later one
+            self.counters["overwrites"] += 1
+            self._pending_gap_reason = "fifo overrun"
+            words = burst[head:]
+            self._carry = None
+        else:
+            # the FIFO overwrote data sets between the status and the data read: the burst
+            # began at pattern position (pos_after - n_words) mod P, not at a pattern start
+            self.counters["overwrites"] += 1
+            self._pending_gap_reason = "fifo overrun"
+            start = (pos_after - n_words) % P
+            first = (P - start) % P
+            whole = (n_words - first) // P
+            words = burst[first : first + whole * P]
+            tail = burst[first + whole * P :]
+            self._carry = tail.copy() if len(tail) == pos_after else None
+        if not len(words):
+            return None, level_after
+        words = words.reshape(-1, P)
+        # slots produced after the newest one read, up to the second status read
+        newest_lag = level_after * self.pattern_slots / P + 0.5
+        chunk = self._decode(words, t_after - newest_lag / self.odr_hz, temp_c, t_after)
+        if chunk is None:  # timestamps inconsistent: discard, restart the FIFO
+            self.counters["resyncs"] += 1
+            self._pending_gap_reason = "fifo resync"
+            self._carry = None
+            self._restart_fifo()
+            return None, 0
+        # words that arrived since the second status read count too (else the next sleep
         # overshoots and, near the bus limit, the FIFO overruns)
-        arrived = (dev.monotonic() - t_status) * self.words_per_s
-        return chunk, level - n_words + int(arrived)
+        since = (dev.monotonic() - t_after) * self.words_per_s
+        return chunk, level_after + int(since)
 
-    def _decode(self, words: np.ndarray, t_newest: float, temp_c: float) -> StreamChunk:
+    def _decode(
+        self, words: np.ndarray, t_newest: float, temp_c: float, t_read: float
+    ) -> StreamChunk | None:
+        """Indices, raw counts and host times of whole patterns; None when the
+        timestamps show the words cannot be these patterns (see :meth:`_ticks_plausible`)."""
         n_pat, d = len(words), self.pattern_slots
         raw = np.take(words, self._body_cols, axis=1).reshape(n_pat * d, 6)
         gaps: list[tuple[int, int, str]] = []
         if self.ts_decimation:
             ts_w = words[:, self._ts_offset : self._ts_offset + 2].astype(np.int64) & 0xFFFF
             raw_ticks = ((ts_w[:, 0] & 0xFF) << 8) | ((ts_w[:, 0] >> 8) << 16) | (ts_w[:, 1] >> 8)
-            start_slots, ticks = self._pattern_start_slots(raw_ticks, gaps)
+            found = self._pattern_start_slots(raw_ticks, gaps, t_read)
+            if found is None:
+                return None
+            start_slots, ticks = found
         else:
             start_slots = self._pattern_start_slots_host(n_pat, t_newest, gaps)
         index = (start_slots[:, None] + np.arange(d)).reshape(-1)
@@ -409,17 +495,46 @@ class FifoStream:
         until the first drift measurement; needs the timestamp, ``timestamp=True``)."""
         return 1.0 / (self.ticks_per_slot * self._tick_s_est)
 
-    def _pattern_start_slots(
-        self, raw_ticks: np.ndarray, gaps: list[tuple[int, int, str]]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Slot index and unwrapped ticks of each pattern start (timestamps mod 2^24)."""
-        d = self.pattern_slots
-        prev_raw = self._last_raw_ticks if self._last_ticks is not None else int(raw_ticks[0])
-        deltas = np.diff(np.concatenate([[prev_raw], raw_ticks])) % TICKS_WRAP
-        base = self._last_ticks if self._last_ticks is not None else 0
-        ticks = base + np.cumsum(deltas)
+    def _ticks_plausible(self, raw_ticks: np.ndarray, t_read: float) -> np.ndarray | None:
+        """Unwrapped ticks of each pattern start, or None if they cannot be real.
+
+        Within one burst the patterns are consecutive FIFO content, so successive
+        timestamps are one pattern apart (``d * ticks_per_slot``, within 2 % for the
+        rounding of the 25 us counter). The first pattern after the previous poll's last
+        one lies at least one pattern later and no later than the host time that has
+        passed since that sample (+ 50 ms + 2 %); the number of 2^24 wraps in between is
+        taken from that host time, so a stall longer than the counter's 419 s period is
+        sized right. Words decoded out of alignment give timestamps that fail this.
+        """
+        pattern_ticks = self.pattern_slots * self.ticks_per_slot
+        inner = np.diff(raw_ticks) % TICKS_WRAP
+        if len(inner) and np.any(np.abs(inner - pattern_ticks) > 0.02 * pattern_ticks + 2):
+            return None
         if self._last_ticks is None:  # new epoch: pattern 0 ticks = its raw value
-            ticks = ticks - ticks[0] + int(raw_ticks[0])
+            first = int(raw_ticks[0])
+        else:
+            step = (int(raw_ticks[0]) - self._last_raw_ticks) % TICKS_WRAP
+            assert self._last_sample_host_t is not None
+            host_ticks = (t_read - self._last_sample_host_t) / self._tick_s_est
+            wraps = max(0, round((host_ticks - step) / TICKS_WRAP))
+            step += wraps * TICKS_WRAP
+            last_slot_ticks = (self.pattern_slots - 1) * self.ticks_per_slot
+            earliest = pattern_ticks - 0.02 * pattern_ticks - 2
+            latest = last_slot_ticks + host_ticks * 1.02 + 0.05 / self._tick_s_est
+            if not earliest <= step <= latest:
+                return None
+            first = self._last_ticks + step
+        return first + np.concatenate([[0], np.cumsum(inner)]).astype(np.int64)
+
+    def _pattern_start_slots(
+        self, raw_ticks: np.ndarray, gaps: list[tuple[int, int, str]], t_read: float
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Slot index and unwrapped ticks of each pattern start (timestamps mod 2^24);
+        None when the timestamps are not plausible (:meth:`_ticks_plausible`)."""
+        d = self.pattern_slots
+        ticks = self._ticks_plausible(raw_ticks, t_read)
+        if ticks is None:
+            return None
         slots_rel = np.rint((ticks - ticks[0]) / self.ticks_per_slot).astype(np.int64)
         if self._next_index is None:
             first = 0
@@ -433,7 +548,10 @@ class FifoStream:
             t_first = self._epoch_t_ref + int(ticks[0]) * self._tick_s_est
             assert self._last_sample_host_t is not None
             period = self.ticks_per_slot * self._tick_s_est
-            first = self._next_index - 1 + round((t_first - self._last_sample_host_t) / period)
+            first = max(
+                self._next_index,
+                self._next_index - 1 + round((t_first - self._last_sample_host_t) / period),
+            )
         starts = first + slots_rel
         self._last_ticks = int(ticks[-1])
         self._last_raw_ticks = int(raw_ticks[-1])
@@ -467,12 +585,8 @@ class FifoStream:
             ]
         )
         jumps = starts - expected
-        if np.any(jumps < 0):
-            raise LSM6DSError(
-                f"{self.dev.chip}: FIFO timestamps went backwards (slot {int(starts[0])}); "
-                "the stream cannot order these samples"
-            )
-        reason = self._pending_gap_reason or "samples lost"
+        # a continuous FIFO loses samples only by overwriting its oldest data sets (§9.3)
+        reason = self._pending_gap_reason or "fifo overrun"
         for k in np.nonzero(jumps > 0)[0]:
             gaps.append((int(starts[k]), int(jumps[k]), reason))
         self._pending_gap_reason = None

@@ -26,6 +26,11 @@ byte order) [§7-8]; FIFO modes, FIFO ODR, decimation, pattern order gyro-accel-
 threshold, overrun, FIFO_STATUS1-4, FIFO_DATA_OUT wrap [§9]; self-test (CTRL5_C) [§3.5];
 the chip differences of [§10] through :mod:`lsm6ds.registers`.
 
+Defects for test jigs (``sim_`` controls): a stuck output axis (:meth:`SimChip.sim_stick_axis`),
+a FIFO that loses whole patterns (:meth:`SimChip.sim_set_fifo_drop_rate`), self-test
+deflections out of limits (:attr:`SimChip.sim_self_test_gyro_lsb`,
+:attr:`SimChip.sim_self_test_accel_g`).
+
 Not modelled: interrupts pins, embedded functions (pedometer, tilt, tap), sensor hub
 (DS3 words read 0), OIS/aux SPI, user offsets, filters other than what the physics
 applies, ONLY_HIGH_DATA.
@@ -142,6 +147,12 @@ class SimChip:
         """Gyro self-test deflection, LSB (5700 LSB = 50 dps at 250 dps, 399 dps at 2000)."""
         self.sim_self_test_accel_g = np.array([0.5, 0.5, 0.5])
         """Accelerometer self-test deflection, g (datasheet range 0.09-1.7 g)."""
+        self.sim_stuck_axes: dict[int, int | None] = {}
+        """Defect: output column (1..6 for gx gy gz ax ay az) -> the raw count it is stuck
+        at (None until the next sample fixes it); see :meth:`sim_stick_axis`."""
+        self.sim_fifo_drop_rate = 0.0
+        """Defect: probability that the FIFO loses each whole pattern it should store."""
+        self._drop_rng = np.random.default_rng(seed)
         self.sim_stats: dict[str, int] = {
             "reserved_writes": 0,
             "readonly_writes": 0,
@@ -149,6 +160,7 @@ class SimChip:
             "resets": 0,
             "samples": 0,
             "fifo_underflow_words": 0,
+            "fifo_dropped_patterns": 0,
         }
         self.sim_reserved_log: list[tuple[int, int]] = []
         self._temp_glitches: list[tuple[int, int, float]] = []
@@ -160,6 +172,11 @@ class SimChip:
     @property
     def _f_scale(self) -> float:
         return 1.0 + self.crystal_ppm * 1e-6
+
+    def sim_sample_period_s(self, base_odr_hz: float) -> float:
+        """Seconds between the samples this chip produces at a base ODR of
+        ``base_odr_hz`` (its oscillator runs ``crystal_ppm`` fast)."""
+        return 1.0 / (base_odr_hz * self._f_scale)
 
     def _power_on(self) -> None:
         now = self.clock.now()
@@ -208,6 +225,26 @@ class SimChip:
         f = self._cfg.base * self._f_scale
         k1 = max(k0, math.floor((t0 + duration_s) * f)) if f else k0
         self._temp_glitches.append((k0, k1, float(delta_c)))
+
+    def sim_stick_axis(self, channel: str, counts: int | None = None) -> None:
+        """Defect: one output axis (``gx`` .. ``az``) stuck at ``counts`` (raw int16), or at
+        the value of the next sample it produces when None: registers and FIFO then
+        repeat that value whatever the input, self-test included."""
+        names = ("gx", "gy", "gz", "ax", "ay", "az")
+        if channel not in names:
+            raise ValueError(f"sim_stick_axis: channel {channel!r} must be one of {names}")
+        if counts is not None and not -32768 <= counts <= 32767:
+            raise ValueError(f"sim_stick_axis: counts={counts} is not an int16")
+        self.sim_stuck_axes[1 + names.index(channel)] = counts
+
+    def sim_set_fifo_drop_rate(self, rate: float, seed: int = 0) -> None:
+        """Defect: the FIFO loses each whole pattern it should store (data sets and
+        timestamp of one pattern) with probability ``rate``, drawn from ``seed``. The
+        timestamps of the patterns kept show the hole (the driver sizes the gap)."""
+        if not 0.0 <= rate <= 1.0:
+            raise ValueError(f"sim_set_fifo_drop_rate: rate={rate} must be in [0, 1]")
+        self.sim_fifo_drop_rate = float(rate)
+        self._drop_rng = np.random.default_rng(seed)
 
     def sim_trigger_fifo(self) -> None:
         """The trigger event of the continuous-to-FIFO and bypass-to-continuous modes."""
@@ -350,6 +387,11 @@ class SimChip:
                 fresh[0] = True
                 idx = np.maximum.accumulate(np.where(fresh, np.arange(n + 1), 0))
                 rows[:, cols] = rows[idx, cols]
+        for col, value in self.sim_stuck_axes.items():
+            if value is None:
+                value = int(rows[1, col])
+                self.sim_stuck_axes[col] = value
+            rows[1:, col] = value
         self._held = rows[-1].copy()
         self.sim_stats["samples"] += n
         self._update_outputs(self._held)
@@ -421,8 +463,26 @@ class SimChip:
         )
         words = words[first : first + n_words]
         pos = ((first + np.arange(n_words)) % c.pattern_words).astype(np.uint16)
+        if self.sim_fifo_drop_rate > 0:
+            words, pos = self._drop_patterns(words, pos, c.pattern_words)
         self.fifo.push(words.view(np.int16), pos)
         self.fifo.next_pattern_pos = int(c.slot_offset[(j_due + 1 - self._slot0) % S])
+
+    def _drop_patterns(
+        self, words: np.ndarray, pos: np.ndarray, pattern_words: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``words``/``pos`` without the whole patterns the FIFO defect loses (only
+        patterns wholly inside this push, so the pattern positions stay aligned)."""
+        starts = np.nonzero(pos == 0)[0]
+        starts = starts[starts + pattern_words <= len(words)]
+        lost = starts[self._drop_rng.random(len(starts)) < self.sim_fifo_drop_rate]
+        if not len(lost):
+            return words, pos
+        keep = np.ones(len(words), dtype=bool)
+        for s in lost:
+            keep[s : s + pattern_words] = False
+        self.sim_stats["fifo_dropped_patterns"] += len(lost)
+        return words[keep], pos[keep]
 
     # ---------------------------------------------------------------- register access
     def _ctrl3(self) -> int:

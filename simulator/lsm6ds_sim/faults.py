@@ -15,6 +15,10 @@ transaction. Faults:
 - stuck output from ``stuck_output_at_s`` for ``stuck_output_for_s``: the sensor's
   outputs (registers and FIFO, all six axes and the temperature) repeat the last sample
   for that interval, as a hung ADC would (the timestamp keeps counting).
+- reader stalls: every ``stall_every_s`` seconds, the transaction that reads the FIFO
+  status (the bus's ``stall_register``) is followed by a stall of ``stall_s`` seconds
+  of the calling thread (virtual clock: time jumps; wall clock: the thread sleeps), as
+  a host busy elsewhere between the status and the data read would be.
 - temperature glitches: Poisson events at ``temp_glitch_rate`` per second; each adds
   ``+-temp_glitch_c`` (sign drawn at random) to the temperature output for
   ``temp_glitch_s`` seconds (at least one sample): a spike on OUT_TEMP.
@@ -50,6 +54,8 @@ class FaultPlan:
     temp_glitch_rate: float = 0.0
     temp_glitch_c: float = 5.0
     temp_glitch_s: float = 0.0
+    stall_every_s: float = 0.0
+    stall_s: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -60,6 +66,8 @@ class FaultPlan:
             "stuck_output_for_s",
             "temp_glitch_rate",
             "temp_glitch_s",
+            "stall_every_s",
+            "stall_s",
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"FaultPlan.{name}={getattr(self, name)} must be >= 0")
@@ -77,6 +85,7 @@ class FaultPlan:
             or self.overrun_at_s is not None
             or self.stuck_output_at_s is not None
             or self.temp_glitch_rate
+            or (self.stall_every_s and self.stall_s)
         )
 
 
@@ -91,7 +100,9 @@ class FaultInjector:
         self._overrun_pending = plan.overrun_at_s is not None
         self._stuck_output_state: bool | None = None
         self._next_glitch_s = self._draw_glitch(0.0)
+        self._next_stall_s = plan.stall_every_s if plan.stall_every_s > 0 else math.inf
         self.injected: dict[str, int] = {
+            "stalls": 0,
             "nacks": 0,
             "stuck_bus": 0,
             "resets": 0,
@@ -120,6 +131,15 @@ class FaultInjector:
             self._burst_left -= 1
             self.injected["nacks"] += 1
             raise OSError(errno.EREMOTEIO, "Remote I/O error (simulated NACK)")
+
+    def stall_after_read(self, now_s: float) -> float:
+        """Seconds the reader stalls after the FIFO status read at ``now_s`` (0: none)."""
+        if now_s < self._next_stall_s or self.plan.stall_s <= 0:
+            return 0.0
+        while self._next_stall_s <= now_s:
+            self._next_stall_s += self.plan.stall_every_s
+        self.injected["stalls"] += 1
+        return self.plan.stall_s
 
     def apply_chip_faults(self, chip: SimChip, now_s: float) -> None:
         """Scheduled chip faults due by ``now_s``, each applied at its own time."""

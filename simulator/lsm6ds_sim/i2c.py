@@ -43,7 +43,10 @@ class SimI2CBus:
     Args:
         clock: shared simulated clock.
         bus_hz: SCL frequency for the timing model; 0 or None = no timing model.
-        faults: fault plan (NACK bursts, stuck bus, chip resets, forced overrun, ...).
+        faults: fault plan (NACK bursts, stuck bus, chip resets, forced overrun, reader
+            stalls, ...).
+        stall_register: the register whose read is followed by the plan's reader stalls
+            (the chip's FIFO_STATUS1; None: no stalls).
     """
 
     def __init__(
@@ -51,7 +54,10 @@ class SimI2CBus:
         clock: SimClock | None = None,
         bus_hz: float | None = None,
         faults: FaultPlan | None = None,
+        *,
+        stall_register: int | None = None,
     ) -> None:
+        self.stall_register = stall_register
         self.clock = clock if clock is not None else SimClock()
         self.timing = I2CTiming(bus_hz) if bus_hz else None
         self.faults = FaultInjector(faults) if faults is not None and faults.active else None
@@ -156,6 +162,12 @@ class SimI2CBus:
                 if len(payload) > 1:
                     dev.write(register, payload[1:])
         self._end(n_bytes, len(i2c_msgs))
+        if (
+            self.faults is not None
+            and self.stall_register is not None
+            and msg_bytes(i2c_msgs[0])[:1] == bytes([self.stall_register])
+        ):
+            self.clock.sleep(self.faults.stall_after_read(self.clock.now()))
 
     def close(self) -> None:
         self.closed = True

@@ -44,6 +44,8 @@ import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
+from importlib import resources
+from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
@@ -254,7 +256,8 @@ class NoiseModel:
         chans: dict[str, ChannelModel] = {}
         for ch in CHANNELS:
             merged = {**defaults_tbl, **channels_tbl.get(ch, {})}
-            chans[ch] = ChannelModel(**{k: _as_number(k, v) for k, v in merged.items()})
+            values: dict[str, Any] = {k: _as_number(k, v) for k, v in merged.items()}
+            chans[ch] = ChannelModel(**values)
             _check_merged(chans[ch], loc, f"channels.{ch}")
         return cls(channels=chans, meta=dict(meta), source=source)
 
@@ -276,23 +279,61 @@ class NoiseModel:
         return tomli_w.dumps(self.to_dict())
 
 
+DATASHEET_PREFIX = "datasheet:"
+"""A model named ``datasheet:CHIP`` (``load_model("datasheet:lsm6dsl")``, ``sim://...&model=
+datasheet:lsm6dsl``, ``--model datasheet:lsm6dsl``) is the chip's shipped datasheet-typical
+model, a data file of this package (``lsm6ds_sim/datasheet/CHIP.toml``, read through
+:mod:`importlib.resources`, so an installed wheel has it too)."""
+
+
+def datasheet_chips() -> tuple[str, ...]:
+    """The chips with a shipped datasheet-typical model, sorted."""
+    folder = resources.files(__package__) / "datasheet"
+    return tuple(sorted(f.name[: -len(".toml")] for f in folder.iterdir()
+                        if f.name.endswith(".toml")))
+
+
+def datasheet_model_file(chip: str) -> Traversable:
+    """The shipped datasheet-typical model file of ``chip`` (the one resolver every
+    ``datasheet:CHIP`` name and the fit's datasheet comparison go through).
+
+    Raises:
+        ModelError: no model is shipped for ``chip`` (the message lists the chips).
+    """
+    name = chip.strip().lower()
+    if name not in datasheet_chips():
+        raise ModelError(f"{DATASHEET_PREFIX}{chip}: no datasheet model is shipped for "
+                         f"{chip!r}; shipped: {', '.join(datasheet_chips())}")
+    return resources.files(__package__) / "datasheet" / f"{name}.toml"
+
+
 def load_model(path: str | Path) -> NoiseModel:
-    """Read a noise model file (TOML).
+    """Read a noise model file (TOML), or the shipped model named ``datasheet:CHIP``.
 
     Raises:
         ModelError: the file is missing, is not valid TOML, or breaks a rule of the format
             (the message names the file, the table, the key and the line).
     """
-    p = Path(path)
+    spec = str(path)
+    source: Traversable
+    if spec.startswith(DATASHEET_PREFIX):
+        source = datasheet_model_file(spec[len(DATASHEET_PREFIX):])
+    else:
+        source = Path(path)
+        spec = str(source)
     try:
-        text = p.read_text(encoding="utf-8")
+        if isinstance(source, Path) and source.exists() and not source.is_file():
+            raise ModelError(f"{spec}: not a regular file (a noise model is a TOML file)")
+        text = source.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ModelError(f"{p}: cannot read the noise model file ({exc.strerror})") from exc
+        raise ModelError(f"{spec}: cannot read the noise model file ({exc.strerror})") from exc
+    except ValueError as exc:  # not UTF-8 text, a NUL in the name
+        raise ModelError(f"{spec}: cannot read the noise model file ({exc})") from exc
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ModelError(f"{p}: not valid TOML: {exc}") from exc
-    return NoiseModel.from_dict(data, source=str(p), text=text)
+        raise ModelError(f"{spec}: not valid TOML: {exc}") from exc
+    return NoiseModel.from_dict(data, source=spec, text=text)
 
 
 # ---------------------------------------------------------------------- validation
@@ -395,7 +436,8 @@ def _channel_from_table(
 ) -> ChannelModel:
     loc = _Locator(source, None)
     _check_table(tbl, loc, table, channel=channel)
-    cm = ChannelModel(**{k: _as_number(k, v) for k, v in tbl.items()})
+    values: dict[str, Any] = {k: _as_number(k, v) for k, v in tbl.items()}
+    cm = ChannelModel(**values)
     _check_merged(cm, loc, table)
     return cm
 
@@ -409,10 +451,13 @@ def _closest(key: str) -> str | None:
 
 __all__ = [
     "ACCEL_CHANNELS",
+    "DATASHEET_PREFIX",
     "GYRO_CHANNELS",
     "KEYS",
     "NON_NEGATIVE_KEYS",
     "ChannelModel",
     "NoiseModel",
+    "datasheet_chips",
+    "datasheet_model_file",
     "load_model",
 ]

@@ -38,6 +38,7 @@ from __future__ import annotations
 import abc
 import functools
 import math
+import threading
 
 import numpy as np
 import scipy.fft
@@ -90,6 +91,9 @@ class TermGenerator(abc.ABC):
     def generate(self, n: int, dt_s: float, t_s: np.ndarray) -> np.ndarray:
         """The next ``n`` samples (float64), spaced ``dt_s``; ``t_s`` their times (s)."""
 
+    def prepare(self) -> None:  # noqa: B027 - most terms have nothing to prepare
+        """Do the slow set-up now (before a real-time stream), without drawing samples."""
+
 
 class WhiteNoise(TermGenerator):
     """Angle/velocity random walk: white rate noise of density ``N`` (unit/sqrt(Hz)).
@@ -135,6 +139,12 @@ class FlickerNoise(TermGenerator):
     (float32 / complex64 FFTs, 3-4x faster than double): its rounding error is about
     1e-6 of the output's rms, a white floor 120 dB below the term, far below an int16
     LSB (tested against the direct FIR sum).
+
+    A block is a few seconds of FFTs at high rates, so :meth:`prepare` computes the first
+    one ahead and, once half of a block has been served, the next one is computed in a
+    background thread (numpy and scipy.fft release the GIL): a real-time reader of the
+    simulated chip is never stalled by it. Blocks are still computed one at a time, in
+    order, from the same random stream, so the output does not change.
     """
 
     def __init__(
@@ -156,22 +166,48 @@ class FlickerNoise(TermGenerator):
         self.history = np.zeros(L - 1, dtype=np.float32)
         self.buffer = np.empty(0, dtype=np.float32)
         self.pos = 0
+        self._ahead: tuple[threading.Thread, list[tuple[np.ndarray, np.ndarray]]] | None = None
 
-    def _next_block(self) -> None:
+    def _compute(self, history: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The block following ``history``: (output samples, the next history)."""
         w = self.rng.standard_normal(self.block)
         x = np.empty(self.nfft, dtype=np.float32)
-        x[: self.taps - 1] = self.history
+        x[: self.taps - 1] = history
         x[self.taps - 1 :] = w
         y = scipy.fft.irfft(scipy.fft.rfft(x) * self.H, self.nfft)
-        self.buffer = y[self.taps - 1 :]
-        self.buffer *= np.float32(self.coefficient)
-        self.history = x[len(x) - (self.taps - 1) :].copy()
+        buffer = y[self.taps - 1 :]
+        buffer *= np.float32(self.coefficient)
+        return buffer, x[len(x) - (self.taps - 1) :].copy()
+
+    def _prefetch(self) -> None:
+        """Start computing the block after the current one in a background thread."""
+        result: list[tuple[np.ndarray, np.ndarray]] = []
+        history = self.history
+        thread = threading.Thread(target=lambda: result.append(self._compute(history)),
+                                  name="flicker-block", daemon=True)
+        thread.start()
+        self._ahead = (thread, result)
+
+    def _next_block(self) -> None:
+        if self._ahead is not None:
+            thread, result = self._ahead
+            thread.join()
+            self._ahead = None
+            self.buffer, self.history = result[0]
+        else:
+            self.buffer, self.history = self._compute(self.history)
         self.pos = 0
+
+    def prepare(self) -> None:
+        if self.pos >= len(self.buffer) and self._ahead is None:
+            self._next_block()
 
     def generate(self, n: int, dt_s: float, t_s: np.ndarray) -> np.ndarray:
         out = np.empty(n)
         done = 0
         while done < n:
+            if self._ahead is None and self.pos > len(self.buffer) // 2:
+                self._prefetch()
             if self.pos >= len(self.buffer):
                 self._next_block()
             take = min(n - done, len(self.buffer) - self.pos)

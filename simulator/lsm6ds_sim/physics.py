@@ -18,9 +18,11 @@ accel: u = specific force in g), all terms optional (model keys in brackets)::
                          or not below the Nyquist frequency 1/(2 dt_s)
            + white noise of density output_white (after the filter)
 
-The true input is constant between calls: a jig sets it with :meth:`SensorPhysics.set_rate_dps`
-and :meth:`SensorPhysics.set_orientation`. With no model the sensor is quiet (no noise,
-+1 g on Z, 25 degC).
+The true input is constant between calls: a jig sets it with
+:meth:`SensorPhysics.set_rate_dps` and :meth:`SensorPhysics.set_orientation`, and the die
+temperature with :meth:`SensorPhysics.set_temperature` (e.g. a
+:class:`~lsm6ds_sim.temperature.ChamberTemperature`). With no model the sensor is quiet
+(no noise, +1 g on Z, 25 degC).
 
 :func:`simulate` is the pure-numpy offline entry point (same numbers as a
 ``SensorPhysics`` with the same seed, generated in one call); :func:`quantize` and
@@ -122,6 +124,10 @@ class ChannelNoise:
         for term in self.terms:
             out += term.generate(n, dt_s, t_s)
         return out
+
+    def prepare(self) -> None:
+        for term in self.terms:
+            term.prepare()
 
 
 class _OutputFilter:
@@ -262,6 +268,12 @@ class SensorPhysics:
         """
         self._force = _gravity_from(orientation)
 
+    def set_temperature(self, temperature: TemperatureProfile | float | str) -> None:
+        """Die temperature profile from the next sample on (a profile, a constant degC or
+        a profile string); profiles are functions of :attr:`time_s`, the simulated time
+        of the samples since this physics started."""
+        self.temperature = as_profile(temperature)
+
     @property
     def rate_dps(self) -> np.ndarray:
         return self._rate.copy()
@@ -322,14 +334,7 @@ class SensorPhysics:
         )
         return self._t_base_s + k * dt_s
 
-    def generate(self, n: int, dt_s: float) -> TrueSamples:
-        """The next ``n`` samples spaced ``dt_s`` (s), continuing the previous call.
-
-        Deterministic from the seed; for a constant ``dt_s`` the result of several calls
-        equals, bit for bit, one call for the total count.
-        """
-        if n < 0 or not dt_s > 0 or not math.isfinite(dt_s):
-            raise ModelError(f"generate: need n >= 0 and dt_s > 0, got n={n}, dt_s={dt_s}")
+    def _make_noise(self, dt_s: float) -> None:
         if self._noise is None:
             taps = math.ceil(self.duration_hint_s / dt_s)
             # one flicker FFT block for the whole hinted record, with room for the
@@ -339,6 +344,24 @@ class SensorPhysics:
                 ch: ChannelNoise(self.model[ch], self.seed, CHANNELS.index(ch), taps, length)
                 for ch in self.noisy_channels
             }
+
+    def prepare(self, dt_s: float) -> None:
+        """Do the slow set-up of samples spaced ``dt_s`` now (the first flicker blocks),
+        before a real-time reader starts; draws no sample, changes no output."""
+        self._make_noise(dt_s)
+        assert self._noise is not None
+        for cn in self._noise.values():
+            cn.prepare()
+
+    def generate(self, n: int, dt_s: float) -> TrueSamples:
+        """The next ``n`` samples spaced ``dt_s`` (s), continuing the previous call.
+
+        Deterministic from the seed; for a constant ``dt_s`` the result of several calls
+        equals, bit for bit, one call for the total count.
+        """
+        if n < 0 or not dt_s > 0 or not math.isfinite(dt_s):
+            raise ModelError(f"generate: need n >= 0 and dt_s > 0, got n={n}, dt_s={dt_s}")
+        self._make_noise(dt_s)
         t = self._times(n, dt_s)
         temp = self.temperature.at(t)
         noise = self._take_noise(n, dt_s)

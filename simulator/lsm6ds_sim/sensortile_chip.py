@@ -18,25 +18,25 @@ sensitivities 0.061 mg/LSB (±2 g) and 8.75 mdps/LSB (±245/250 dps) [§4.2].
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
+from lsm6ds.bus import I2CBus
+from lsm6ds.registers import ACCEL_FS, GYRO_FS, accel_fs_code, chip_map, gyro_fs_code
+
+if TYPE_CHECKING:
+    from lsm6ds_sim.clock import SimClock
+    from lsm6ds_sim.model import NoiseModel
 
 Triple = tuple[int, int, int]
 
-OUT_TEMP_L = 0x20
-STATUS_REG = 0x1E
-CTRL1_XL = 0x10
-CTRL2_G = 0x11
-CTRL3_C = 0x12
+_MAP = chip_map("lsm6dsm")
 LSM6DSM_ADDR = 0x6A
 
-ACCEL_SENS_MG = 0.061
-"""mg/LSB at ±2 g (BSP ``LSM6DSM_ACC_SENSITIVITY_FS_2G``)."""
-GYRO_SENS_MDPS = 8.75
-"""mdps/LSB at ±245/250 dps (BSP ``LSM6DSM_GYRO_SENSITIVITY_FS_245DPS``)."""
-TEMP_LSB_PER_C = 256.0
-"""LSM6DSM temperature: raw/256 + 25 degC [§6]."""
+ACCEL_SENS_MG = ACCEL_FS[accel_fs_code(2.0)][1] * 1e3
+"""mg/LSB at ±2 g (0.061; BSP ``LSM6DSM_ACC_SENSITIVITY_FS_2G``)."""
+GYRO_SENS_MDPS = GYRO_FS[gyro_fs_code(250.0)][1] * 1e3
+"""mdps/LSB at ±245/250 dps (8.75; BSP ``LSM6DSM_GYRO_SENSITIVITY_FS_245DPS``)."""
 
 
 def bsp_scale(counts: np.ndarray | list[int], sensitivity: float) -> Triple:
@@ -64,10 +64,6 @@ class ChipPort(Protocol):
     def read_outputs(self) -> ChipOutputs: ...
 
 
-class _Clock(Protocol):
-    def now(self) -> float: ...
-
-
 class I2cChipPort:
     """A chip on an I2C bus read like the SensorTile BSP: STATUS_REG then a 14-byte burst.
 
@@ -75,30 +71,30 @@ class I2cChipPort:
     and CTRL2_G = 104 Hz 250 dps (0x40), the DataLogExtended defaults.
     """
 
-    def __init__(self, bus: object, addr: int = LSM6DSM_ADDR) -> None:
+    def __init__(self, bus: I2CBus, addr: int = LSM6DSM_ADDR) -> None:
         self.bus = bus
         self.addr = addr
 
     def configure(self, odr_code: int = 4) -> None:
         bus = self.bus
-        bus.write_byte_data(self.addr, CTRL3_C, 0x44)  # type: ignore[attr-defined]
-        bus.write_byte_data(self.addr, CTRL1_XL, (odr_code << 4) | 0x00)  # type: ignore[attr-defined]
-        bus.write_byte_data(self.addr, CTRL2_G, (odr_code << 4) | 0x00)  # type: ignore[attr-defined]
+        bus.write_byte_data(self.addr, _MAP.addr("CTRL3_C"), 0x44)  # BDU | IF_INC
+        bus.write_byte_data(self.addr, _MAP.addr("CTRL1_XL"), (odr_code << 4) | 0x00)
+        bus.write_byte_data(self.addr, _MAP.addr("CTRL2_G"), (odr_code << 4) | 0x00)
 
     def read_outputs(self) -> ChipOutputs:
-        status = self.bus.read_byte_data(self.addr, STATUS_REG)  # type: ignore[attr-defined]
-        raw = bytes(self.bus.read_i2c_block_data(self.addr, OUT_TEMP_L, 14))  # type: ignore[attr-defined]
+        status = self.bus.read_byte_data(self.addr, _MAP.addr("STATUS_REG"))
+        raw = bytes(self.bus.read_i2c_block_data(self.addr, _MAP.addr("OUT_TEMP_L"), 14))
         words = np.frombuffer(raw, dtype="<i2").astype(np.int64)
         return ChipOutputs(
             gyro_mdps=bsp_scale(words[1:4], GYRO_SENS_MDPS),
             accel_mg=bsp_scale(words[4:7], ACCEL_SENS_MG),
-            temp_c=float(words[0]) / TEMP_LSB_PER_C + 25.0,
+            temp_c=float(words[0]) / _MAP.temp_lsb_per_c + _MAP.temp_zero_c,
             gyro_new=bool(status & 0x02),
             accel_new=bool(status & 0x01),
         )
 
 
-def datasheet_model() -> object:
+def datasheet_model() -> NoiseModel:
     """White noise at LSM6DSM datasheet-typical densities (§11, unverified): gyro
     3.8 mdps/sqrt(Hz), accel 90 ug/sqrt(Hz); the default when no model file is given."""
     from lsm6ds_sim.model import NoiseModel
@@ -112,9 +108,9 @@ def datasheet_model() -> object:
 
 
 def simulated_lsm6dsm(
-    clock: object,
+    clock: SimClock,
     seed: int = 0,
-    model: object | None = None,
+    model: NoiseModel | None = None,
     odr_code: int = 4,
     crystal_ppm: float = 0.0,
     bus_hz: float | None = 400_000.0,
@@ -127,9 +123,9 @@ def simulated_lsm6dsm(
     from lsm6ds_sim.i2c import SimI2CBus
     from lsm6ds_sim.physics import SensorPhysics
 
-    physics = SensorPhysics(model if model is not None else datasheet_model(), seed=seed)  # type: ignore[arg-type]
-    chip = SimChip("lsm6dsm", clock, physics, crystal_ppm=crystal_ppm, seed=seed)  # type: ignore[arg-type]
-    bus = SimI2CBus(clock, bus_hz=bus_hz)  # type: ignore[arg-type]
+    physics = SensorPhysics(model if model is not None else datasheet_model(), seed=seed)
+    chip = SimChip("lsm6dsm", clock, physics, crystal_ppm=crystal_ppm, seed=seed)
+    bus = SimI2CBus(clock, bus_hz=bus_hz)
     bus.attach(LSM6DSM_ADDR, chip)
     port = I2cChipPort(bus, LSM6DSM_ADDR)
     port.configure(odr_code)

@@ -54,6 +54,7 @@ from lsm6ds.sensortile.stream import (
 )
 from lsm6ds.sensortile.tmsg import FrameDecoder, encode_frame
 
+from lsm6ds_sim.clock import SimClock
 from lsm6ds_sim.sensortile_chip import ChipPort, simulated_lsm6dsm
 
 BY_ID_NAME = "usb-STMicroelectronics_STLKT01V1_0123456789AB-if00"
@@ -61,37 +62,6 @@ BY_ID_NAME = "usb-STMicroelectronics_STLKT01V1_0123456789AB-if00"
 
 MAG_FIELD_MGAUSS = (220, -45, -410)
 """Constant magnetic field reported when the magnetometer is enabled (mgauss)."""
-
-
-class _FallbackClock:
-    """Minimal SimClock stand-in (same contract) used only if lsm6ds_sim.clock is absent."""
-
-    def __init__(self, mode: str = "virtual", start_s: float = 0.0) -> None:
-        self.mode = mode
-        self._t = start_s
-        self._t0 = time.monotonic() - start_s
-
-    def now(self) -> float:
-        return self._t if self.mode == "virtual" else time.monotonic() - self._t0
-
-    def advance(self, dt_s: float) -> None:
-        if self.mode == "virtual":
-            self._t += dt_s
-
-    def sleep(self, dt_s: float) -> None:
-        if self.mode == "virtual":
-            self._t += dt_s
-        else:
-            time.sleep(dt_s)
-
-
-def make_clock(mode: str) -> object:
-    """Engineer C's :class:`lsm6ds_sim.clock.SimClock` if present, else the fallback."""
-    try:
-        from lsm6ds_sim.clock import SimClock
-    except ImportError:
-        return _FallbackClock(mode)
-    return SimClock(mode)
 
 
 @dataclass
@@ -153,7 +123,7 @@ class SensorTileFirmware:
     Args:
         mode: ``binary`` (DataLogExtended) or ``ascii`` (DataLog).
         chip: where the IMU outputs come from; default :func:`simulated_lsm6dsm` on the clock.
-        clock: an object with ``now/advance/sleep`` (``lsm6ds_sim.clock.SimClock``).
+        clock: the simulated clock (default: a new virtual one).
         seed: seeds the fault generator (and the stand-in chip).
         period_cs: binary stream tick in hundredths of a second (RTC resolution).
         period_ms: ascii record period, ms.
@@ -166,7 +136,7 @@ class SensorTileFirmware:
         self,
         mode: str = "binary",
         chip: ChipPort | None = None,
-        clock: object | None = None,
+        clock: SimClock | None = None,
         *,
         seed: int = 0,
         faults: SerialFaults | None = None,
@@ -182,7 +152,7 @@ class SensorTileFirmware:
         if period_cs < 1 or period_ms < 1:
             raise ValueError("SensorTileFirmware: period_cs and period_ms must be >= 1")
         self.mode = mode
-        self.clock = clock if clock is not None else make_clock("virtual")
+        self.clock = clock if clock is not None else SimClock("virtual")
         self.chip: ChipPort = chip if chip is not None else simulated_lsm6dsm(self.clock, seed)
         self.faults = faults or SerialFaults()
         self.period_s = period_cs / 100.0 if mode == "binary" else period_ms / 1000.0
@@ -270,7 +240,7 @@ class SensorTileFirmware:
         os.replace(tmp, self.link_path)  # atomic re-point, like udev
         self._master, self._slave = master, slave
         self._decoder.reset()
-        self._plugged_since_s = self.clock.now()  # type: ignore[attr-defined]
+        self._plugged_since_s = self.clock.now()
         self._unplugged_at_s = None
 
     def _unplug(self, count: bool = True) -> None:
@@ -285,7 +255,7 @@ class SensorTileFirmware:
         self._streaming = None  # the USB host went away: streaming state is lost
         if count:
             self.sim_stats.unplugs += 1
-        self._unplugged_at_s = self.clock.now()  # type: ignore[attr-defined]
+        self._unplugged_at_s = self.clock.now()
 
     # -- main loop ------------------------------------------------------------------
     def _run(self) -> None:
@@ -297,8 +267,8 @@ class SensorTileFirmware:
 
     def _loop(self) -> None:
         clock = self.clock
-        virtual = getattr(clock, "mode", "virtual") == "virtual"
-        next_tick_s = clock.now()  # type: ignore[attr-defined]
+        virtual = clock.mode == "virtual"
+        next_tick_s = clock.now()
         while not self._stop.is_set():
             with self._lock:
                 self._cable_events()
@@ -312,13 +282,13 @@ class SensorTileFirmware:
                         continue  # nobody listens: virtual time stands still
                 next_tick_s += self.period_s
                 # the bus model may already have moved time on (I2C transfers)
-                lag = next_tick_s - clock.now()  # type: ignore[attr-defined]
+                lag = next_tick_s - clock.now()
                 if lag > 0:
-                    clock.advance(lag)  # type: ignore[attr-defined]
+                    clock.advance(lag)
             else:
-                wait = next_tick_s - clock.now()  # type: ignore[attr-defined]
+                wait = next_tick_s - clock.now()
                 self._serve_commands(max(wait, 0.0))
-                if clock.now() < next_tick_s:  # type: ignore[attr-defined]
+                if clock.now() < next_tick_s:
                     continue
                 next_tick_s += self.period_s
             with self._lock:
@@ -326,7 +296,7 @@ class SensorTileFirmware:
 
     def _cable_events(self) -> None:
         f = self.faults
-        now = self.clock.now()  # type: ignore[attr-defined]
+        now = self.clock.now()
         if self._master is not None:
             if (
                 f.unplug_every_s is not None
@@ -364,7 +334,7 @@ class SensorTileFirmware:
                 return
             for item in self._decoder.feed(data):
                 if hasattr(item, "message"):
-                    self._answer(item.message)  # type: ignore[union-attr]
+                    self._answer(item.message)
                 else:
                     self.sim_stats.bad_commands += 1
 
@@ -469,10 +439,10 @@ class SensorTileFirmware:
                     host=self._host,
                     rtc=(h, m, s, cc),
                     pressure_hpa=0.0,
-                    temperature_c=temp,  # type: ignore[arg-type]
+                    temperature_c=temp,
                     humidity_pct=0.0,
-                    accel_mg=acc,  # type: ignore[arg-type]
-                    gyro_mdps=gyro,  # type: ignore[arg-type]
+                    accel_mg=acc,
+                    gyro_mdps=gyro,
                     mag_mgauss=mag,
                     flags=flags,
                 ).pack()
@@ -489,7 +459,7 @@ class SensorTileFirmware:
             self.sim_stats.frames_unsent += 1
         if self.keep_log:
             self.sim_stats.log.append(
-                SentFrame(tick, rtc_cs, gyro, acc, temp, flags, sent, wire, self._last_damaged)  # type: ignore[arg-type]
+                SentFrame(tick, rtc_cs, gyro, acc, temp, flags, sent, wire, self._last_damaged)
             )
 
     def _apply_faults(self, wire: bytes) -> list[bytes]:

@@ -12,6 +12,9 @@ one-line form used by ``imubench sim --temperature``:
 ``replay:PATH[:TIME_COL:TEMP_COL]``         CSV with a header; linear interpolation,
                                             held at the ends; default columns t_s, temp_c
 =========================================  ============================================
+
+:class:`ChamberTemperature` (no one-line form) is the die in a climatic chamber whose set
+point a test jig changes while the simulation runs.
 """
 
 from __future__ import annotations
@@ -149,6 +152,55 @@ class ReplayTemperature(TemperatureProfile):
         return cls(np.array(t), np.array(v), name=str(p))
 
 
+class ChamberTemperature(TemperatureProfile):
+    """Die temperature of a board in a climatic chamber whose set point a jig changes.
+
+    The chamber air follows each set point at once; the die follows the air as a
+    first-order lag of time constant ``time_constant_s`` (thermal mass behind a thermal
+    resistance): from a set-point change at ``t_k`` to ``S_k``,
+    ``T(t) = S_k + (T(t_k) - S_k) exp(-(t - t_k) / time_constant_s)`` until the next
+    change. :meth:`set_point` appends a change (times must not go back), so the profile
+    stays a pure function of time for every time before the last change and a sampled
+    profile equals the profile sampled at once.
+    """
+
+    def __init__(self, start_c: float = 25.0, time_constant_s: float = 120.0) -> None:
+        if not time_constant_s > 0:
+            raise ProfileError(
+                f"chamber temperature: time_constant_s must be > 0, got {time_constant_s}"
+            )
+        self.time_constant_s = float(time_constant_s)
+        self._times: list[float] = [0.0]
+        self._starts: list[float] = [float(start_c)]
+        self._targets: list[float] = [float(start_c)]
+
+    @property
+    def set_point_c(self) -> float:
+        """The latest set point, degC."""
+        return self._targets[-1]
+
+    def set_point(self, t_s: float, temp_c: float) -> None:
+        """From time ``t_s`` (s) on, the chamber air is at ``temp_c`` (degC)."""
+        if t_s < self._times[-1]:
+            raise ProfileError(
+                f"chamber temperature: set point at t={t_s} s is before the previous change"
+                f" at t={self._times[-1]} s"
+            )
+        here = float(self.at(np.array([t_s]))[0])
+        self._times.append(float(t_s))
+        self._starts.append(here)
+        self._targets.append(float(temp_c))
+
+    def at(self, t_s: np.ndarray) -> np.ndarray:
+        t = np.asarray(t_s, dtype=np.float64)
+        k = np.clip(np.searchsorted(np.asarray(self._times), t, side="right") - 1, 0, None)
+        t0 = np.asarray(self._times)[k]
+        start = np.asarray(self._starts)[k]
+        target = np.asarray(self._targets)[k]
+        decay = np.exp(-np.maximum(t - t0, 0.0) / self.time_constant_s)
+        return target + (start - target) * decay
+
+
 def as_profile(value: TemperatureProfile | float | str | None) -> TemperatureProfile:
     """A profile from a profile, a constant degC, a spec string, or None (25 degC)."""
     if value is None:
@@ -205,6 +257,7 @@ def parse_profile(spec: str) -> TemperatureProfile:
 
 
 __all__ = [
+    "ChamberTemperature",
     "ConstantTemperature",
     "RampTemperature",
     "ReplayTemperature",

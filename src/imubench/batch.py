@@ -3,15 +3,16 @@
 A :class:`Batch` holds consecutive samples of the six inertial channels
 (``gx gy gz`` in dps, ``ax ay az`` in g) and the temperature in degC. Every sample
 carries its *sample index*: the count of nominal output-data-rate periods since the
-start of acquisition. Samples lost by the source (FIFO overrun, dropped frame, I/O
-error) leave a hole in the index sequence; a gap is therefore never implicit: it is
-the difference between consecutive indices, and sources additionally report it in
-:attr:`Batch.lost_before` for the hole just before the batch's first sample.
+start of acquisition. Samples lost on the way (FIFO overrun, dropped frame, chip reset,
+a consumer that fell behind) leave a hole in the index sequence, and every hole is
+described by one or more typed :class:`Gap` records carried in :attr:`Batch.gaps`:
+where it ends, how many samples it holds and why. A hole is never implicit.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Iterable
+from dataclasses import dataclass
 
 import numpy as np
 from lsm6ds.channels import CHANNELS
@@ -19,6 +20,24 @@ from lsm6ds.channels import CHANNELS
 UNITS: dict[str, str] = {
     "gx": "dps", "gy": "dps", "gz": "dps", "ax": "g", "ay": "g", "az": "g", "temp": "degC",
 }
+
+UNEXPLAINED = "unexplained"
+"""Reason given to a hole in the sample index that no source or consumer declared (a
+defect: every path declares its losses; tests assert it never appears)."""
+
+
+@dataclass(frozen=True)
+class Gap:
+    """``lost`` samples missing just before sample index ``at`` (the index of the first
+    sample after the hole, or the end index of a stream that ended in a hole), and why."""
+
+    at: int
+    lost: int
+    reason: str
+
+    def __post_init__(self) -> None:
+        if self.lost <= 0:
+            raise ValueError(f"Gap at index {self.at}: lost={self.lost} must be positive")
 
 
 @dataclass(frozen=True)
@@ -32,8 +51,8 @@ class Batch:
             NaN where a channel is absent.
         temp_c: float64 ``(n,)`` temperature in degC, NaN where not measured.
         raw: int16 ``(n, 6)`` raw output counts when the source has them, else None.
-        lost_before: samples lost immediately before ``index[0]`` (also visible as the
-            jump from the previous batch's last index).
+        gaps: the holes before and between this batch's samples (sorted by ``at``);
+            a batch without samples carries only gaps (a stream that ended in a hole).
     """
 
     index: np.ndarray
@@ -41,8 +60,7 @@ class Batch:
     values: np.ndarray
     temp_c: np.ndarray
     raw: np.ndarray | None = None
-    lost_before: int = 0
-    meta: dict[str, object] = field(default_factory=dict)
+    gaps: tuple[Gap, ...] = ()
 
     def __post_init__(self) -> None:
         n = len(self.index)
@@ -52,30 +70,95 @@ class Batch:
             raise ValueError("Batch.t_s and Batch.temp_c must have one entry per sample")
         if self.raw is not None and self.raw.shape != (n, len(CHANNELS)):
             raise ValueError(f"Batch.raw must have shape ({n}, 6), got {self.raw.shape}")
+        if n and self.gaps and max(g.at for g in self.gaps) > int(self.index[-1]):
+            raise ValueError(
+                "Batch.gaps: a gap after the last sample belongs to the next batch "
+                "(or to a batch without samples at the end of the stream)"
+            )
 
     def __len__(self) -> int:
         return len(self.index)
 
     @property
-    def internal_gaps(self) -> np.ndarray:
-        """``(k, 2)`` int64 array of (index of the sample after the hole, samples lost)."""
-        d = np.diff(self.index) - 1
-        where = np.nonzero(d > 0)[0]
-        return np.column_stack([self.index[where + 1], d[where]]).astype(np.int64)
+    def lost(self) -> int:
+        """Samples lost in this batch's gaps."""
+        return sum(g.lost for g in self.gaps)
+
+    def head(self, n: int) -> Batch:
+        """The first ``n`` samples, with the gaps that end at or before the last of them."""
+        if n >= len(self):
+            return self
+        last = int(self.index[n - 1]) if n else None
+        gaps = tuple(g for g in self.gaps if last is not None and g.at <= last)
+        return Batch(self.index[:n], self.t_s[:n], self.values[:n], self.temp_c[:n],
+                     None if self.raw is None else self.raw[:n], gaps)
+
+    @staticmethod
+    def empty(*, with_raw: bool = False, gaps: Iterable[Gap] = ()) -> Batch:
+        """A batch without samples (optionally carrying gaps)."""
+        z = np.zeros(0)
+        return Batch(np.zeros(0, np.int64), z, np.zeros((0, len(CHANNELS))), z,
+                     np.zeros((0, len(CHANNELS)), np.int16) if with_raw else None, tuple(gaps))
 
     @staticmethod
     def concat(batches: list[Batch]) -> Batch:
-        """Join batches in order (``lost_before`` of the first one is kept)."""
+        """Join batches in order (their gaps too)."""
         if not batches:
             raise ValueError("Batch.concat needs at least one batch")
         raw = None
         if all(b.raw is not None for b in batches):
-            raw = np.concatenate([b.raw for b in batches])  # type: ignore[misc]
+            raw = np.concatenate([b.raw for b in batches])
         return Batch(
             index=np.concatenate([b.index for b in batches]),
             t_s=np.concatenate([b.t_s for b in batches]),
             values=np.concatenate([b.values for b in batches]),
             temp_c=np.concatenate([b.temp_c for b in batches]),
             raw=raw,
-            lost_before=batches[0].lost_before,
+            gaps=tuple(g for b in batches for g in b.gaps),
         )
+
+
+def explain_holes(batch: Batch, last_index: int | None) -> list[Gap]:
+    """Every hole before and inside ``batch`` as gaps with their declared reasons.
+
+    ``last_index`` is the stream's previous sample (None at the start of a stream: the
+    declared gaps up to the first sample are then returned as they are, since a stream may
+    begin after lost samples). A hole ``[start, end)`` (``end`` the index of the sample
+    after it) is explained by the declared gaps with ``start <= at <= end``: a consumer
+    that skipped samples learns of the source gaps inside the skipped range, and they are
+    moved to ``end``. What no declared gap explains gets :data:`UNEXPLAINED`. A batch
+    without samples (the end of a stream) returns its gaps as they are.
+    """
+    if not len(batch):
+        return list(batch.gaps)
+    idx = batch.index
+    first = int(idx[0])
+    holes: list[tuple[int, int]] = []
+    if last_index is not None and first > last_index + 1:
+        holes.append((last_index + 1, first))
+    steps = np.diff(idx) - 1
+    for k in np.nonzero(steps > 0)[0]:
+        holes.append((int(idx[k]) + 1, int(idx[k + 1])))
+    declared = sorted(batch.gaps, key=lambda g: g.at)
+    out: list[Gap] = []
+    j = 0
+    if last_index is None:
+        while j < len(declared) and declared[j].at <= first:
+            out.append(declared[j])
+            j += 1
+    for start, end in holes:
+        while j < len(declared) and declared[j].at < start:
+            j += 1  # declared where no hole is: the index is the truth
+        left = end - start
+        while j < len(declared) and declared[j].at <= end:
+            take = min(declared[j].lost, left)
+            if take > 0:
+                out.append(Gap(end, take, declared[j].reason))
+                left -= take
+            j += 1
+        if left > 0:
+            out.append(Gap(end, left, UNEXPLAINED))
+    return out
+
+
+__all__ = ["CHANNELS", "UNEXPLAINED", "UNITS", "Batch", "Gap", "explain_holes"]

@@ -1,14 +1,18 @@
 """CLI subcommands; each module has ``register(subparsers)`` and ``run(args)``.
 
 Errors of the project's families propagate to :func:`imubench.cli.main`, which prints
-them as ``imubench COMMAND: error: ...`` and exits with 2.
+them as ``imubench COMMAND: error: ...`` and exits with 2 (every exit status is decided
+there). Conventions: every option has a help text; a ``PATH|-`` option writes to stdout
+for ``-`` (:func:`write_json`), and the human summary then goes to stderr
+(:func:`summary_stream`); progress bars come from :func:`imubench.progress.progress`.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from imubench.errors import ImubenchError
 
@@ -24,3 +28,9 @@ def write_json(doc: Any, dest: str) -> None:
         Path(dest).write_text(text + "\n", encoding="utf-8")
     except OSError as exc:
         raise ImubenchError(f"--json {dest}: cannot write ({exc.strerror})") from exc
+
+
+def summary_stream(*json_dests: str | Path | None) -> TextIO:
+    """Where a command's human-readable summary goes: stdout, unless one of its JSON
+    outputs is ``-`` (stdout then carries only that JSON)."""
+    return sys.stderr if any(str(d) == "-" for d in json_dests if d is not None) else sys.stdout

@@ -1,81 +1,92 @@
 """``imubench acquire SOURCE --duration-s S --out REC [--stats-json PATH]``: one recording.
 
-The source is any registered URI (``sim://``, ``i2c://``, ``sensortile://``, ...). Every
-hole in the sample index is written as an explicit gap with its reason (FIFO overrun,
-chip reset, ...). The stats JSON holds the source counters (``samples``, ``gaps``,
-``lost_samples``, ``overruns``, ``bus_bytes``, ``io_errors``, ``retries``, ``bad_frames``,
-``reconnects``) plus ``bus_utilization``, ``expected_samples``, ``duration_s`` (source
-seconds elapsed) and, for chips streaming with timestamps, ``measured_odr_hz`` (the ODR
-measured against the host clock: a crystal error shows here).
+The source is any registered URI (``sim://``, ``i2c://``, ``sensortile://``, ``replay://``,
+...), read through the one acquisition pipeline (:mod:`imubench.pipeline`) into the
+recorder (:class:`~imubench.recorder.Recorder`). Every hole in the sample index is written
+as an explicit gap with its reason (FIFO overrun, chip reset, ...). The stats JSON holds
+the source telemetry (``samples``, ``gaps``, ``lost_samples``, ``overruns``,
+``bus_bytes``, ``bus_utilization``, ``io_errors``, ``retries``, ``bad_frames``,
+``reconnects``, ``measured_odr_hz`` (the ODR measured against the host clock: a crystal
+error shows here), ``elapsed_s``, ``expected_samples``, ``lost_by_reason``) plus
+``duration_s`` (source seconds elapsed), ``produced`` and what the recording holds
+(``recorded``, ``recording_lost``). Ctrl-C stops the acquisition and keeps, closed and
+readable, everything recorded so far.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
+from imubench.calibration import Calibration, recording_header
+from imubench.commands import summary_stream, write_json
 from imubench.errors import SourceError
-from imubench.recording import STORAGE_RAW, open_writer
+from imubench.pipeline import Pipeline
+from imubench.progress import progress
+from imubench.recorder import Recorder
 from imubench.sources.base import Source
-from imubench.sources.registry import open_source
+from imubench.sources.registry import SourceURI, backend_for, open_source
+
+WAIT_SLICE_S = 0.2
 
 
 def add_duration(uri: str, duration_s: float) -> str:
-    """``uri`` with ``duration_s=`` set (kept if the URI has it already)."""
-    if "duration_s=" in uri:
+    """``uri`` with ``duration_s=`` set, for backends that declare it (a finite
+    simulated stream knows its length ahead: exact end accounting, flicker noise exact
+    over the whole run); other URIs are returned unchanged (the pipeline ends them)."""
+    parsed = SourceURI.parse(uri)
+    if "duration_s" in parsed.params or not backend_for(parsed).has_param("duration_s"):
         return uri
-    return uri + ("&" if "?" in uri else "?") + f"duration_s={duration_s:g}"
+    value = quote(f"{duration_s:g}", safe="")  # 1e+06: a bare '+' would read as a space
+    return uri + ("&" if "?" in uri else "?") + f"duration_s={value}"
 
 
-def source_metadata(src: Source) -> dict[str, Any]:
-    info = dataclasses.asdict(src.info)
-    meta: dict[str, Any] = {k: v for k, v in info.items() if k != "config"}
-    meta["source_config"] = info["config"]
-    if info.get("gyro_sensitivity_dps") and info.get("accel_sensitivity_g"):
-        meta["storage"] = STORAGE_RAW
-    return meta
-
-
-def record(src: Source, out: Path) -> dict[str, Any]:
-    """Read ``src`` to its end into the recording ``out``; return the stats."""
-    with src:
-        writer = open_writer(out, source_metadata(src))
-        last = -1
-        try:
-            for batch in src:
-                gaps = batch.meta.get("gaps", []) if batch.meta else []
-                reasons = {int(at): str(reason) for at, _, reason in gaps}  # type: ignore[misc]
-                if batch.raw is None and getattr(writer, "storage", "") == STORAGE_RAW:
-                    raise SourceError("source delivered no raw counts for raw storage")
-                writer.write(batch, reasons)
-                last = int(batch.index[-1])
-            # gaps after the last delivered sample (end of a finite stream)
-            for at, lost, reason in getattr(src, "gap_log", []):
-                if at - lost > last:
-                    writer.write_gap(at, lost, reason)
-        finally:
-            writer.close()
-    stats: dict[str, Any] = dict(src.counters)
-    stats["bus_utilization"] = float(getattr(src, "bus_utilization", 0.0))
-    n_total = getattr(src, "n_total", None)
-    if n_total is not None:
-        stats["expected_samples"] = n_total
-    stats["duration_s"] = float(getattr(src, "elapsed_s", 0.0))
-    measured = getattr(src, "measured_odr_hz", None)
-    if measured is not None:
-        stats["measured_odr_hz"] = float(measured)
+def record(src: Source, out: Path, duration_s: float | None = None,
+           calibration: Calibration | None = None) -> dict[str, Any]:
+    """Read ``src`` (to its end, or for ``duration_s``) into the recording ``out``, with
+    ``calibration`` applied to the values (raw counts untouched, the header says which);
+    return the stats (see the module docstring)."""
+    recorder = Recorder(out, {"calibration": recording_header(calibration)})
+    pipeline = Pipeline(src, [recorder], duration_s=duration_s,
+                        transform=None if calibration is None else calibration.apply)
+    pipeline.prepare()
+    pipeline.start()
+    try:
+        with progress(duration_s, f"recording {out.name}", unit="s") as bar:
+            while not pipeline.join(WAIT_SLICE_S):
+                bar.fraction(pipeline.produced / (pipeline.info.odr_hz * (duration_s or 1)))
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM (imubench.cli raises it for both): keep
+        # what was recorded: stop, drain, close the file
+        pipeline.stop()
+        pipeline.join()
+        raise
+    if pipeline.error is not None:
+        raise pipeline.error
+    errors = pipeline.consumer_errors()
+    if errors:
+        raise next(iter(errors.values()))
+    tel = src.telemetry()
+    stats: dict[str, Any] = tel.as_dict()
+    stats["duration_s"] = tel.elapsed_s
+    stats["produced"] = pipeline.produced
+    account = pipeline.accounts()["recorder"]
+    stats["recorded"] = recorder.samples
+    stats["recording_lost"] = account.lost + recorder.not_recorded
     return stats
 
 
-def record_uri(uri: str, out: Path, stats_json: Path | None) -> dict[str, Any]:
-    """Open the source ``uri``, record it to ``out`` and write the counters to
-    ``stats_json`` (if given); returns the counters (see :func:`record`)."""
-    stats = record(open_source(uri), out)
+def record_uri(uri: str, out: Path, stats_json: Path | None,
+               duration_s: float | None = None,
+               calibration: Path | None = None) -> dict[str, Any]:
+    """Open the source ``uri``, record it to ``out`` (with the calibration file
+    ``calibration`` applied) and write the counters to ``stats_json`` (if given); returns
+    the counters (see :func:`record`)."""
+    cal = None if calibration is None else Calibration.load(calibration)
+    stats = record(open_source(uri), out, duration_s, cal)
     if stats_json is not None:
-        stats_json.write_text(json.dumps(stats, indent=2, sort_keys=True) + "\n")
+        write_json(stats, str(stats_json))
     return stats
 
 
@@ -87,20 +98,28 @@ def register(sub: argparse._SubParsersAction) -> None:
         "i2c:///dev/i2c-1?chip=lsm6dsl&addr=0x6a) for --duration-s seconds into --out "
         "(.imbr native or .csv). Gaps are recorded explicitly.",
     )
-    p.add_argument("source", metavar="SOURCE")
-    p.add_argument("--duration-s", type=float, required=True)
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--stats-json", type=Path, default=None)
+    p.add_argument("source", metavar="SOURCE", help="source URI (README: Sources)")
+    p.add_argument("--duration-s", type=float, required=True,
+                   help="seconds of data to record (a finite source may end sooner)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="recording to write: .imbr (native), .csv or .csv.gz")
+    p.add_argument("--stats-json", type=Path, default=None,
+                   help="write the acquisition counters as JSON here (- for stdout)")
+    p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+                   help="calibration file applied to the values (docs/calibration.md); "
+                   "raw counts stay in the recording")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
-    stats = record_uri(add_duration(args.source, args.duration_s), args.out, args.stats_json)
+    stats = record_uri(add_duration(args.source, args.duration_s), args.out, args.stats_json,
+                       args.duration_s, args.calibration)
     print(
         f"{args.out}: {stats['samples']} samples, {stats['gaps']} gaps, "
         f"{stats['lost_samples']} lost, {stats['overruns']} overruns, "
-        f"{stats['io_errors']} I/O errors"
+        f"{stats['io_errors']} I/O errors",
+        file=summary_stream(args.stats_json),
     )
     return 0

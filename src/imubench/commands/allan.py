@@ -10,19 +10,20 @@ from __future__ import annotations
 
 import argparse
 import gzip
-import sys
-import time
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
+from imubench.batchrun import add_batch_options, is_batch
 from imubench.commands import write_json
-from imubench.errors import RecordingError, StatsError
+from imubench.errors import RecordingError
+from imubench.progress import progress
 from imubench.stats import STATISTICS, compute
+from imubench.stats.taus import parse_taus
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "allan",
         help="Allan-family statistic (adev, oadev, mdev, ..., theoh) of a recording",
@@ -70,23 +71,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "--remove-drift", action="store_true", help="remove linear frequency drift first (reported)"
     )
     p.add_argument("--json", default=None, metavar="PATH|-", help="write JSON here")
+    add_batch_options(p)
     p.set_defaults(func=run)
-
-
-def parse_taus(text: str) -> str | int | list[float]:
-    """--taus value: keyword, int points per decade, or comma-separated seconds."""
-    t = text.strip().lower()
-    if t in ("octave", "decade", "all"):
-        return t
-    try:
-        if "," not in t and "." not in t and "e" not in t:
-            return int(t)
-        return [float(v) for v in t.split(",") if v.strip()]
-    except ValueError:
-        raise StatsError(
-            f"--taus {text!r}: use octave, decade, all, an integer (points per decade) or a "
-            "comma-separated list of tau values in seconds"
-        ) from None
 
 
 def read_column_text(path: Path) -> np.ndarray:
@@ -130,30 +116,6 @@ def load_input(path: Path, column: str | None) -> tuple[np.ndarray, float | None
     return read_column_text(path), None
 
 
-class ProgressBar:
-    """A one-line stderr progress bar shown only on a terminal after one second."""
-
-    def __init__(self, label: str, stream: TextIO = sys.stderr) -> None:
-        self.label = label
-        self.stream = stream
-        self.enabled = stream.isatty()
-        self.t0 = time.monotonic()
-        self.shown = False
-
-    def __call__(self, fraction: float) -> None:
-        if not self.enabled or time.monotonic() - self.t0 < 1.0:
-            return
-        n = int(30 * min(max(fraction, 0.0), 1.0))
-        self.stream.write(f"\r{self.label} [{'#' * n}{'.' * (30 - n)}] {fraction:5.1%}")
-        self.stream.flush()
-        self.shown = True
-
-    def close(self) -> None:
-        if self.shown:
-            self.stream.write("\r" + " " * (len(self.label) + 40) + "\r")
-            self.stream.flush()
-
-
 def format_table(res: Any) -> str:
     lines = [
         f"# {res.stat}  data_type={res.data_type}  rate={res.rate_hz:g} Hz  "
@@ -172,25 +134,33 @@ def format_table(res: Any) -> str:
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> int:
-    data, rec_rate = load_input(args.input, args.column)
+def analyse(args: argparse.Namespace, data: np.ndarray, rec_rate: float | None,
+            on_progress: Any = None) -> Any:
+    """The statistic the options ask for, of one series (``rec_rate``: the recording's
+    rate, None for text input)."""
     rate = args.rate if args.rate is not None else (rec_rate or 1.0)
-    bar = ProgressBar(f"{args.stat}")
-    try:
-        res = compute(
-            args.stat,
-            data,
-            rate,
-            args.data_type,
-            parse_taus(args.taus),
-            confidence=args.ci,
-            alpha=args.alpha,
-            bias_correction=not args.no_bias_correction,
-            remove_drift=args.remove_drift,
-            progress=bar,
-        )
-    finally:
-        bar.close()
+    return compute(
+        args.stat,
+        data,
+        rate,
+        args.data_type,
+        parse_taus(args.taus),
+        confidence=args.ci,
+        alpha=args.alpha,
+        bias_correction=not args.no_bias_correction,
+        remove_drift=args.remove_drift,
+        progress=on_progress,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    if is_batch(args.input, args):
+        from imubench.batchrun.jobs import run_allan_batch
+
+        return run_allan_batch(args)
+    data, rec_rate = load_input(args.input, args.column)
+    with progress(100, args.stat, unit="%") as bar:
+        res = analyse(args, data, rec_rate, bar.fraction)
     if args.json is None:
         print(format_table(res))
     else:

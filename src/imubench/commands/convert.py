@@ -14,8 +14,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(.imbr native, .csv or .csv.gz CSV). Metadata, gaps and raw counts are kept "
         "where the target format can hold them.",
     )
-    p.add_argument("input", metavar="IN")
-    p.add_argument("output", metavar="OUT")
+    p.add_argument("input", metavar="IN", help="recording to read (.imbr, .csv, .csv.gz)")
+    p.add_argument("output", metavar="OUT",
+                   help="recording to write (.imbr, .csv, .csv.gz); never overwritten")
     p.set_defaults(func=run)
 
 

@@ -12,13 +12,15 @@ import argparse
 import sys
 from pathlib import Path
 
+from imubench.batchrun import add_batch_options, is_batch
 from imubench.commands import write_json
+from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
 from imubench.noisefit.units import kalibr_yaml
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "fit",
         help="fit the noise model (white, flicker, random walk, ...) to a recording",
@@ -34,11 +36,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     p.add_argument("--method", choices=METHODS, default="wls",
                    help="wls: GLS on the Allan variance with EDF weights (default); "
                         "tangent: datasheet slope lines")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="MODEL.toml",
-                   help="model file to write")
+    p.add_argument("-o", "--output", type=Path, default=None, metavar="MODEL.toml",
+                   help="model file to write (required for one recording)")
     p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")
     p.add_argument("--kalibr", type=Path, default=None, metavar="imu.yaml",
                    help="also write Kalibr noise parameters")
+    add_batch_options(p)
     p.set_defaults(func=run)
 
 
@@ -57,6 +60,13 @@ def format_summary(result: RecordingFit) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if is_batch(args.recording, args):
+        from imubench.batchrun.jobs import run_fit_batch
+
+        return run_fit_batch(args)
+    if args.output is None:
+        raise FitError("-o MODEL.toml is required for one recording (a directory or glob "
+                       "writes into --out-dir)")
     try:
         result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
                                method=args.method)

@@ -17,9 +17,12 @@ from pathlib import Path
 
 from lsm6ds_sim.model import load_model
 
+from imubench.batchrun import add_batch_options, is_batch
 from imubench.commands import write_json
 from imubench.gap import EFFECTS, GapOptions, diagnose_recording
+from imubench.gap.errors import GapError
 from imubench.gap.explain import explain_channel
+from imubench.progress import progress
 from imubench.recording import load_recording
 
 
@@ -37,7 +40,7 @@ def _list(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "gap",
         help="sim-to-real gap: where the model departs from a recording, and why",
@@ -45,7 +48,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("real", type=Path, metavar="REAL", help="recording (.imbr/.csv)")
-    p.add_argument("--model", type=Path, required=True, help="noise model TOML")
+    p.add_argument("--model", type=Path, required=True, metavar="MODEL.toml|datasheet:CHIP",
+                   help="noise model file, or datasheet:CHIP for a shipped one")
     p.add_argument("--channels", type=_list, default=None,
                    help="comma list, e.g. gx,gy (default: every channel of REAL)")
     p.add_argument("--holdout-fraction", type=_fraction, default=0.5,
@@ -59,25 +63,36 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     p.add_argument("--seed", type=int, default=0, help="seed of the realisations")
     p.add_argument("--report", type=Path, default=None, metavar="DIR",
                    help="write PNG/SVG plots and index.html here")
-    p.add_argument("--json", required=True, metavar="OUT|-", help="write the JSON here")
+    p.add_argument("--json", default=None, metavar="OUT|-",
+                   help="write the JSON here (required for one recording)")
+    add_batch_options(p)
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def gap_options(args: argparse.Namespace) -> GapOptions:
     effects = tuple(args.effects) if args.effects else EFFECTS
-    options = GapOptions(realisations=args.realisations, seed=args.seed,
-                         holdout_fraction=args.holdout_fraction, effects=effects)
+    return GapOptions(realisations=args.realisations, seed=args.seed,
+                      holdout_fraction=args.holdout_fraction, effects=effects)
+
+
+def run(args: argparse.Namespace) -> int:
+    if is_batch(args.real, args):
+        from imubench.batchrun.jobs import run_gap_batch
+
+        return run_gap_batch(args)
+    if args.json is None:
+        raise GapError("--json OUT is required for one recording (a directory or glob "
+                       "writes into --out-dir)")
+    options = gap_options(args)
     model = load_model(args.model)
     rec = load_recording(args.real)
     reps = [load_recording(p) for p in args.holdout]
 
-    def progress(ch: str) -> None:
-        if sys.stderr.isatty():
-            print(f"imubench gap: {ch} ...", file=sys.stderr)
-
-    out, diags = diagnose_recording(rec, model, args.channels, options, reps,
-                                    effects_requested=args.effects is not None,
-                                    progress=progress)
+    n_channels = len(args.channels) if args.channels else len(rec.channels)
+    with progress(n_channels, "gap", unit="channel") as bar:
+        out, diags = diagnose_recording(rec, model, args.channels, options, reps,
+                                        effects_requested=args.effects is not None,
+                                        progress=lambda ch: bar.update(1))
     if args.report is not None:
         from imubench.gap.report import write_report  # matplotlib only when asked
 

@@ -22,13 +22,12 @@ from lsm6ds_sim.model import ChannelModel, NoiseModel, load_model
 
 from imubench.batch import CHANNELS
 from imubench.commands import write_json
-from imubench.commands.allan import parse_taus
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.identify import local_slopes
 from imubench.noisefit.model_avar import model_avar_m
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "model",
         help="Allan deviation a noise model file predicts (per channel)",
@@ -46,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 
 def _factors(spec: str, rate_hz: float, n: int | None) -> np.ndarray:
-    from imubench.stats.taus import averaging_factors
+    from imubench.stats.taus import averaging_factors, parse_taus
 
     taus = parse_taus(spec)
     if isinstance(taus, list):

@@ -15,7 +15,7 @@ from pathlib import Path
 from imubench.noisefit.fit import METHODS
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "report", help="noise report of a recording: plots, fit, HTML summary",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

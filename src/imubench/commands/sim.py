@@ -13,6 +13,7 @@ from urllib.parse import quote
 
 from lsm6ds.registers import CHIPS
 
+from imubench.commands import summary_stream
 from imubench.commands.acquire import record_uri
 from imubench.errors import SourceError
 
@@ -23,7 +24,7 @@ def build_uri(args: argparse.Namespace) -> str:
         f"fs_dps={args.fs_dps:g}",
         f"fs_g={args.fs_g:g}",
         f"seed={args.seed}",
-        f"duration_s={args.duration_s:g}",
+        f"duration_s={quote(f'{args.duration_s:g}', safe='')}",
         "clock=virtual",
     ]
     if args.model:
@@ -42,26 +43,37 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Write a recording produced by a simulated LSM6DS chip read through "
         "the real I2C driver and its FIFO, in virtual time.",
     )
-    p.add_argument("--chip", choices=CHIPS, default="lsm6dsl")
-    p.add_argument("--odr-hz", type=float, default=104.0)
-    p.add_argument("--duration-s", type=float, required=True)
-    p.add_argument("--model", type=Path, default=None, help="noise model TOML")
-    p.add_argument("--temperature", default=None, help="temperature profile (see docs)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--fs-dps", type=float, default=250.0)
-    p.add_argument("--fs-g", type=float, default=2.0)
-    p.add_argument("--bus-khz", type=float, default=0.0, help="bus timing model, 0 = off")
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--stats-json", type=Path, default=None)
+    p.add_argument("--chip", choices=CHIPS, default="lsm6dsl", help="simulated chip")
+    p.add_argument("--odr-hz", type=float, default=104.0,
+                   help="output data rate in Hz (one the chip has; default 104)")
+    p.add_argument("--duration-s", type=float, required=True,
+                   help="seconds of data to simulate (virtual time)")
+    p.add_argument("--model", default=None, metavar="MODEL.toml|datasheet:CHIP",
+                   help="noise model file, or datasheet:CHIP for the shipped "
+                   "datasheet-typical one (default: no noise)")
+    p.add_argument("--temperature", default=None,
+                   help="temperature profile (docs/simulator.md; default 25 degC)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--fs-dps", type=float, default=250.0,
+                   help="gyro full scale in dps (default 250)")
+    p.add_argument("--fs-g", type=float, default=2.0,
+                   help="accelerometer full scale in g (default 2)")
+    p.add_argument("--bus-khz", type=float, default=0.0,
+                   help="I2C bus clock of the bus timing model in kHz (default 0 = off)")
+    p.add_argument("--out", type=Path, required=True, metavar="REC",
+                   help="recording to write (.imbr native, .csv, .csv.gz)")
+    p.add_argument("--stats-json", type=Path, default=None, metavar="PATH|-",
+                   help="write the acquisition counters as JSON here (- for stdout)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
-    stats = record_uri(build_uri(args), args.out, args.stats_json)
+    stats = record_uri(build_uri(args), args.out, args.stats_json, args.duration_s)
     print(
         f"{args.out}: {stats['samples']} samples from a simulated {args.chip} "
-        f"({stats['gaps']} gaps, {stats['lost_samples']} lost)"
+        f"({stats['gaps']} gaps, {stats['lost_samples']} lost)",
+        file=summary_stream(args.stats_json),
     )
     return 0

@@ -642,12 +642,12 @@ class EmbeddedBroker:
             while True:
                 while session.queue and len(session.inflight) < self.max_inflight:
                     message = session.pop()
-                    packet_id = None
+                    new_id: int | None = None
                     if message.qos:
-                        packet_id = session.next_packet_id()
+                        new_id = session.next_packet_id()
                         awaited = pk.PUBACK if message.qos == 1 else pk.PUBREC
-                        session.inflight[packet_id] = (message, awaited)
-                    conn.writer.write(pk.publish(message, packet_id))
+                        session.inflight[new_id] = (message, awaited)
+                    conn.writer.write(pk.publish(message, new_id))
                     session.sent += 1
                     self._sent += 1
                     await conn.writer.drain()

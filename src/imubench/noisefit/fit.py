@@ -490,10 +490,10 @@ def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
             best = (score, fitted[sub])
     assert best is not None
     chosen = best[1]
-    sub = [k for k in kinds if (k == "filter" and chosen.bandwidth_hz > 0)
-           or (k == "markov" and "markov" in chosen.terms)
-           or (k == "sine" and "sine" in chosen.terms)]
-    return _polish(chosen, sub, pts, corr), pts
+    chosen_kinds = tuple(k for k in kinds if (k == "filter" and chosen.bandwidth_hz > 0)
+                         or (k == "markov" and "markov" in chosen.terms)
+                         or (k == "sine" and "sine" in chosen.terms))
+    return _polish(chosen, chosen_kinds, pts, corr), pts
 
 
 def _eliminate(st: Structure, pts: Points) -> tuple[Structure, _Solution]:
@@ -756,9 +756,9 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
                           tau_c_s=st.tau_c_s, f0_hz=st.f0_hz)
         sol_all = _solve(design(withall, pts), pts.avar, sol.sigma)
         se_all = np.sqrt(np.maximum(np.diag(sol_all.cov_theta), 0.0))
-        for t in absent:
-            j = withall.terms.index(t)
-            ci[AMPLITUDE_KEY[t]] = (0.0, math.sqrt(max(sol_all.theta[j], 0.0)
+        for term in absent:
+            j = withall.terms.index(term)
+            ci[AMPLITUDE_KEY[term]] = (0.0, math.sqrt(max(sol_all.theta[j], 0.0)
                                                    + Z_PRESENT * se_all[j]))
     dof = int(pts.avar.size - len(st.terms) - 2 * sum(
         1 for v in (st.tau_c_s, st.f0_hz, st.bandwidth_hz) if v > 0))

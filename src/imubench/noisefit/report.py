@@ -12,6 +12,7 @@ from __future__ import annotations
 import html
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -22,7 +23,7 @@ SENSORS = {"gyro": (("gx", "gy", "gz"), "dps"), "accel": (("ax", "ay", "az"), "g
 COLORS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 
 
-def _plt():  # type: ignore[no-untyped-def]
+def _plt() -> Any:
     import matplotlib
 
     matplotlib.use("Agg")

@@ -27,12 +27,37 @@ FLICKER_FLOOR: float = math.sqrt(2.0 * math.log(2.0) / math.pi)
 """ADEV of flicker of coefficient B is 0.664 B (IEEE 952 C.3)."""
 
 
-def _read(values: np.ndarray, edf: np.ndarray, i: int) -> tuple[float, tuple[float, float], int]:
+def _read(values: np.ndarray, edf: np.ndarray, i: int) -> tuple[float, tuple[float, float]]:
     v = float(values[i])
     e = float(edf[i])
     lo = v * math.sqrt(e / chi2.ppf(0.975, e))
     hi = v * math.sqrt(e / chi2.ppf(0.025, e))
-    return v, (lo, hi), i
+    return v, (lo, hi)
+
+
+def tangent_readings(tau_s: np.ndarray, dev: np.ndarray
+                     ) -> dict[str, tuple[np.ndarray, int]]:
+    """The tangent rule on an ADEV curve (module docstring), without its intervals.
+
+    Returns ``{"white": (N per point, i), "flicker": (B per point, i), "random_walk":
+    (K per point, i)}``: each term's value as it would be read at every point
+    (N = sigma sqrt(tau), B = sigma / 0.664, K = sigma sqrt(3 / tau)) and the index ``i``
+    of the point the rule reads it at: the slope nearest -1/2 left of the minimum, the
+    minimum, the slope nearest +1/2 right of the minimum. ``tau_s`` ascending, ``dev`` > 0,
+    at least two points.
+    """
+    tau = np.asarray(tau_s, dtype=float)
+    dev = np.asarray(dev, dtype=float)
+    slope = local_slopes(tau, dev)
+    i_min = int(np.argmin(dev))
+    left = np.arange(i_min + 1)
+    right = np.arange(i_min, tau.size)
+    return {
+        "white": (dev * np.sqrt(tau), int(left[np.argmin(np.abs(slope[left] + 0.5))])),
+        "flicker": (dev / FLICKER_FLOOR, i_min),
+        "random_walk": (dev * np.sqrt(3.0 / tau),
+                        int(right[np.argmin(np.abs(slope[right] - 0.5))])),
+    }
 
 
 def fit_tangent(y: np.ndarray, rate_hz: float, *, channel: str = "gx",
@@ -40,31 +65,17 @@ def fit_tangent(y: np.ndarray, rate_hz: float, *, channel: str = "gx",
     """N, B, K by the tangent method (module docstring); other terms are reported 0."""
     arr = check_series(y, rate_hz, channel)
     pts = avar_points(arr, rate_hz, taus, channel)
-    dev = np.sqrt(pts.avar)
     tau = pts.tau_s
     params = dict.fromkeys(PARAM_KEYS, 0.0)
     params["filter_order"] = 1
     ci: dict[str, tuple[float, float]] = {}
     notes = []
-    slope = local_slopes(tau, dev)
-    i_min = int(np.argmin(dev))
-    left = np.arange(i_min + 1)
-    right = np.arange(i_min, tau.size)
-    picks = {
-        "white": int(left[np.argmin(np.abs(slope[left] + 0.5))]),
-        "flicker": i_min,
-        "random_walk": int(right[np.argmin(np.abs(slope[right] - 0.5))]),
-    }
-    for key, values in (("white", dev * np.sqrt(tau)),
-                        ("flicker", dev / FLICKER_FLOOR),
-                        ("random_walk", dev * np.sqrt(3.0 / tau))):
-        v, lim, i = _read(values, pts.edf, picks[key])
-        params[key] = v
-        ci[key] = lim
+    for key, (values, i) in tangent_readings(tau, np.sqrt(pts.avar)).items():
+        params[key], ci[key] = _read(values, pts.edf, i)
         notes.append(f"{key} read at tau = {tau[i]:.4g} s")
     return ChannelFit(channel, float(rate_hz), "tangent", params, ci,
                       ("white", "flicker", "random_walk"), pts.tau_s, pts.avar, pts.edf,
                       float(np.nanmean(arr)), notes=tuple(notes))
 
 
-__all__ = ["FLICKER_FLOOR", "fit_tangent"]
+__all__ = ["FLICKER_FLOOR", "fit_tangent", "tangent_readings"]

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from pathlib import Path
 
 from imubench.noisefit.errors import FitError
 
@@ -103,30 +102,20 @@ def kalibr_yaml(values: Mapping[str, float | str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def datasheet_model_path(chip: str) -> Path | None:
-    """``config/model-<chip>.toml`` of the source tree when it exists."""
-    root = Path(__file__).resolve().parents[3] / "config"
-    p = root / f"model-{chip.lower()}.toml"
-    return p if p.is_file() else None
-
-
 def datasheet_comparison(chip: str | None,
                          params_by_channel: Mapping[str, Mapping[str, float]]
                          ) -> dict[str, dict[str, float]]:
-    """Fitted white density vs the chip's datasheet-typical one (config/model-<chip>.toml).
+    """Fitted white density vs the chip's datasheet-typical one (``datasheet:<chip>``).
 
     Returns ``{channel: {"fitted": N, "typical": N_typ, "ratio": N / N_typ}}``; empty when
     the chip is unknown or has no shipped model. The typicals are those of the shipped
     files (marked unverified there).
     """
-    if not chip:
-        return {}
-    path = datasheet_model_path(chip)
-    if path is None:
-        return {}
-    from lsm6ds_sim.model import load_model
+    from lsm6ds_sim.model import DATASHEET_PREFIX, datasheet_chips, load_model
 
-    typical = load_model(path)
+    if not chip or chip.lower() not in datasheet_chips():
+        return {}
+    typical = load_model(DATASHEET_PREFIX + chip)
     out: dict[str, dict[str, float]] = {}
     for ch, p in params_by_channel.items():
         n_typ = float(typical[ch].white)
@@ -139,7 +128,6 @@ def datasheet_comparison(chip: str | None,
 __all__ = [
     "G0",
     "datasheet_comparison",
-    "datasheet_model_path",
     "datasheet_units",
     "kalibr_imu",
     "kalibr_yaml",

@@ -13,19 +13,18 @@ from typing import Any
 
 import numpy as np
 
-from imubench.batch import CHANNELS, Batch
+from imubench.batch import CHANNELS, Batch, Gap
 from imubench.errors import RecordingError
 from imubench.recording.csvio import CsvWriter, read_csv
 from imubench.recording.native import (
     STORAGE_FLOAT,
     STORAGE_RAW,
-    GapRecord,
     NativeReader,
     NativeWriter,
 )
 
 __all__ = [
-    "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "GapRecord", "NativeReader", "NativeWriter",
+    "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "NativeReader", "NativeWriter",
     "Recording", "convert", "load_recording", "open_writer", "recording_kind",
 ]
 
@@ -62,7 +61,7 @@ class Recording:
     values: np.ndarray
     temp_c: np.ndarray
     raw: np.ndarray | None = None
-    gaps: list[GapRecord] = field(default_factory=list)
+    gaps: list[Gap] = field(default_factory=list)
     damage: str | None = None
     complete: bool = True
 
@@ -91,7 +90,7 @@ class Recording:
         first, last = int(self.index[0]), int(self.index[-1])
         inside = last - first + 1 - len(self.index)
         outside = sum(
-            g.lost for g in self.gaps if g.at_index <= first or g.at_index - g.lost > last
+            g.lost for g in self.gaps if g.at <= first or g.at - g.lost > last
         )
         return int(inside + outside)
 
@@ -151,13 +150,20 @@ def convert(src: str | Path, dst: str | Path) -> Recording:
         meta["storage"] = STORAGE_RAW if rec.raw is not None else STORAGE_FLOAT
     else:
         meta.pop("storage", None)
-    reasons = {g.at_index: g.reason for g in rec.gaps}
+    gaps = sorted(rec.gaps, key=lambda g: g.at)
     with open_writer(dst, meta) as writer:
+        j = 0
         for start in range(0, len(rec), CONVERT_BLOCK):
             part = slice(start, start + CONVERT_BLOCK)
+            last = int(rec.index[part][-1])
+            mine = []
+            while j < len(gaps) and gaps[j].at <= last:
+                mine.append(gaps[j])
+                j += 1
             writer.write(
                 Batch(rec.index[part], rec.t_s[part], rec.values[part], rec.temp_c[part],
-                      None if rec.raw is None else rec.raw[part]),
-                reasons,
+                      None if rec.raw is None else rec.raw[part], tuple(mine)),
             )
+        if j < len(gaps):  # the recording ended in a gap
+            writer.write(Batch.empty(with_raw=rec.raw is not None, gaps=gaps[j:]))
     return rec

@@ -17,15 +17,13 @@ import io
 import json
 import math
 import re
-from collections.abc import Mapping
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 
-from imubench.batch import CHANNELS, Batch
+from imubench.batch import CHANNELS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
-from imubench.recording.native import GapRecord, gaps_of
 
 COLUMNS: tuple[str, ...] = ("t", *CHANNELS, "temp")
 INDEX_COLUMN = "index"
@@ -58,17 +56,29 @@ class CsvWriter:
             self._fh.write(f"# {key}: {json.dumps(self.metadata[key], default=str)}\n")
         self._fh.write(",".join((*COLUMNS, INDEX_COLUMN)) + "\n")
 
-    def write(self, batch: Batch, reasons: Mapping[int, str] | None = None) -> None:
-        """Append rows; each hole in the sample index gets a ``# gap`` line before it."""
-        if not len(batch):
-            return
-        holes = dict(gaps_of(batch, self._last_index))
-        table = np.column_stack([batch.t_s, batch.values, batch.temp_c, batch.index])
+    def write(self, batch: Batch) -> None:
+        """Append rows; every hole gets ``# gap`` lines (one per declared reason, see
+        :func:`~imubench.batch.explain_holes`) before the sample after it."""
+        holes: dict[int, list[Gap]] = {}
+        for gap in explain_holes(batch, self._last_index):
+            holes.setdefault(gap.at, []).append(gap)
         buf = io.StringIO()
+        if not len(batch):
+            for gaps in holes.values():
+                for g in gaps:
+                    self._gap_line(buf, g.at, g.lost, g.reason)
+            self._fh.write(buf.getvalue())
+            self._fh.flush()
+            return
+        table = np.column_stack([batch.t_s, batch.values, batch.temp_c, batch.index])
+        last = int(batch.index[-1])
+        for at in [a for a in holes if a <= int(batch.index[0]) or a > last]:
+            for g in holes.pop(at):
+                self._gap_line(buf, g.at, g.lost, g.reason)
         for idx, row in zip(batch.index, table, strict=True):
             if holes and int(idx) in holes:
-                at = int(idx)
-                self._gap_line(buf, at, holes[at], (reasons or {}).get(at, "source"))
+                for g in holes.pop(int(idx)):
+                    self._gap_line(buf, g.at, g.lost, g.reason)
             buf.write(",".join("" if math.isnan(v) else f"{v:.9g}" for v in row) + "\n")
         self._fh.write(buf.getvalue())
         self._fh.flush()
@@ -94,11 +104,11 @@ class CsvWriter:
         self.close()
 
 
-def read_csv(path: str | Path) -> tuple[dict[str, Any], Batch, list[GapRecord]]:
+def read_csv(path: str | Path) -> tuple[dict[str, Any], Batch, list[Gap]]:
     """Parse a CSV recording; errors name the file, line and column."""
     path = Path(path)
     meta: dict[str, Any] = {}
-    gaps: list[GapRecord] = []
+    gaps: list[Gap] = []
     header: list[str] | None = None
     rows: list[list[float]] = []
     try:
@@ -113,7 +123,7 @@ def read_csv(path: str | Path) -> tuple[dict[str, Any], Batch, list[GapRecord]]:
             if line.startswith("#"):
                 gap = _GAP.match(line)
                 if gap:
-                    gaps.append(GapRecord(int(gap[1]), int(gap[2]), (gap[3] or "").strip()))
+                    gaps.append(Gap(int(gap[1]), int(gap[2]), (gap[3] or "").strip()))
                 elif header is None and ":" in line:
                     key, _, value = line[1:].partition(":")
                     try:
@@ -150,8 +160,8 @@ def read_csv(path: str | Path) -> tuple[dict[str, Any], Batch, list[GapRecord]]:
     if header is None:
         raise RecordingError(f"{path}: no CSV header line (expected t,gx,gy,gz,ax,ay,az,temp)")
     table = np.array(rows, dtype=np.float64).reshape(len(rows), len(header))
-    col = {name: table[:, i] for i, name in enumerate(header)}
-    t = col["t"]
+    columns = {name: table[:, i] for i, name in enumerate(header)}
+    t = columns["t"]
     odr = meta.get("odr_hz")
     if odr is None:
         if len(t) < 2:
@@ -159,8 +169,8 @@ def read_csv(path: str | Path) -> tuple[dict[str, Any], Batch, list[GapRecord]]:
         odr = float(1.0 / np.median(np.diff(t)))
         meta["odr_hz"] = odr
     n = len(t)
-    if INDEX_COLUMN in col:
-        index = col[INDEX_COLUMN].astype(np.int64)
+    if INDEX_COLUMN in columns:
+        index = columns[INDEX_COLUMN].astype(np.int64)
     else:
         index = np.rint((t - t[0]) * float(odr)).astype(np.int64) if n else np.zeros(0, np.int64)
     if n > 1 and np.any(np.diff(index) <= 0):
@@ -171,9 +181,9 @@ def read_csv(path: str | Path) -> tuple[dict[str, Any], Batch, list[GapRecord]]:
         )
     values = np.full((n, len(CHANNELS)), np.nan)
     for i, name in enumerate(CHANNELS):
-        if name in col:
-            values[:, i] = col[name]
-    temp = col.get("temp", np.full(n, np.nan))
-    meta.setdefault("channels", [c for c in CHANNELS if c in col])
+        if name in columns:
+            values[:, i] = columns[name]
+    temp = columns.get("temp", np.full(n, np.nan))
+    meta.setdefault("channels", [c for c in CHANNELS if c in columns])
     batch = Batch(index=index, t_s=t, values=values, temp_c=temp)
     return meta, batch, gaps

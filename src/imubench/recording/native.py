@@ -38,14 +38,13 @@ import os
 import struct
 import time
 import zlib
-from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
 
-from imubench.batch import CHANNELS, Batch
+from imubench.batch import CHANNELS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
 
 MAGIC = b"IMBR"
@@ -54,28 +53,6 @@ _PREAMBLE = MAGIC + struct.pack("<H", VERSION) + b"\r\n"
 _REC = struct.Struct("<cII")
 STORAGE_RAW = "raw_int16"
 STORAGE_FLOAT = "float64"
-
-
-@dataclass(frozen=True)
-class GapRecord:
-    """``lost`` samples missing just before sample index ``at_index``."""
-
-    at_index: int
-    lost: int
-    reason: str
-
-
-def gaps_of(batch: Batch, last_index: int | None) -> list[tuple[int, int]]:
-    """(index after the hole, samples lost) for every hole in ``batch``, including the
-    one between ``last_index`` (the previous sample written) and the batch's first."""
-    out = []
-    first = int(batch.index[0])
-    if last_index is not None and first > last_index + 1:
-        out.append((first, first - last_index - 1))
-    elif last_index is None and batch.lost_before:
-        out.append((first, int(batch.lost_before)))
-    out.extend((int(a), int(lost)) for a, lost in batch.internal_gaps)
-    return out
 
 
 class NativeWriter:
@@ -143,22 +120,21 @@ class NativeWriter:
             os.fsync(self._fh.fileno())
             self._last_sync = now
 
-    def write(self, batch: Batch, reasons: Mapping[int, str] | None = None) -> None:
-        """Append a batch; each hole in the sample index becomes a gap record first.
-
-        ``reasons`` maps the index after a hole to the reason stored with the gap
-        (default ``"source"``).
-        """
+    def write(self, batch: Batch) -> None:
+        """Append a batch; every hole before and inside it becomes a gap record first,
+        with the reason its :class:`~imubench.batch.Gap` declares
+        (:func:`~imubench.batch.explain_holes`). A batch without samples writes its gaps
+        (a stream that ended in a hole)."""
         n = len(batch)
+        if n and self._last_index is not None and int(batch.index[0]) <= self._last_index:
+            raise RecordingError(
+                f"{self.path}: sample index {int(batch.index[0])} does not follow "
+                f"{self._last_index}"
+            )
+        for gap in explain_holes(batch, self._last_index):
+            self.write_gap(gap.at, gap.lost, gap.reason)
         if n == 0:
             return
-        first = int(batch.index[0])
-        if self._last_index is not None and first <= self._last_index:
-            raise RecordingError(
-                f"{self.path}: sample index {first} does not follow {self._last_index}"
-            )
-        for at, lost in gaps_of(batch, self._last_index):
-            self.write_gap(at, lost, (reasons or {}).get(at, "source"))
         if self.storage == STORAGE_RAW:
             if batch.raw is None:
                 raise RecordingError(f"{self.path}: raw_int16 storage but batch has no raw counts")
@@ -189,10 +165,13 @@ class NativeWriter:
             "samples": self.samples, "gaps": self.gaps, "lost_samples": self.lost_samples,
             "stopped_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }
-        self._record(b"E", json.dumps(end).encode())
-        self._sync(force=True)
-        self._fh.close()
-        self._fh = None
+        fh = self._fh
+        try:
+            self._record(b"E", json.dumps(end).encode())
+            self._sync(force=True)
+        finally:
+            self._fh = None
+            fh.close()
 
     def __enter__(self) -> NativeWriter:
         return self
@@ -208,7 +187,7 @@ class NativeReader:
         self.path = Path(path)
         self.damage: str | None = None
         self.end: dict[str, Any] | None = None
-        self.gaps: list[GapRecord] = []
+        self.gaps: list[Gap] = []
         try:
             self._fh: BinaryIO = open(self.path, "rb")  # noqa: SIM115
         except OSError as exc:
@@ -270,7 +249,7 @@ class NativeReader:
                 yield self._decode(payload, offset)
             elif kind == b"G":
                 at, lost = struct.unpack_from("<qq", payload)
-                self.gaps.append(GapRecord(at, lost, payload[16:].decode(errors="replace")))
+                self.gaps.append(Gap(at, lost, payload[16:].decode(errors="replace")))
             elif kind == b"E":
                 self.end = json.loads(payload)
             else:

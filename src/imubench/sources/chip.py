@@ -20,69 +20,114 @@ URIs (parameters of both unless marked)::
 ``stuck_output_at_s``/``_for_s`` freeze every output (registers and FIFO repeat the last
 sample); ``temp_glitch_rate`` (per s) adds +-``temp_glitch_c`` degC spikes lasting
 ``temp_glitch_s`` to the temperature output; ``counting=1`` makes raw gyro X count samples
-(test signal). ``duration_s`` makes the stream finite: it ends after the sample of index
+(test signal); ``stall_every_s``/``stall_s`` stall the reading thread for ``stall_s``
+between a FIFO status read and the data burst, once per ``stall_every_s``, as a busy host
+would. ``duration_s`` makes the stream finite: it ends after the sample of index
 ``round(odr_hz * duration_s) - 1`` and every index below that is either delivered or
-counted lost. ``clock=wall`` paces :meth:`read` to real time in batches of about
-``watermark_s`` of data; :meth:`close` interrupts a wait at once.
+counted lost. Every parameter, its type, default and unit is declared once in
+:data:`SIM_PARAMS` / :data:`I2C_PARAMS`. ``clock=wall`` paces :meth:`read` to real time
+in batches of about ``watermark_s`` of data; :meth:`close` interrupts a wait at once.
 """
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from lsm6ds.driver import LSM6DS, ImuConfig
 from lsm6ds.errors import DriverIOError, LSM6DSError
-from lsm6ds.registers import CHIPS
+from lsm6ds.registers import CHIPS, accel_fs_code, chip_map, gyro_fs_code
 from lsm6ds.stream import FifoStream, StreamChunk
 
-from imubench.batch import Batch
+from imubench.batch import Batch, Gap
 from imubench.errors import SourceError
 from imubench.sources.base import Source, SourceInfo
-from imubench.sources.registry import SourceURI, register_source
+from imubench.sources.registry import Backend, Param, SourceURI, register_backend
 
-_COMMON = {
-    "odr_hz",
-    "accel_odr_hz",
-    "fs_dps",
-    "fs_g",
-    "addr",
-    "duration_s",
-    "watermark_s",
-    "timestamp",
-    "on_overbudget",
-    "bus_khz",
-}
-SIM_PARAMS = _COMMON | {
-    "seed",
-    "clock",
-    "model",
-    "nack_rate",
-    "nack_burst",
-    "reset_every_s",
-    "overrun_at_s",
-    "crystal_ppm",
-    "counting",
-    "stuck_bus_at_s",
-    "stuck_bus_for_s",
-    "stuck_output_at_s",
-    "stuck_output_for_s",
-    "temp_glitch_rate",
-    "temp_glitch_c",
-    "temp_glitch_s",
-    "temperature",
-}
-I2C_PARAMS = _COMMON | {"chip"}
+if TYPE_CHECKING:
+    from lsm6ds_sim.chip import SimChip
+    from lsm6ds_sim.clock import SimClock
+    from lsm6ds_sim.i2c import SimI2CBus
+    from lsm6ds_sim.physics import SensorPhysics
+
+COMMON_PARAMS: tuple[Param, ...] = (
+    Param("odr_hz", float, 104.0, "output data rate of gyro and accelerometer, Hz"),
+    Param("accel_odr_hz", float, None, "accelerometer ODR if different, Hz (FIFO refuses it)"),
+    Param("fs_dps", float, 250.0, "gyro full scale, dps"),
+    Param("fs_g", float, 2.0, "accelerometer full scale, g"),
+    Param("addr", int, 0x6A, "7-bit I2C address (0x6a or 0x6b)"),
+    Param("duration_s", float, None, "make the stream finite after this many seconds, s"),
+    Param("watermark_s", float, None, "data let into the FIFO between polls, s"),
+    Param("timestamp", bool, True, "stream the chip's timestamp in the FIFO"),
+    Param("on_overbudget", str, "refuse", "an ODR the bus cannot carry: refuse or degrade",
+          ("refuse", "degrade")),
+)
+SIM_PARAMS: tuple[Param, ...] = (
+    *COMMON_PARAMS,
+    Param("bus_khz", float, 0.0, "I2C timing model, kHz (0: none)"),
+    Param("seed", int, 0, "random seed of the noise and the faults"),
+    Param("clock", str, "virtual", "virtual (as fast as read) or wall (real time)",
+          ("virtual", "wall")),
+    Param("model", str, None, "noise model TOML file"),
+    Param("temperature", str, None, "die temperature profile (docs/simulator.md)"),
+    Param("crystal_ppm", float, 0.0, "oscillator frequency error, ppm"),
+    Param("counting", bool, False, "test signal: raw gyro X counts samples"),
+    Param("nack_rate", float, 0.0, "NACK probability per transaction"),
+    Param("nack_burst", int, 1, "consecutive NACKed transactions per event"),
+    Param("reset_every_s", float, 0.0, "spontaneous chip reset period, s (0: never)"),
+    Param("overrun_at_s", float, None, "force one FIFO overrun at this time, s"),
+    Param("stuck_bus_at_s", float, None, "bus stuck (timeouts) from this time, s"),
+    Param("stuck_bus_for_s", float, 0.0, "bus stuck for this long, s"),
+    Param("stuck_output_at_s", float, None, "outputs frozen from this time, s"),
+    Param("stuck_output_for_s", float, 0.0, "outputs frozen for this long, s"),
+    Param("temp_glitch_rate", float, 0.0, "temperature spikes per second"),
+    Param("temp_glitch_c", float, 5.0, "temperature spike size, degC"),
+    Param("temp_glitch_s", float, 0.0, "temperature spike length, s"),
+    Param("stall_every_s", float, 0.0,
+          "stall the reader between FIFO status and data read this often, s (0: never)"),
+    Param("stall_s", float, 0.0, "length of each such stall, s"),
+)
+I2C_PARAMS: tuple[Param, ...] = (
+    *COMMON_PARAMS,
+    Param("chip", str, "lsm6dsl", "which chip is on the bus", CHIPS),
+    Param("bus_khz", float, 400.0, "I2C clock for the bandwidth check, kHz"),
+)
 IO_BACKOFF_MAX_S = 1.0
+
+
+@dataclass(frozen=True)
+class SimHandles:
+    """The simulated parts behind a ``sim://`` source, for jigs and tests that drive the
+    sensor's physics (orientation, rate, temperature) or read the fault counts."""
+
+    chip: SimChip
+    bus: SimI2CBus
+    physics: SensorPhysics
+    clock: SimClock
+
+
+@dataclass(frozen=True)
+class ChipOptions:
+    """Typed, validated options of a ``sim://`` or ``i2c://`` URI."""
+
+    chip: str
+    cfg: ImuConfig
+    addr: int
+    bus_hz: float | None
+    watermark_s: float | None
+    on_overbudget: str
+    duration_s: float | None
+    values: dict[str, Any]
 
 
 class ChipSource(Source):
     """FIFO streaming of one LSM6DS chip through :class:`lsm6ds.stream.FifoStream`.
 
-    Build it with :func:`open_sim` / :func:`open_i2c` (or ``open_source(uri)``).
+    Build it with ``open_source("sim://...")`` or ``open_source("i2c://...")``.
+    ``sim`` holds the simulated parts of a ``sim://`` source (None on hardware).
     """
 
     def __init__(
@@ -99,10 +144,11 @@ class ChipSource(Source):
         extra_config: dict[str, Any],
         on_close: Callable[[], None] | None = None,
         max_fill: float = 0.4,
+        sim: SimHandles | None = None,
     ) -> None:
         super().__init__()
         self.dev = dev
-        self._wake = threading.Event()
+        self.sim = sim
         self._paced = paced
         try:
             self.stream = FifoStream(
@@ -122,14 +168,13 @@ class ChipSource(Source):
         """dps or g per LSB of gx gy gz ax ay az."""
         self.bus_hz = bus_hz
         self.duration_s = duration_s
-        self.n_total = round(cfg.odr_hz * duration_s) if duration_s is not None else None
+        self._n_total = round(cfg.odr_hz * duration_s) if duration_s is not None else None
         self._on_close = on_close
         self._t0_host: float | None = None
         self._start_host: float | None = None
         self._done = False
         self._sleep_first_s = 0.0
-        self._delivered_to = -1  # last index handed out
-        self.gap_log: list[tuple[int, int, str]] = []
+        self._pending: list[Gap] = []
         config = {
             "watermark_s": watermark_s,
             "bus_hz": bus_hz,
@@ -141,6 +186,7 @@ class ChipSource(Source):
             uri=uri,
             chip=dev.chip,
             odr_hz=cfg.odr_hz,
+            realtime=paced,
             fs_dps=cfg.fs_dps,
             fs_g=cfg.fs_g,
             gyro_sensitivity_dps=cfg.gyro_sensitivity_dps,
@@ -153,7 +199,7 @@ class ChipSource(Source):
         if dt_s <= 0:
             return
         if self._paced:
-            self._wake.wait(dt_s)
+            self._interrupt.wait(dt_s)
         else:
             self.dev.sleep(dt_s)
 
@@ -171,9 +217,13 @@ class ChipSource(Source):
         return self.dev.monotonic() - self._start_host
 
     @property
+    def expected_samples(self) -> int | None:
+        return self._n_total
+
+    @property
     def measured_odr_hz(self) -> float | None:
-        """ODR measured against the host clock from the chip's timestamp counter, Hz
-        (None without timestamps): a crystal error shows here (107.9 for 104)."""
+        """ODR measured against the host clock from the chip's timestamp counter, Hz (None
+        without timestamps): a crystal error shows here (107.9 for 104)."""
         return self.stream.measured_odr_hz if self.stream.ts_decimation else None
 
     @property
@@ -185,8 +235,13 @@ class ChipSource(Source):
         return self.counters["bus_bytes"] * 9.0 / (self.bus_hz * self.elapsed_s)
 
     # -- Source hooks ----------------------------------------------------------------
+    def prepare(self) -> None:
+        """A simulated chip's first noise blocks are computed now, not in the first read."""
+        if self.sim is not None:
+            period = self.sim.chip.sim_sample_period_s(self.info.odr_hz)
+            self.sim.physics.prepare(period)
+
     def _open(self) -> None:
-        self._wake.clear()
         try:
             self.stream.start()
         except LSM6DSError as exc:
@@ -194,7 +249,6 @@ class ChipSource(Source):
         self._start_host = self.dev.monotonic()
 
     def _close(self) -> None:
-        self._wake.set()
         self.stream.stop()
         if self._on_close is not None:
             self._on_close()
@@ -204,7 +258,7 @@ class ChipSource(Source):
         self._sleep(self._sleep_first_s)
         self._sleep_first_s = 0.0
         while not self._done:
-            if self._paced and self._wake.is_set():
+            if self._interrupt.is_set():
                 return None
             try:
                 chunk, level = self.stream.poll()
@@ -212,7 +266,7 @@ class ChipSource(Source):
                 self._sync_counters()
                 self._sleep(backoff)
                 backoff = min(2 * backoff, IO_BACKOFF_MAX_S)
-                self.stream._last_verify_t = -float("inf")  # check for a reset next time
+                self.stream.verify_soon()  # check for a reset at the next poll
                 continue
             except LSM6DSError as exc:
                 raise SourceError(f"source {self.info.uri!r}: {exc}") from None
@@ -224,74 +278,77 @@ class ChipSource(Source):
                     return batch
                 continue
             self._sleep(max(self.stream.time_to_watermark_s(level), 0.0005))
+        if self._pending:  # the stream ended in a gap
+            gaps, self._pending = tuple(self._pending), []
+            return Batch.empty(with_raw=True, gaps=gaps)
         return None
 
     def _to_batch(self, chunk: StreamChunk) -> Batch | None:
         index = chunk.index
         keep = slice(None)
-        gaps = chunk.gaps
-        if self.n_total is not None:
-            n = self.n_total
+        gaps = [Gap(at, lost, reason) for at, lost, reason in chunk.gaps]
+        if self._n_total is not None:
+            n = self._n_total
             n_keep = int(np.searchsorted(index, n))
             keep = slice(0, n_keep)
             # a gap (at, lost) is the hole [at - lost, at - 1]; keep its part below n
             gaps = [
-                (min(at, n), min(at, n) - (at - lost), r) for at, lost, r in gaps if at - lost < n
+                Gap(min(g.at, n), min(g.at, n) - (g.at - g.lost), g.reason)
+                for g in gaps if g.at - g.lost < n
             ]
             if n_keep < len(index):
                 self._done = True
-        for at, lost, reason in gaps:
-            self.counters["gaps"] += 1
-            self.counters["lost_samples"] += lost
-            self.gap_log.append((at, lost, reason))
         index = index[keep]
+        self._pending.extend(gaps)
         if not len(index):
             return None
+        last = int(index[-1])
+        mine = tuple(g for g in self._pending if g.at <= last)
+        self._pending = [g for g in self._pending if g.at > last]
         raw = chunk.raw[keep]
         if self._t0_host is None:
             self._t0_host = float(chunk.t_s[0])
-        values = raw * self._sensitivity
-        lost_before = int(index[0]) - self._delivered_to - 1
-        self._delivered_to = int(index[-1])
         return Batch(
             index=index,
             t_s=chunk.t_s[keep] - self._t0_host,
-            values=values,
+            values=raw * self._sensitivity,
             temp_c=np.full(len(index), chunk.temp_c),
             raw=raw.astype(np.int16, copy=False),
-            lost_before=max(0, lost_before),
-            meta={"gaps": [g for g in gaps if g[0] <= int(index[-1])]},
+            gaps=mine,
         )
 
 
 # ---------------------------------------------------------------- factories
-def _common(uri: SourceURI, default_bus_khz: float) -> dict[str, Any]:
-    odr = uri.get_float("odr_hz", 104.0)
-    fs_dps = uri.get_float("fs_dps", 250.0)
-    fs_g = uri.get_float("fs_g", 2.0)
+def _chip_options(uri: SourceURI, params: tuple[Param, ...], chip: str) -> ChipOptions:
+    """Typed options of a chip URI, checked against the chip's tables (no device I/O)."""
+    v = uri.values(params)
+    if chip not in CHIPS:
+        raise SourceError(
+            f"source URI {uri.text!r}: chip {chip!r} must be one of {', '.join(CHIPS)}"
+        )
+    m = chip_map(chip)
     cfg = ImuConfig(
-        odr_hz=odr,
-        accel_odr_hz=uri.get_float("accel_odr_hz"),
-        fs_dps=fs_dps,
-        fs_g=fs_g,  # type: ignore[arg-type]
-        timestamp=uri.get_bool("timestamp", True),
+        odr_hz=v["odr_hz"], accel_odr_hz=v["accel_odr_hz"], fs_dps=v["fs_dps"],
+        fs_g=v["fs_g"], timestamp=v["timestamp"],
     )
     try:
-        cfg.gyro_sensitivity_dps, cfg.accel_sensitivity_g  # noqa: B018 - validate FS
+        m.odr_code(cfg.odr_hz, "gyro")
+        m.odr_code(cfg.odr_xl_hz, "accel")
+        gyro_fs_code(cfg.fs_dps)
+        accel_fs_code(cfg.fs_g)
     except ValueError as exc:
         raise SourceError(f"source URI {uri.text!r}: {exc}") from None
-    bus_khz = uri.get_float("bus_khz", default_bus_khz)
-    duration = uri.get_float("duration_s")
-    if duration is not None and duration <= 0:
-        raise SourceError(f"source URI {uri.text!r}: duration_s={duration} must be > 0")
-    return {
-        "cfg": cfg,
-        "addr": uri.get_int("addr", 0x6A),
-        "bus_hz": bus_khz * 1e3 if bus_khz else None,
-        "watermark_s": uri.get_float("watermark_s"),
-        "on_overbudget": uri.get_choice("on_overbudget", ("refuse", "degrade"), "refuse"),
-        "duration_s": duration,
-    }
+    if v["addr"] not in (0x6A, 0x6B):
+        raise SourceError(f"source URI {uri.text!r}: addr=0x{v['addr']:02x} must be 0x6a or 0x6b")
+    for name in ("duration_s", "watermark_s"):
+        if v[name] is not None and v[name] <= 0:
+            raise SourceError(f"source URI {uri.text!r}: {name}={v[name]} must be > 0")
+    return ChipOptions(
+        chip=chip, cfg=cfg, addr=v["addr"],
+        bus_hz=v["bus_khz"] * 1e3 if v["bus_khz"] else None,
+        watermark_s=v["watermark_s"], on_overbudget=v["on_overbudget"],
+        duration_s=v["duration_s"], values=v,
+    )
 
 
 SIM_NOISE_BLOCK = 1 << 14
@@ -299,27 +356,51 @@ SIM_NOISE_BLOCK = 1 << 14
 per-call cost of the FIFO read loop; the values do not depend on it)."""
 
 
-def _sim_physics(
-    uri: SourceURI, seed: int, model_path: str | None, duration_s: float | None
-) -> Any:
-    """The sensor physics behind a ``sim://`` chip: ``model=`` noise model (quiet without
-    one), ``temperature=`` profile (25 degC without one), flicker exact over the whole
-    ``duration_s`` (default hint 3 h for an endless stream)."""
-    from lsm6ds_sim.physics import DEFAULT_DURATION_HINT_S, SensorPhysics
-
-    model = None
-    if model_path:
+def sim_options(uri: SourceURI) -> ChipOptions:
+    opts = _chip_options(uri, SIM_PARAMS, uri.target.strip("/").lower() or "lsm6dsl")
+    v = opts.values
+    if v["model"]:
         from lsm6ds_sim.model import load_model
 
         try:
-            model = load_model(model_path)
+            load_model(v["model"])
         except Exception as exc:  # ModelError and file errors, reported with the URI
-            raise SourceError(f"source URI {uri.text!r}: model {model_path!r}: {exc}") from None
-    profile = uri.get_str("temperature")
+            raise SourceError(f"source URI {uri.text!r}: model {v['model']!r}: {exc}") from None
+    _fault_plan(uri, v)
+    return opts
+
+
+def _fault_plan(uri: SourceURI, v: dict[str, Any]) -> Any:
+    from lsm6ds_sim.faults import FaultPlan
+
+    try:
+        return FaultPlan(
+            nack_rate=v["nack_rate"], nack_burst=v["nack_burst"],
+            reset_every_s=v["reset_every_s"], overrun_at_s=v["overrun_at_s"],
+            stuck_bus_at_s=v["stuck_bus_at_s"], stuck_bus_for_s=v["stuck_bus_for_s"],
+            stuck_output_at_s=v["stuck_output_at_s"],
+            stuck_output_for_s=v["stuck_output_for_s"],
+            temp_glitch_rate=v["temp_glitch_rate"], temp_glitch_c=v["temp_glitch_c"],
+            temp_glitch_s=v["temp_glitch_s"], stall_every_s=v["stall_every_s"],
+            stall_s=v["stall_s"], seed=v["seed"],
+        )
+    except ValueError as exc:
+        raise SourceError(f"source URI {uri.text!r}: {exc}") from None
+
+
+def _sim_physics(uri: SourceURI, v: dict[str, Any], duration_s: float | None) -> Any:
+    """The sensor physics behind a ``sim://`` chip: ``model=`` noise model (quiet without
+    one), ``temperature=`` profile (25 degC without one), flicker exact over the whole
+    ``duration_s`` (default hint 3 h for an endless stream)."""
+    from lsm6ds_sim.model import load_model
+    from lsm6ds_sim.physics import DEFAULT_DURATION_HINT_S, SensorPhysics
+
+    model = load_model(v["model"]) if v["model"] else None
+    profile = v["temperature"]
     try:
         return SensorPhysics(
             model,
-            seed=seed,
+            seed=v["seed"],
             temperature=profile or None,
             duration_hint_s=duration_s or DEFAULT_DURATION_HINT_S,
             noise_block=SIM_NOISE_BLOCK,
@@ -328,95 +409,59 @@ def _sim_physics(
         raise SourceError(f"source URI {uri.text!r}: temperature={profile!r}: {exc}") from None
 
 
-def build_sim(uri: SourceURI) -> ChipSource:
+def build_sim(uri: SourceURI, opts: ChipOptions) -> ChipSource:
     """The ``sim://`` source: SimChip + SimI2CBus + the real driver."""
     from lsm6ds_sim.chip import SimChip
     from lsm6ds_sim.clock import SimClock
-    from lsm6ds_sim.faults import FaultPlan
     from lsm6ds_sim.i2c import SimI2CBus
 
-    uri.check_known(SIM_PARAMS)
-    chip = uri.target.strip("/").lower() or "lsm6dsl"
-    if chip not in CHIPS:
-        raise SourceError(
-            f"source URI {uri.text!r}: chip {chip!r} must be one of {', '.join(CHIPS)}"
-        )
-    common = _common(uri, 0.0)
-    seed = uri.get_int("seed", 0)
-    clock_mode = uri.get_choice("clock", ("virtual", "wall"), "virtual")
+    v = opts.values
+    clock_mode = v["clock"]
     clock = SimClock(clock_mode)
-    model_path = uri.get_str("model")
-    physics = _sim_physics(uri, seed, model_path, common["duration_s"])
-    try:
-        plan = FaultPlan(
-            nack_rate=uri.get_float("nack_rate", 0.0),  # type: ignore[arg-type]
-            nack_burst=uri.get_int("nack_burst", 1),  # type: ignore[arg-type]
-            reset_every_s=uri.get_float("reset_every_s", 0.0),  # type: ignore[arg-type]
-            overrun_at_s=uri.get_float("overrun_at_s"),
-            stuck_bus_at_s=uri.get_float("stuck_bus_at_s"),
-            stuck_bus_for_s=uri.get_float("stuck_bus_for_s", 0.0),  # type: ignore[arg-type]
-            stuck_output_at_s=uri.get_float("stuck_output_at_s"),
-            stuck_output_for_s=uri.get_float("stuck_output_for_s", 0.0),  # type: ignore[arg-type]
-            temp_glitch_rate=uri.get_float("temp_glitch_rate", 0.0),  # type: ignore[arg-type]
-            temp_glitch_c=uri.get_float("temp_glitch_c", 5.0),  # type: ignore[arg-type]
-            temp_glitch_s=uri.get_float("temp_glitch_s", 0.0),  # type: ignore[arg-type]
-            seed=seed,  # type: ignore[arg-type]
-        )
-    except ValueError as exc:
-        raise SourceError(f"source URI {uri.text!r}: {exc}") from None
+    physics = _sim_physics(uri, v, opts.duration_s)
+    plan = _fault_plan(uri, v)
     sim_chip = SimChip(
-        chip,
-        clock,
-        physics,
-        crystal_ppm=uri.get_float("crystal_ppm", 0.0),  # type: ignore[arg-type]
-        sim_counting=uri.get_bool("counting", False),
+        opts.chip, clock, physics, crystal_ppm=v["crystal_ppm"], sim_counting=v["counting"]
     )
-    bus = SimI2CBus(clock, common["bus_hz"], plan)
-    addr = common["addr"]
-    if addr not in (0x6A, 0x6B):
-        raise SourceError(f"source URI {uri.text!r}: addr=0x{addr:02x} must be 0x6a or 0x6b")
-    bus.attach(addr, sim_chip)
-    dev = LSM6DS(bus, chip, addr, sleep=clock.sleep, monotonic=clock.now)
-    watermark_s = common["watermark_s"]
+    bus = SimI2CBus(clock, opts.bus_hz, plan,
+                    stall_register=chip_map(opts.chip).addr("FIFO_STATUS1"))
+    bus.attach(opts.addr, sim_chip)
+    dev = LSM6DS(bus, opts.chip, opts.addr, sleep=clock.sleep, monotonic=clock.now)
+    watermark_s = opts.watermark_s
     max_fill = 0.4
     if watermark_s is None:
         # virtual time: large bursts are free (fast); wall clock: small, paced batches
         watermark_s = 0.1 if clock_mode == "wall" else 60.0
-        if clock_mode == "virtual" and (common["bus_hz"] is None or common["cfg"].odr_hz <= 833):
+        if clock_mode == "virtual" and (opts.bus_hz is None or opts.cfg.odr_hz <= 833):
             max_fill = 0.9
-    src = ChipSource(
+    return ChipSource(
         uri.text,
         dev,
-        common["cfg"],
-        bus_hz=common["bus_hz"],
+        opts.cfg,
+        bus_hz=opts.bus_hz,
         max_fill=max_fill,
         watermark_s=watermark_s,
-        on_overbudget=common["on_overbudget"],
-        duration_s=common["duration_s"],
+        on_overbudget=opts.on_overbudget,
+        duration_s=opts.duration_s,
         paced=clock_mode == "wall",
         extra_config={
-            "seed": seed,
+            "seed": v["seed"],
             "clock": clock_mode,
-            "model": model_path,
-            "faults": {k: v for k, v in plan.__dict__.items() if v},
+            "model": v["model"],
+            "faults": {k: val for k, val in plan.__dict__.items() if val},
         },
         on_close=bus.close,
+        sim=SimHandles(sim_chip, bus, physics, clock),
     )
-    src.sim_chip = sim_chip  # type: ignore[attr-defined]
-    src.sim_bus = bus  # type: ignore[attr-defined]
-    return src
 
 
-def build_i2c(uri: SourceURI) -> ChipSource:
+def i2c_options(uri: SourceURI) -> ChipOptions:
+    return _chip_options(uri, I2C_PARAMS, str(uri.values(I2C_PARAMS)["chip"]))
+
+
+def build_i2c(uri: SourceURI, opts: ChipOptions) -> ChipSource:
     """The ``i2c://`` source on a real ``smbus2.SMBus``."""
-    uri.check_known(I2C_PARAMS)
     path = uri.target or "/dev/i2c-1"
-    chip = (uri.get_str("chip", "lsm6dsl") or "lsm6dsl").lower()
-    if chip not in CHIPS:
-        raise SourceError(
-            f"source URI {uri.text!r}: chip={chip!r} must be one of {', '.join(CHIPS)}"
-        )
-    common = _common(uri, 400.0)
     try:
         from smbus2 import SMBus
 
@@ -426,20 +471,21 @@ def build_i2c(uri: SourceURI) -> ChipSource:
             f"source URI {uri.text!r}: cannot open I2C adapter {path!r} "
             f"({exc}); check the path and permissions (group i2c)"
         ) from None
-    dev = LSM6DS(bus, chip, common["addr"], sleep=time.sleep, monotonic=time.monotonic)
+    dev = LSM6DS(bus, opts.chip, opts.addr, sleep=time.sleep, monotonic=time.monotonic)
     return ChipSource(
         uri.text,
         dev,
-        common["cfg"],
-        bus_hz=common["bus_hz"],
-        watermark_s=common["watermark_s"] or 0.1,
-        on_overbudget=common["on_overbudget"],
-        duration_s=common["duration_s"],
+        opts.cfg,
+        bus_hz=opts.bus_hz,
+        watermark_s=opts.watermark_s or 0.1,
+        on_overbudget=opts.on_overbudget,
+        duration_s=opts.duration_s,
         paced=True,
         extra_config={"adapter": path},
         on_close=bus.close,
     )
 
 
-register_source("sim")(build_sim)
-register_source("i2c")(build_i2c)
+register_backend(Backend("sim", SIM_PARAMS, sim_options, build_sim,
+                         "simulated chip read through the real driver"))
+register_backend(Backend("i2c", I2C_PARAMS, i2c_options, build_i2c, "a real chip on Linux I2C"))

@@ -1,13 +1,20 @@
-"""Source backends registered by URI scheme.
+"""Source backends registered by URI scheme, each with its URI parameters declared once.
 
-    @register_source("sim")
-    def _open_sim(uri: SourceURI) -> Source: ...
+    SIM = Backend("sim", params=(Param("odr_hz", float, 104.0, "output data rate, Hz"), ...),
+                  options=sim_options, build=build_sim)
+    register_backend(SIM)
 
     source = open_source("sim://lsm6dsl?odr_hz=104&seed=1")
 
+A backend is two functions over one parameter table: ``options(uri)`` checks the URI
+against the table (unknown names, types, choices) and everything else that can be checked
+without touching a device (chip, ODR, full scale, files), returning typed options;
+``build(uri, options)`` makes the (not yet opened) source from them. The configuration
+loader calls only ``options`` (:func:`check_source_uri`), :func:`open_source` calls both,
+so validation and construction cannot disagree.
+
 Backends live in their own modules; :data:`BUILTIN_MODULES` are imported lazily the
-first time a scheme is looked up, so importing imubench stays cheap and a backend whose
-optional dependency is missing fails only when it is used.
+first time a scheme is looked up, so importing imubench stays cheap.
 """
 
 from __future__ import annotations
@@ -15,19 +22,67 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 from urllib.parse import parse_qsl, unquote, urlsplit
 
 from imubench.errors import SourceError
 from imubench.sources.base import Source
 
-SourceFactory = Callable[["SourceURI"], Source]
-_REGISTRY: dict[str, SourceFactory] = {}
+_REGISTRY: dict[str, Backend] = {}
 
 BUILTIN_MODULES: tuple[str, ...] = (
     "imubench.sources.replay",
     "imubench.sources.chip",
     "imubench.sources.sensortile",
 )
+
+_BOOL_TEXT = {"1": True, "true": True, "yes": True, "on": True,
+              "0": False, "false": False, "no": False, "off": False}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One URI query parameter of a backend.
+
+    Attributes:
+        name: the parameter name in the URI.
+        kind: ``int`` (decimal or 0x hex), ``float``, ``bool`` (1/0/true/false/yes/no/on/
+            off) or ``str``.
+        default: value when absent (None: absent means "not set").
+        doc: one line for the documentation and error messages, with the unit.
+        choices: allowed values of a ``str`` parameter.
+    """
+
+    name: str
+    kind: type
+    default: Any
+    doc: str
+    choices: tuple[str, ...] | None = None
+
+    def parse(self, uri_text: str, raw: str) -> Any:
+        try:
+            if self.kind is bool:
+                return _BOOL_TEXT[raw.lower()]
+            if self.kind is int:
+                return int(raw, 0)
+            if self.kind is float:
+                value = float(raw)
+                if value != value or value in (float("inf"), float("-inf")):
+                    raise ValueError(raw)
+                return value
+        except (ValueError, KeyError):
+            what = {bool: "a boolean (1/0/true/false)", int: "an integer",
+                    float: "a finite number"}[self.kind]
+            raise SourceError(
+                f"source URI {uri_text!r}: parameter {self.name}={raw!r} is not {what} "
+                f"({self.doc})"
+            ) from None
+        if self.choices is not None and raw not in self.choices:
+            raise SourceError(
+                f"source URI {uri_text!r}: parameter {self.name}={raw!r} must be one of "
+                f"{', '.join(self.choices)}"
+            )
+        return raw
 
 
 @dataclass(frozen=True)
@@ -36,7 +91,7 @@ class SourceURI:
 
     ``target`` is netloc + path with percent-escapes decoded (``sim://lsm6dsl`` ->
     ``lsm6dsl``; ``i2c:///dev/i2c-1`` -> ``/dev/i2c-1``; ``replay://rec.imbr`` ->
-    ``rec.imbr``). Typed getters raise :class:`SourceError` naming the parameter.
+    ``rec.imbr``).
     """
 
     text: str
@@ -56,70 +111,45 @@ class SourceURI:
             params[key] = value
         return cls(text, parts.scheme.lower(), unquote(parts.netloc + parts.path), params)
 
-    def _get(self, name: str, kind: type, default: object, allowed: str) -> object:
-        if name not in self.params:
-            return default
-        raw = self.params[name]
-        try:
-            if kind is bool:
-                low = raw.lower()
-                if low not in {"1", "0", "true", "false", "yes", "no", "on", "off"}:
-                    raise ValueError(raw)
-                return low in {"1", "true", "yes", "on"}
-            return kind(raw, 0) if kind is int else kind(raw)
-        except ValueError:
-            raise SourceError(
-                f"source URI {self.text!r}: parameter {name}={raw!r} is not {allowed}"
-            ) from None
-
-    def get_str(self, name: str, default: str | None = None) -> str | None:
-        return self.params.get(name, default)
-
-    def get_float(self, name: str, default: float | None = None) -> float | None:
-        return self._get(name, float, default, "a number")  # type: ignore[return-value]
-
-    def get_int(self, name: str, default: int | None = None) -> int | None:
-        return self._get(name, int, default, "an integer")  # type: ignore[return-value]
-
-    def get_bool(self, name: str, default: bool = False) -> bool:
-        return self._get(name, bool, default, "a boolean (1/0/true/false)")  # type: ignore[return-value]
-
-    def get_choice(self, name: str, choices: tuple[str, ...], default: str) -> str:
-        value = self.params.get(name, default)
-        if value not in choices:
-            raise SourceError(
-                f"source URI {self.text!r}: parameter {name}={value!r} must be one of "
-                f"{', '.join(choices)}"
-            )
-        return value
-
-    def check_known(self, known: set[str]) -> None:
-        """Reject parameters the backend does not understand (typos must not pass)."""
-        unknown = sorted(set(self.params) - known)
+    def values(self, params: tuple[Param, ...]) -> dict[str, Any]:
+        """Every declared parameter, typed (defaults where absent); unknown names refused
+        with the accepted ones (typos must not pass)."""
+        known = {p.name: p for p in params}
+        unknown = sorted(set(self.params) - set(known))
         if unknown:
             raise SourceError(
                 f"source URI {self.text!r}: unknown parameter(s) {', '.join(unknown)}; "
                 f"{self.scheme}:// accepts {', '.join(sorted(known))}"
             )
+        return {
+            name: p.parse(self.text, self.params[name]) if name in self.params else p.default
+            for name, p in known.items()
+        }
 
 
-def register_source(scheme: str) -> Callable[[SourceFactory], SourceFactory]:
-    """Class/function decorator registering a factory for ``scheme://`` URIs."""
+@dataclass(frozen=True)
+class Backend:
+    """A source backend: its scheme, its URI parameters, and the two functions over them
+    (see the module docstring)."""
 
-    def deco(factory: SourceFactory) -> SourceFactory:
-        _REGISTRY[scheme.lower()] = factory
-        return factory
+    scheme: str
+    params: tuple[Param, ...]
+    options: Callable[[SourceURI], Any]
+    build: Callable[[SourceURI, Any], Source]
+    doc: str = ""
 
-    return deco
+    def has_param(self, name: str) -> bool:
+        return any(p.name == name for p in self.params)
+
+
+def register_backend(backend: Backend) -> Backend:
+    _REGISTRY[backend.scheme.lower()] = backend
+    return backend
 
 
 def _load_builtins() -> None:
     for name in BUILTIN_MODULES:
-        try:
-            importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name != name:  # a real missing dependency inside the backend
-                raise
+        importlib.import_module(name)
 
 
 def available_schemes() -> list[str]:
@@ -127,15 +157,29 @@ def available_schemes() -> list[str]:
     return sorted(_REGISTRY)
 
 
+def backend_for(uri: SourceURI) -> Backend:
+    """The backend of ``uri``'s scheme; SourceError naming the available ones."""
+    if uri.scheme not in _REGISTRY:
+        _load_builtins()
+    backend = _REGISTRY.get(uri.scheme)
+    if backend is None:
+        raise SourceError(
+            f"unknown source scheme {uri.scheme!r} in {uri.text!r}; available: "
+            f"{', '.join(available_schemes())}"
+        )
+    return backend
+
+
+def check_source_uri(text: str) -> SourceURI:
+    """Parse ``text`` and check everything that can be checked without a device: scheme,
+    parameter names, types and choices, chip, ODR, full scales, files."""
+    uri = SourceURI.parse(text)
+    backend_for(uri).options(uri)
+    return uri
+
+
 def open_source(uri: str) -> Source:
     """Create (not yet open) the source for ``uri``."""
     parsed = SourceURI.parse(uri)
-    if parsed.scheme not in _REGISTRY:
-        _load_builtins()
-    factory = _REGISTRY.get(parsed.scheme)
-    if factory is None:
-        raise SourceError(
-            f"unknown source scheme {parsed.scheme!r} in {uri!r}; available: "
-            f"{', '.join(available_schemes())}"
-        )
-    return factory(parsed)
+    backend = backend_for(parsed)
+    return backend.build(parsed, backend.options(parsed))

@@ -16,29 +16,30 @@ period; ascii: TimeStamp ms / record period), so a frame lost on the line is a h
 are the firmware's int32 mg / mdps divided by 1000 (g, dps); ``raw`` is None because the
 firmware sends scaled integers, not the chip's counts. ``t_s`` is the firmware RTC time
 since the first frame (10 ms resolution; 12-hour wrap unwrapped); the host receive time
-(``time.monotonic`` since open) is in ``meta["host_t_s"]``; ``info.config["firmware_t0_s"]``
+is not kept; ``info.config["firmware_t0_s"]``
 is the firmware stamp of index 0 (RTC seconds modulo 12 h, or DataLog ms / 1000). On a
 wall-clock link the host
 clock also guards the RTC (a reset RTC after a kit reboot re-anchors the index on the
-host clock). Per-sample new-data flags are in ``meta["fresh"]`` (bool (n, 2): accel, gyro);
-a frame whose flag is 0 repeats the previous value (the firmware samples on its own timer).
+host clock). A frame whose new-data flag is 0 repeats the previous value (the firmware
+samples on its own timer): such frames are delivered as they are (the kit's own output).
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from lsm6ds.sensortile import commands as cmds
 from lsm6ds.sensortile.datalog_ascii import DATA_PERIOD_MS, DataLogRecord
 from lsm6ds.sensortile.link import LinkConfig, Received, SensorTileError, SensorTileLink
-from lsm6ds.sensortile.stream import FLAG_ACC, FLAG_GYRO, FLAG_TEMP, RtcTimeline, StreamFrame
+from lsm6ds.sensortile.stream import FLAG_TEMP, RtcTimeline, StreamFrame
 
-from imubench.batch import Batch
+from imubench.batch import Batch, Gap
 from imubench.errors import SourceError
 from imubench.sources.base import Source, SourceInfo
-from imubench.sources.registry import SourceURI, register_source
+from imubench.sources.registry import Backend, Param, SourceURI, register_backend
 
 DEFAULT_MASK = int(
     cmds.SensorMask.ACCELEROMETER | cmds.SensorMask.GYROSCOPE | cmds.SensorMask.TEMPERATURE
@@ -112,6 +113,7 @@ class SensorTileSource(Source):
         firmware: Any | None = None,
         max_batch: int = 256,
         chip: str = "lsm6dsm",
+        realtime: bool = True,
     ) -> None:
         super().__init__()
         if period_s is None:
@@ -131,6 +133,7 @@ class SensorTileSource(Source):
             uri=uri,
             chip=chip,
             odr_hz=1.0 / period_s,
+            realtime=realtime,
             config={"url": url, "mode": mode, "mask": mask, "period_s": period_s},
         )
         self._timeline: RtcTimeline | _AsciiTimeline | None = None
@@ -189,7 +192,7 @@ class SensorTileSource(Source):
     def _read(self) -> Batch | None:
         if self._done:
             return None
-        while True:
+        while not self._interrupt.is_set():
             try:
                 received = self.link.read_stream(self.max_batch, timeout_s=0.2)
             except SensorTileError as exc:
@@ -201,6 +204,7 @@ class SensorTileSource(Source):
                 return batch
             if self._done:
                 return None
+        return None
 
     # -- conversion -----------------------------------------------------------------
     def _sync_counters(self) -> None:
@@ -217,10 +221,8 @@ class SensorTileSource(Source):
         assert self._timeline is not None
         idx: list[int] = []
         t_s: list[float] = []
-        host: list[float] = []
         vals: list[tuple[float, ...]] = []
         temps: list[float] = []
-        fresh: list[tuple[bool, bool]] = []
         for r in received:
             item = r.item
             if isinstance(item, StreamFrame):
@@ -228,12 +230,10 @@ class SensorTileSource(Source):
                 temp = item.temperature_c if self.mask & cmds.SensorMask.TEMPERATURE else np.nan
                 if self.mask & cmds.SensorMask.TEMPERATURE and not item.flags & FLAG_TEMP:
                     temp = np.nan
-                flags = (bool(item.flags & FLAG_ACC), bool(item.flags & FLAG_GYRO))
             else:
                 assert isinstance(item, DataLogRecord)
                 index = self._timeline.accept(item.timestamp_ms, r.host_s)
                 temp = np.nan  # the DataLog temperature is the HTS221's, not the IMU's
-                flags = (True, True)
             if index is None:  # duplicate or implausible stamp
                 self.counters["bad_frames"] += 1
                 continue
@@ -252,7 +252,6 @@ class SensorTileSource(Source):
             g, a = item.gyro_mdps, item.accel_mg
             idx.append(index)
             t_s.append(elapsed)
-            host.append(r.host_s - self._host_t0)
             vals.append(
                 (
                     g[0] / 1000.0,
@@ -264,15 +263,15 @@ class SensorTileSource(Source):
                 )
             )
             temps.append(float(temp))
-            fresh.append(flags)
         if not idx:
             return None
         index_arr = np.asarray(idx, dtype=np.int64)
         # the first accepted frame has index 0, so with _last_index = -1 the step is 0
         holes = np.diff(np.concatenate([[self._last_index], index_arr])) - 1
-        lost_before = int(holes[0])
-        self.counters["lost_samples"] += int(holes.sum())
-        self.counters["gaps"] += int((holes > 0).sum())
+        gaps = tuple(
+            Gap(int(index_arr[k]), int(holes[k]), "frames lost on the serial link")
+            for k in np.nonzero(holes > 0)[0]
+        )
         self._last_index = int(index_arr[-1])
         return Batch(
             index=index_arr,
@@ -280,115 +279,155 @@ class SensorTileSource(Source):
             values=np.asarray(vals, dtype=np.float64).reshape(-1, 6),
             temp_c=np.asarray(temps, dtype=np.float64),
             raw=None,
-            lost_before=lost_before,
-            meta={"host_t_s": np.asarray(host), "fresh": np.asarray(fresh, dtype=bool)},
+            gaps=gaps,
         )
 
 
-def _link_config(uri: SourceURI) -> LinkConfig:
+COMMON_PARAMS: tuple[Param, ...] = (
+    Param("mode", str, "binary", "binary (DataLogExtended) or ascii (DataLog)",
+          ("binary", "ascii")),
+    Param("duration_s", float, None, "stop after this much firmware time, s"),
+    Param("period_ms", float, None, "frame period, ms (binary 10, ascii 20)"),
+    Param("reconnect_timeout_s", float, None, "give up re-opening an unplugged port after, s"),
+    Param("backoff_max_s", float, None, "longest wait between re-open attempts, s"),
+    Param("mask", int, DEFAULT_MASK, "sensors enabled (bit mask, binary mode)"),
+)
+SIM_PARAMS: tuple[Param, ...] = (
+    *COMMON_PARAMS,
+    Param("seed", int, 0, "random seed of the noise and the faults"),
+    Param("clock", str, "virtual", "virtual (as fast as read) or wall (real time)",
+          ("virtual", "wall")),
+    Param("model", str, None, "noise model TOML file"),
+    Param("corrupt_rate", float, 0.0, "probability a byte is corrupted"),
+    Param("drop_rate", float, 0.0, "probability a byte vanishes"),
+    Param("split_rate", float, 0.0, "probability a write is split"),
+    Param("unplug_every_s", float, None, "unplug the kit this often, s"),
+    Param("replug_after_s", float, 0.5, "and plug it back after, s"),
+    Param("max_unplugs", int, None, "unplug at most this many times"),
+    Param("crystal_ppm", float, 0.0, "oscillator frequency error, ppm"),
+)
+
+
+@dataclass(frozen=True)
+class SensorTileOptions:
+    mode: str
+    period_ms: float
+    values: dict[str, Any]
+
+
+def _options(uri: SourceURI, params: tuple[Param, ...]) -> SensorTileOptions:
+    v = uri.values(params)
+    mode = v["mode"]
+    period_ms = v["period_ms"] or (10.0 if mode == "binary" else float(DATA_PERIOD_MS))
+    if period_ms <= 0:
+        raise SourceError(f"source URI {uri.text!r}: period_ms={period_ms:g} must be > 0")
+    for name in ("duration_s", "reconnect_timeout_s", "backoff_max_s"):
+        if v[name] is not None and v[name] <= 0:
+            raise SourceError(f"source URI {uri.text!r}: {name}={v[name]} must be > 0")
+    return SensorTileOptions(mode, period_ms, v)
+
+
+def _link_config(v: dict[str, Any]) -> LinkConfig:
     cfg = LinkConfig()
-    cfg.reconnect_timeout_s = uri.get_float("reconnect_timeout_s", cfg.reconnect_timeout_s)  # type: ignore[assignment]
-    cfg.backoff_max_s = uri.get_float("backoff_max_s", cfg.backoff_max_s)  # type: ignore[assignment]
+    if v["reconnect_timeout_s"] is not None:
+        cfg.reconnect_timeout_s = v["reconnect_timeout_s"]
+    if v["backoff_max_s"] is not None:
+        cfg.backoff_max_s = v["backoff_max_s"]
     return cfg
 
 
-_COMMON = {"mode", "duration_s", "period_ms", "reconnect_timeout_s", "backoff_max_s", "mask"}
-
-
-@register_source("sensortile")
-def open_sensortile(uri: SourceURI) -> SensorTileSource:
-    """``sensortile://<pyserial url or device>?mode=binary|ascii&period_ms=&mask=&duration_s=``."""
-    uri.check_known(_COMMON)
+def sensortile_options(uri: SourceURI) -> SensorTileOptions:
+    opts = _options(uri, COMMON_PARAMS)
     if not uri.target:
         raise SourceError(
             f"source URI {uri.text!r} names no port; e.g. sensortile:///dev/ttyACM0 or "
             "sensortile:///dev/serial/by-id/usb-STMicroelectronics_...-if00"
         )
-    mode = uri.get_choice("mode", ("binary", "ascii"), "binary")
-    period_ms = uri.get_float("period_ms", 10.0 if mode == "binary" else float(DATA_PERIOD_MS))
-    assert period_ms is not None
+    return opts
+
+
+def open_sensortile(uri: SourceURI, opts: SensorTileOptions) -> SensorTileSource:
+    """``sensortile://<pyserial url or device>?mode=binary|ascii&period_ms=&mask=&duration_s=``."""
+    v = opts.values
     return SensorTileSource(
         uri.text,
         uri.target,
-        mode=mode,
-        period_s=period_ms / 1000.0,
-        mask=uri.get_int("mask", DEFAULT_MASK),  # type: ignore[arg-type]
-        duration_s=uri.get_float("duration_s"),
+        mode=opts.mode,
+        period_s=opts.period_ms / 1000.0,
+        mask=v["mask"],
+        duration_s=v["duration_s"],
         host_check_s=2.0,
-        link_config=_link_config(uri),
+        link_config=_link_config(v),
     )
 
 
-@register_source("sensortile-sim")
-def open_sensortile_sim(uri: SourceURI) -> SensorTileSource:
-    """``sensortile-sim://?mode=&seed=&clock=&model=&corrupt_rate=&drop_rate=&split_rate=&
-    unplug_every_s=&replug_after_s=&max_unplugs=&duration_s=&period_ms=``."""
-    from lsm6ds_sim.sensortile_chip import simulated_lsm6dsm
-    from lsm6ds_sim.sensortile_fw import SensorTileFirmware, SerialFaults, make_clock
-
-    uri.check_known(
-        _COMMON
-        | {
-            "seed",
-            "clock",
-            "model",
-            "corrupt_rate",
-            "drop_rate",
-            "split_rate",
-            "unplug_every_s",
-            "replug_after_s",
-            "max_unplugs",
-            "crystal_ppm",
-        }
-    )
-    mode = uri.get_choice("mode", ("binary", "ascii"), "binary")
-    clock_mode = uri.get_choice("clock", ("virtual", "wall"), "virtual")
-    seed = uri.get_int("seed", 0)
-    assert seed is not None
-    period_ms = uri.get_float("period_ms", 10.0 if mode == "binary" else float(DATA_PERIOD_MS))
-    assert period_ms is not None
-    if mode == "binary" and (period_ms < 10 or period_ms % 10):
+def sensortile_sim_options(uri: SourceURI) -> SensorTileOptions:
+    opts = _options(uri, SIM_PARAMS)
+    if opts.mode == "binary" and (opts.period_ms < 10 or opts.period_ms % 10):
         raise SourceError(
-            f"source URI {uri.text!r}: period_ms={period_ms:g} must be a multiple of 10 ms "
-            "in binary mode (the RTC stamps frames in hundredths of a second)"
+            f"source URI {uri.text!r}: period_ms={opts.period_ms:g} must be a multiple of "
+            "10 ms in binary mode (the RTC stamps frames in hundredths of a second)"
         )
-    model = None
-    model_path = uri.get_str("model")
-    if model_path:
+    v = opts.values
+    if v["model"]:
         from lsm6ds_sim.model import load_model
 
-        model = load_model(model_path)
+        try:
+            load_model(v["model"])
+        except Exception as exc:  # ModelError and file errors, reported with the URI
+            raise SourceError(f"source URI {uri.text!r}: model {v['model']!r}: {exc}") from None
+    _serial_faults(uri, v)
+    return opts
+
+
+def _serial_faults(uri: SourceURI, v: dict[str, Any]) -> Any:
+    from lsm6ds_sim.sensortile_fw import SerialFaults
+
     try:
-        faults = SerialFaults(
-            corrupt_rate=uri.get_float("corrupt_rate", 0.0),  # type: ignore[arg-type]
-            drop_rate=uri.get_float("drop_rate", 0.0),  # type: ignore[arg-type]
-            split_rate=uri.get_float("split_rate", 0.0),  # type: ignore[arg-type]
-            unplug_every_s=uri.get_float("unplug_every_s"),
-            replug_after_s=uri.get_float("replug_after_s", 0.5),  # type: ignore[arg-type]
-            max_unplugs=uri.get_int("max_unplugs"),
+        return SerialFaults(
+            corrupt_rate=v["corrupt_rate"], drop_rate=v["drop_rate"],
+            split_rate=v["split_rate"], unplug_every_s=v["unplug_every_s"],
+            replug_after_s=v["replug_after_s"], max_unplugs=v["max_unplugs"],
         )
     except ValueError as exc:
         raise SourceError(f"source URI {uri.text!r}: {exc}") from exc
-    clock = make_clock(clock_mode)
-    chip = simulated_lsm6dsm(clock, seed, model, crystal_ppm=uri.get_float("crystal_ppm", 0.0))  # type: ignore[arg-type]
+
+
+def open_sensortile_sim(uri: SourceURI, opts: SensorTileOptions) -> SensorTileSource:
+    """The simulated SensorTile firmware on a pty, read through the real serial code."""
+    from lsm6ds_sim.clock import SimClock
+    from lsm6ds_sim.model import load_model
+    from lsm6ds_sim.sensortile_chip import simulated_lsm6dsm
+    from lsm6ds_sim.sensortile_fw import SensorTileFirmware
+
+    v = opts.values
+    clock = SimClock(v["clock"])
+    model = load_model(v["model"]) if v["model"] else None
+    chip = simulated_lsm6dsm(clock, v["seed"], model, crystal_ppm=v["crystal_ppm"])
     firmware = SensorTileFirmware(
-        mode,
+        opts.mode,
         chip,
         clock,
-        seed=seed,
-        faults=faults,
-        period_cs=round(period_ms / 10) if mode == "binary" else 1,
-        period_ms=round(period_ms),
+        seed=v["seed"],
+        faults=_serial_faults(uri, v),
+        period_cs=round(opts.period_ms / 10) if opts.mode == "binary" else 1,
+        period_ms=round(opts.period_ms),
     )
-    cfg = _link_config(uri)
     return SensorTileSource(
         uri.text,
         firmware.url,
-        mode=mode,
-        period_s=period_ms / 1000.0,
-        mask=uri.get_int("mask", DEFAULT_MASK),  # type: ignore[arg-type]
-        duration_s=uri.get_float("duration_s"),
-        host_check_s=2.0 if clock_mode == "wall" else None,
-        link_config=cfg,
+        mode=opts.mode,
+        period_s=opts.period_ms / 1000.0,
+        mask=v["mask"],
+        duration_s=v["duration_s"],
+        host_check_s=2.0 if v["clock"] == "wall" else None,
+        link_config=_link_config(v),
         firmware=firmware,
+        realtime=v["clock"] == "wall",
     )
+
+
+register_backend(Backend("sensortile", COMMON_PARAMS, sensortile_options, open_sensortile,
+                         "a SensorTile running DataLogExtended or DataLog"))
+register_backend(Backend("sensortile-sim", SIM_PARAMS, sensortile_sim_options,
+                         open_sensortile_sim, "the simulated SensorTile firmware on a pty"))

@@ -24,7 +24,7 @@ PREFIX_REFRESH = 64  # subseq_meansq_sum: exact local prefix every this many sta
 LAG1_CHUNK = 2048  # series points formed at a time by lag1_r1_diff (a 16 kB scratch)
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def sumsq_diff(
     x: np.ndarray, m: int, step: int, count: int, order: int, gp: np.ndarray, goff: int
 ) -> tuple[float, int]:
@@ -73,18 +73,18 @@ def sumsq_diff(
     return s, valid
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _d2(x: np.ndarray, m: int, i: int) -> float:
     return x[i + 2 * m] - 2.0 * x[i + m] + x[i]
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _d3(x: np.ndarray, m: int, j: int) -> float:
     """w_{j+1} - w_j of :func:`mvar_sum`: d_{j+m} - d_j, a third difference at lag m."""
     return x[j + 3 * m] - 3.0 * x[j + 2 * m] + 3.0 * x[j + m] - x[j]
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def mvar_sum(x: np.ndarray, m: int, gp: np.ndarray, goff: int) -> tuple[float, int]:
     """sum_j w_j^2, w_j = sum_{i=j}^{j+m-1} x[i+2m] - 2 x[i+m] + x[i], j = 0..N-3m
     (SP 1065 eq. (15)).
@@ -134,7 +134,7 @@ def mvar_sum(x: np.ndarray, m: int, gp: np.ndarray, goff: int) -> tuple[float, i
     return s, count
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def totvar_sum(xe: np.ndarray, n: int, m: int, gp: np.ndarray, goff: int) -> tuple[float, int]:
     """sum_{i=1}^{N-2} (x*[i-m] - 2 x*[i] + x*[i+m])^2 on TOTVAR's reflected phase x*
     (x[0] at index N-2 of ``xe``); with gaps, terms whose span clipped to 0..N-1 has one
@@ -162,7 +162,7 @@ def totvar_sum(xe: np.ndarray, n: int, m: int, gp: np.ndarray, goff: int) -> tup
     return s, valid
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _local_prefix(series: np.ndarray, s: int, n3: int, v: np.ndarray) -> None:
     """v[t] = sum_{u<t} (series[s+u] - series[s]), t = 0..n3, as four independent running
     sums (one per quarter, side by side) joined by their end values."""
@@ -281,7 +281,7 @@ def subseq_meansq_sum(series: np.ndarray, m: int, starts: np.ndarray) -> float:
     return total
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _term(
     vv: np.ndarray, v3: float, n3: int, m: int, p: int, q: int, coef: float
 ) -> tuple[float, float, np.ndarray]:
@@ -295,7 +295,7 @@ def _term(
     return coef * 3.0 * v3, -coef, vv[1, k0 - 2 * n3 : k0 - 2 * n3 + m]  # 3 V[3m] - V[9m-k]
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def theo1_direct(x: np.ndarray, ms: np.ndarray, a_lo: int, ok: np.ndarray) -> np.ndarray:
     """Per m in ``ms``: sum_{a=a_lo}^{m/2} (1/a) sum_i (x_i - x_{i+a} + x_{i+m} - x_{i+m-a})^2
     over rows i = 0..N-m-1 (SP 1065 eq. (31) with a = m/2 - d). ``ok`` is empty (all rows)
@@ -324,7 +324,7 @@ def theo1_direct(x: np.ndarray, ms: np.ndarray, a_lo: int, ok: np.ndarray) -> np
     return out
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def lag1_r1(z: np.ndarray) -> tuple[float, int]:
     """(r1 without the (n-1)/n factor, n) of the finite values of z, two passes, NaN pairs
     skipped (Riley & Greenhall 2004, eq. 2)."""
@@ -342,7 +342,7 @@ def lag1_r1(z: np.ndarray) -> tuple[float, int]:
     return num / den, n
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _lag1_pair_sums(buf: np.ndarray, cnt: int, ext: int, mean: float, num: float,
                     den: float) -> tuple[float, float]:
     """NaN-aware sums of :func:`lag1_r1` over points 0..cnt-1 of ``buf`` (``ext`` points
@@ -360,7 +360,7 @@ def _lag1_pair_sums(buf: np.ndarray, cnt: int, ext: int, mean: float, num: float
     return num, den
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def diff_rows_windows(x: np.ndarray, a0: int, buf: np.ndarray, sel: np.ndarray) -> np.ndarray:
     """Fill row j of ``buf`` with D_a = x[:N-a] - x[a:] (a = a0 + j, zero beyond N - a) and
     return w[j, k] = (sum_{i<N-m} D_a(i)^2 + sum_{i=m-a}^{N-a-1} D_a(i)^2) / a for
@@ -392,7 +392,7 @@ def diff_rows_windows(x: np.ndarray, a0: int, buf: np.ndarray, sel: np.ndarray) 
     return out
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def shifted_power_sum(
     f: np.ndarray, a0: int, wr: np.ndarray, wi: np.ndarray, er: np.ndarray, ei: np.ndarray,
     out: np.ndarray,
@@ -420,7 +420,7 @@ def shifted_power_sum(
         out[k] = complex(sr, si)
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _z0(x: np.ndarray, m: int, freq: bool, k: int) -> float:
     """Point k of the series at tau: x[k m] (phase) or (x[(k+1) m] - x[k m]) / m (freq)."""
     if freq:
@@ -428,7 +428,7 @@ def _z0(x: np.ndarray, m: int, freq: bool, k: int) -> float:
     return x[k * m]
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def points_at_tau(x: np.ndarray, m: int, freq: bool, limit: int) -> int:
     """Finite points of the series at tau (phase decimated by m, or freq averages by m),
     counted until ``limit`` is reached (the caller only asks whether there are enough)."""
@@ -442,7 +442,7 @@ def points_at_tau(x: np.ndarray, m: int, freq: bool, limit: int) -> int:
     return n
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _fill_chunk(
     x: np.ndarray, m: int, freq: bool, d: int, k0: int, cnt: int, buf: np.ndarray
 ) -> None:
@@ -456,7 +456,7 @@ def _fill_chunk(
             buf[j] = buf[j + 1] - buf[j]
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def lag1_r1_diff(x: np.ndarray, m: int, freq: bool, d: int) -> tuple[float, int]:
     """:func:`lag1_r1` of the series at tau differenced d times, formed from the phase
     chunk by chunk (strided reads into a fixed scratch, no N-sized temporaries): the lag-1

@@ -44,7 +44,7 @@ BLOCK = 4096
 FAM_OAVAR, FAM_AVAR, FAM_OHVAR, FAM_HVAR = range(4)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _neumaier_add(sum2: np.ndarray, comp: np.ndarray, row: int, ch: int, v: float) -> None:
     """sum2[row, ch] += v with the Neumaier compensation kept in comp (no fastmath)."""
     s = sum2[row, ch]
@@ -56,7 +56,7 @@ def _neumaier_add(sum2: np.ndarray, comp: np.ndarray, row: int, ch: int, v: floa
     sum2[row, ch] = t
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _block_sumsq(xc: np.ndarray, a: int, b: int, q: int, step: int,
                  order: int) -> float:
     """Sum of squares of the order-2 (D) or order-3 (H) differences at lag q ending at
@@ -84,7 +84,7 @@ def _block_sumsq(xc: np.ndarray, a: int, b: int, q: int, step: int,
     return s
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _block_sumsq_g(xc: np.ndarray, gc: np.ndarray, a: int, b: int, q: int, step: int,
                    order: int, goff: int) -> tuple[float, int]:
     """``_block_sumsq`` with gaps: gc[i + goff] is G at buffer row i of xc."""
@@ -103,7 +103,7 @@ def _block_sumsq_g(xc: np.ndarray, gc: np.ndarray, a: int, b: int, q: int, step:
     return s, n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def level_sums(x: np.ndarray, x0: int, g: np.ndarray, g0: int, i_old: int, i_new: int,
                qs: np.ndarray, rows: np.ndarray, sum2: np.ndarray, comp: np.ndarray,
                cnt: np.ndarray, skip: np.ndarray) -> None:
@@ -151,7 +151,7 @@ def level_sums(x: np.ndarray, x0: int, g: np.ndarray, g0: int, i_old: int, i_new
                 skip[row, ch] += total - used
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _sumsq(v: np.ndarray, a: int, b: int) -> float:
     """Sum of v[a:b]**2 (vectorised)."""
     s = 0.0
@@ -160,7 +160,7 @@ def _sumsq(v: np.ndarray, a: int, b: int) -> float:
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _add_blocks(v: np.ndarray, n: int, rows: np.ndarray, ch: int, sum2: np.ndarray,
                 comp: np.ndarray, cnt: np.ndarray) -> None:
     """Add sum(v[:n]**2) (in blocks of BLOCK) and n terms to every row >= 0 of ``rows``."""
@@ -177,7 +177,7 @@ def _add_blocks(v: np.ndarray, n: int, rows: np.ndarray, ch: int, sum2: np.ndarr
             cnt[row, ch] += n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _move_sumsq(x0: np.ndarray, x1: np.ndarray, x2: np.ndarray, x3: np.ndarray, e: Any,
                 a: int, b: int) -> tuple[Any, float]:
     """Move E over k = a..b-1 (``E += d_k - d_{k-q}``, the lagged views x0..x3) and sum
@@ -207,7 +207,7 @@ def _move_sumsq(x0: np.ndarray, x1: np.ndarray, x2: np.ndarray, x3: np.ndarray, 
     return e, (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mvar_sums(bs: np.ndarray, bs0: int, ga: np.ndarray, ga0: int, ge: np.ndarray, ge0: int,
               b_old: int, b_new: int, q: int, unit_stride: bool, rows: np.ndarray,
               noise_row: int, sum2: np.ndarray, comp: np.ndarray, cnt: np.ndarray,
@@ -262,7 +262,7 @@ def mvar_sums(bs: np.ndarray, bs0: int, ga: np.ndarray, ga0: int, ge: np.ndarray
                 e, s = _move_sumsq(x0, x1, x2, x3, e, a, b)
                 for row in all_rows:
                     if row >= 0:
-                        _neumaier_add(sum2, comp, row, ch, s + first if a == 0 else s)
+                        _neumaier_add(sum2, comp, int(row), ch, s + first if a == 0 else s)
                 if b == n:
                     break
                 a = b
@@ -281,7 +281,7 @@ def mvar_sums(bs: np.ndarray, bs0: int, ga: np.ndarray, ga0: int, ge: np.ndarray
     age[0] = total - 1 if anchor else age[0] + total
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _add_mvar_terms(e: np.ndarray, lo: int, total: int, q: int, unit_stride: bool,
                     ga: np.ndarray, ga0: int, ge: np.ndarray, ge0: int, all_rows: np.ndarray,
                     ch: int, sum2: np.ndarray, comp: np.ndarray, cnt: np.ndarray,
@@ -333,7 +333,7 @@ def _add_mvar_terms(e: np.ndarray, lo: int, total: int, q: int, unit_stride: boo
 _FM_NOISE = {"reassoc", "contract", "nsz"}  # no arcp: x / m rounds as numpy's does
 
 
-@njit(cache=True, fastmath=_FM_NOISE)
+@njit(cache=True, fastmath=_FM_NOISE, nogil=True)
 def _moments(z: np.ndarray, j0: int, n: int, out: np.ndarray, d: int, ch: int) -> None:
     """The seven u sums (``streaming_noise`` indices 0..6) of the new elements z[j0:n]
     of one difference order, pairs with their predecessors included (``_add_finite``)."""
@@ -367,7 +367,7 @@ def _moments(z: np.ndarray, j0: int, n: int, out: np.ndarray, d: int, ch: int) -
         out[d, 6, ch] = lag
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def noise_sums_finite(x: np.ndarray, i0: int, m: int, tail: np.ndarray, cnt: int,
                       orders: int, shift: np.ndarray, out: np.ndarray,
                       scratch: np.ndarray) -> None:

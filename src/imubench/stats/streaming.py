@@ -79,7 +79,7 @@ from imubench.stats._stream_kernels import level_sums, mvar_sums
 from imubench.stats.edf import canonical_stat
 from imubench.stats.noise_id import LAG1_MIN_POINTS, alpha_range, dmax_for, identifies_at
 from imubench.stats.streaming_noise import ALPHA_UNKNOWN, RunningNoiseSums, concat_f
-from imubench.stats.taus import averaging_factors
+from imubench.stats.taus import averaging_factors, streaming_factors
 
 # statistic (deviation name) -> (variance family, overlapping?)
 STREAM_STATS: dict[str, tuple[str, bool]] = {
@@ -293,21 +293,7 @@ class StreamingAllan:
         self.overlap = int(overlap)
         self.confidence = confidence
         self.alpha = alpha
-        # largest m; a tau given as m / rate_hz must not lose m to rounding
-        self.max_m = int(np.floor(max_tau_s * self.rate_hz * (1 + 1e-12))) if max_tau_s else 2**20
-        if self.max_m < 1:
-            raise StatsError(f"max_tau_s={max_tau_s} is shorter than one sample period")
-        ms: set[int] = set()
-        for stat in self.stats:
-            ms.update(
-                int(m)
-                for m in averaging_factors(
-                    stat, 10**15, taus, self.tau0_s, max_af_override=self.max_m
-                )
-            )
-        if not ms:
-            raise StatsError(f"no averaging factor <= {self.max_m} from taus={taus!r}")
-        self.ms = sorted(ms)
+        self.max_m, self.ms = streaming_factors(self.stats, taus, self.rate_hz, max_tau_s)
         self._scale_arg = scale
         self._nch: int | None = None
         self._one_d = True
@@ -514,7 +500,7 @@ class StreamingAllan:
         x = np.cumsum(y0, axis=0, out=self._work("x", c, self._dtype))
         x += self._x_last
         if gaps is None:
-            g = np.broadcast_to(self._g_last, (c, self._nch))
+            g = np.broadcast_to(self._g_last, (c, self._g_last.shape[-1]))
         else:
             g = np.cumsum(gaps, axis=0, dtype=np.int64,
                           out=self._work("g", c, np.dtype(np.int64)))
@@ -743,7 +729,8 @@ class StreamingAllan:
             alpha = self._alphas(stat, mm, n_freq + 1, lag1_cache)
             for ch, res in enumerate(self._results(stat, mm, n, var, skipped, n_freq, alpha)):
                 per_channel[ch][stat] = res
-        return per_channel[0] if self._one_d else per_channel
+        channels: list[Mapping[str, Any]] = [*per_channel]
+        return per_channel[0] if self._one_d else channels
 
     def _alphas(
         self, stat: str, ms: np.ndarray, n_phase: int, lag1_cache: dict[tuple[int, int], np.ndarray]
@@ -848,7 +835,7 @@ class StreamingAllan:
             raise StatsError("save_state() before any update()")
         self._flush_inbox()
         self._flush_noise()
-        arrays: dict[str, np.ndarray] = {
+        arrays: dict[str, Any] = {
             "scale": self.scale,
             "ref": self._ref,
             "ref_set": self._ref_set,
@@ -961,3 +948,28 @@ class StreamingAllan:
                     seq.buf[: rows.shape[0]] = rows
                     seq.start, seq.stop = start, stop
         return eng
+
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Compile (or load from the numba cache) every kernel a streaming engine uses: both
+    input kinds (integer raw counts, floats), both memory modes, every statistic,
+    noise identification and snapshots. The first call on a machine with an empty cache
+    (``NUMBA_CACHE_DIR``) takes tens of seconds; later ones load the cache (about a
+    second); repeated calls in one process return at once."""
+    global _WARM
+    if _WARM:
+        return
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(4096, 2))
+    for memory in ("bounded", "exact"):
+        for data in ((x * 100).astype(np.int64), x):
+            eng = StreamingAllan(100.0, taus="octave", stats=list(STREAM_STATS),
+                                 max_tau_s=8.0, memory=memory)
+            mask = np.zeros(data.shape, bool) if data.dtype.kind == "i" else None
+            eng.update(data, gaps=mask)
+            eng.update(data[:7], gaps=None if mask is None else mask[:7])
+            eng.snapshot()
+    _WARM = True

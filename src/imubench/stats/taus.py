@@ -41,6 +41,52 @@ THEO_STATS = ("theo1", "theobr", "theoh")
 THEO1_MIN_M = 10  # SP 1065 section 5.2.14: 10 <= m <= N - 1, m even
 
 
+TAU_KEYWORDS = ("octave", "decade", "all")
+
+
+def parse_taus(text: str) -> str | int | list[float]:
+    """A tau specification as text (``--taus``, ``allan.taus``): a keyword of
+    :data:`TAU_KEYWORDS`, an integer (points per decade) or comma-separated tau values in
+    seconds; the value :func:`averaging_factors` takes."""
+    t = text.strip().lower()
+    if t in TAU_KEYWORDS:
+        return t
+    try:
+        if "," not in t and "." not in t and "e" not in t:
+            return int(t)
+        return [float(v) for v in t.split(",") if v.strip()]
+    except ValueError:
+        raise StatsError(
+            f"taus {text!r} is not understood: use octave, decade, all, an integer (points "
+            "per decade) or a comma-separated list of tau values in seconds"
+        ) from None
+
+
+def streaming_factors(
+    stats: Sequence[str], taus: str | int | Sequence[float], rate_hz: float,
+    max_tau_s: float | None,
+) -> tuple[int, list[int]]:
+    """``(m_max, factors)`` a streaming engine keeps: every averaging factor of ``taus``
+    for each statistic up to ``m_max = floor(max_tau_s * rate_hz)`` (2**20 without
+    ``max_tau_s``), sorted. The rule :class:`~imubench.stats.streaming.StreamingAllan`
+    and the configuration check share.
+
+    Raises:
+        StatsError: ``max_tau_s`` shorter than one sample period, or no factor at all.
+    """
+    # largest m; a tau given as m / rate_hz must not lose m to rounding
+    max_m = int(np.floor(max_tau_s * rate_hz * (1 + 1e-12))) if max_tau_s else 2**20
+    if max_m < 1:
+        raise StatsError(f"max_tau_s={max_tau_s} is shorter than one sample period")
+    ms: set[int] = set()
+    for stat in stats:
+        ms.update(int(m) for m in averaging_factors(stat, 10**15, taus, 1.0 / rate_hz,
+                                                    max_af_override=max_m))
+    if not ms:
+        raise StatsError(f"no averaging factor <= {max_m} from taus={taus!r}")
+    return max_m, sorted(ms)
+
+
 def max_af(stat: str, n_freq: int, max_af_override: float | None = None) -> int:
     """Largest averaging factor Stable32 uses for ``stat`` with ``n_freq`` frequency samples."""
     if max_af_override is not None:
