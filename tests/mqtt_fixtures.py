@@ -27,6 +27,7 @@ import tempfile
 import time
 import uuid
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,11 +36,14 @@ import pytest
 from imubench.mqtt.broker import EmbeddedBroker
 
 __all__ = [
+    "DeliveryCount",
     "MosquittoProcess",
+    "deliver_across_faults",
     "embedded_broker",
     "find_mosquitto",
     "free_port",
     "mqtt_broker",
+    "persistent_mosquitto_config",
     "private_mosquitto",
     "speaks_mqtt",
     "unique_prefix",
@@ -244,3 +248,127 @@ def embedded_broker() -> Iterator[Callable[..., EmbeddedBroker]]:
     yield make
     for broker in started:
         broker.stop_thread()
+
+
+PERSISTENT_SESSIONS = (
+    "persistence true\n"
+    "autosave_interval 1\n"
+    "autosave_on_changes true\n"
+)
+"""Extra mosquitto configuration (with ``persistence_location``) that saves subscriptions
+at once, so a SIGKILLed broker restarts with the subscriber's session and queues for it."""
+
+
+def persistent_mosquitto_config(directory: Path) -> str:
+    """``PERSISTENT_SESSIONS`` storing its database in ``directory``."""
+    return PERSISTENT_SESSIONS + f"persistence_location {directory}/\n"
+
+
+@dataclass
+class DeliveryCount:
+    """Snapshots across broker faults: produced by the publisher (``seq`` 0..produced-1),
+    received by a persistent subscriber (distinct ``seq``), received more than once
+    (``duplicated``), reported dropped by the publisher (``dropped``), and the publisher's
+    connections (1 + reconnections)."""
+
+    produced: int = 0
+    received: int = 0
+    duplicated: int = 0
+    dropped: int = 0
+    connections: int = 0
+
+    @property
+    def unaccounted(self) -> int:
+        """produced - received - dropped: snapshots gone without being reported."""
+        return self.produced - self.received - self.dropped
+
+
+async def deliver_across_faults(
+    broker: MosquittoProcess,
+    faults: list[tuple[str, float]],
+    *,
+    interval_s: float = 0.1,
+    settle_s: float = 1.0,
+    backlog_snapshots: int = 120,
+    keepalive_s: int = 30,
+) -> DeliveryCount:
+    """Publish a snapshot every ``interval_s`` with ``MqttPublisher`` while ``broker`` goes
+    through ``faults`` (``("kill", down_s)``: SIGKILL, restart after down_s; ``("stop",
+    hung_s)``: SIGSTOP, SIGCONT after hung_s), ``settle_s`` of normal service before, between
+    and after; count what a QoS 1 subscriber with a persistent session receives.
+
+    ``broker`` must be configured with ``persistent_mosquitto_config`` so its subscription
+    survives a SIGKILL.
+    """
+    import asyncio
+    import json
+
+    import aiomqtt
+
+    from imubench.mqtt.publisher import MqttPublisher
+
+    station = f"f{uuid.uuid4().hex[:10]}"
+    seqs: list[int] = []
+    subscribed = asyncio.Event()
+    stop = asyncio.Event()
+
+    async def subscriber() -> None:
+        while not stop.is_set():
+            try:
+                async with aiomqtt.Client(
+                    broker.host, broker.port, identifier=f"sub-{station}", clean_session=False,
+                    keepalive=300,
+                ) as sub:
+                    await sub.subscribe(f"imubench/{station}/imu0/allan", qos=1)
+                    subscribed.set()
+                    async for message in sub.messages:
+                        seqs.append(json.loads(message.payload)["seq"])  # type: ignore[arg-type]
+            except aiomqtt.MqttError:
+                await asyncio.sleep(0.05)
+
+    sub_task = asyncio.create_task(subscriber())
+    await asyncio.wait_for(subscribed.wait(), 10)
+    pub = MqttPublisher(
+        broker.host, broker.port, station, "imu0", qos=1, keepalive_s=keepalive_s,
+        backlog_snapshots=backlog_snapshots, reconnect_min_s=0.2, reconnect_max_s=2.0,
+    )
+    count = DeliveryCount()
+
+    async def produce(duration_s: float) -> None:
+        end = time.monotonic() + duration_s
+        while time.monotonic() < end:
+            await pub.publish_allan({"k": pub.produced_snapshots})
+            await asyncio.sleep(interval_s)
+
+    async with pub:
+        await pub.wait_connected(10)
+        await produce(settle_s)
+        for kind, duration_s in faults:
+            if kind == "kill":
+                broker.kill()
+                await produce(duration_s)
+                await asyncio.to_thread(broker.start)
+            elif kind == "stop":
+                assert broker.proc is not None
+                broker.proc.send_signal(signal.SIGSTOP)
+                await produce(duration_s)
+                broker.proc.send_signal(signal.SIGCONT)
+            else:
+                raise ValueError(f"fault {kind!r}: use 'kill' or 'stop'")
+            await produce(settle_s)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and (
+            pub.buffered_snapshots
+            or len(set(seqs)) + pub.dropped_snapshots < pub.produced_snapshots
+        ):
+            await asyncio.sleep(0.05)
+        count.produced = pub.produced_snapshots
+        count.dropped = pub.dropped_snapshots
+        count.connections = pub.connections
+    stop.set()
+    sub_task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await sub_task
+    count.received = len(set(seqs))
+    count.duplicated = len(seqs) - count.received
+    return count

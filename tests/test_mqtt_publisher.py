@@ -205,7 +205,7 @@ def test_reconnects_after_broker_restart_with_bounded_buffer(
             broker.port,
             station,
             "imu0",
-            buffer_snapshots=3,
+            backlog_snapshots=3,
             reconnect_min_s=0.1,
             reconnect_max_s=0.4,
             keepalive_s=5,
@@ -253,7 +253,7 @@ def test_buffer_drops_oldest_while_no_broker_and_close_returns() -> None:
             free_port(),
             station_name(),
             "imu0",
-            buffer_snapshots=3,
+            backlog_snapshots=3,
             reconnect_min_s=0.05,
             reconnect_max_s=0.2,
         )
@@ -289,7 +289,7 @@ def test_username_password_against_password_file(
                 assert await pub.wait_connected(5)
                 await pub.publish_allan({"ok": 1})
                 got = (await receive(sub, 1))[0]
-                assert json.loads(got.payload) == {"ok": 1}  # type: ignore[arg-type]
+                assert json.loads(got.payload) == {"ok": 1, "seq": 0}  # type: ignore[arg-type]
         async with MqttPublisher(
             broker.host,
             broker.port,
@@ -417,7 +417,7 @@ def test_tls_with_self_signed_ca(private_mosquitto: MosquittoFactory, tmp_path: 
                 assert await pub.wait_connected(5)
                 await pub.publish_allan({"tls": True})
                 stdout, _ = await asyncio.to_thread(sub.communicate, timeout=10)
-        assert json.loads(stdout) == {"tls": True}
+        assert json.loads(stdout) == {"tls": True, "seq": 0}
         # A publisher trusting another CA must refuse the broker's certificate.
         async with MqttPublisher(
             "127.0.0.1",

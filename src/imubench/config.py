@@ -357,7 +357,25 @@ class MqttConfig(_Section):
     tls_ca: str | None = Field(
         None, description="CA certificate file (PEM) for `mqtts://` (unit: path)"
     )
-    qos: int = Field(0, ge=0, le=2, description="QoS of the snapshots (unit: -)")
+    tls_cert: str | None = Field(
+        None, description="Client certificate file (PEM) for `mqtts://`, with `tls_key` "
+        "(unit: path)"
+    )
+    tls_key: str | None = Field(
+        None, description="Private key file (PEM, unencrypted) of `tls_cert` (unit: path)"
+    )
+    tls_insecure: bool = Field(
+        False, description="Skip the check of the broker's host name against its certificate "
+        "(the chain is still verified against `tls_ca`) (unit: -)"
+    )
+    qos: int = Field(
+        1, ge=0, le=2, description="QoS of the snapshots; 1 or 2 keep a snapshot in the "
+        "backlog until the broker acknowledged it (unit: -)"
+    )
+    backlog_snapshots: int = Field(
+        120, ge=1, le=100_000, description="Snapshots kept while the broker is unreachable; "
+        "the oldest beyond are dropped and counted in `dropped_snapshots` (unit: snapshots)"
+    )
     keepalive_s: int = Field(30, ge=5, le=3600, description="MQTT keep-alive (unit: s)")
 
     @field_validator("station", "sensor")
@@ -382,6 +400,14 @@ class MqttConfig(_Section):
                 parse_broker_url(value)
             except MqttError as exc:
                 raise ValueError(str(exc)) from None
+        return value
+
+    @field_validator("tls_cert", "tls_key")
+    @classmethod
+    def _tls_file(cls, value: str | None) -> str | None:
+        if not value:
+            return None
+        check_readable_file(Path(value))
         return value
 
     @field_validator("tls_ca")
@@ -537,6 +563,15 @@ def cross_checks(cfg: Config) -> list[Problem]:
             check_creatable_file(Path(sample))
         except ValueError as exc:
             problems.append(Problem(("log", "path"), cfg.log.path, str(exc)))
+    if (cfg.mqtt.tls_cert is None) != (cfg.mqtt.tls_key is None):
+        field = "tls_key" if cfg.mqtt.tls_key is None else "tls_cert"
+        problems.append(Problem(("mqtt", field), None,
+                                "mqtt.tls_cert and mqtt.tls_key go together: give both"))
+    for field, path in (("tls_cert", cfg.mqtt.tls_cert), ("tls_key", cfg.mqtt.tls_key)):
+        if path and not cfg.mqtt.broker.startswith("mqtts://"):
+            problems.append(Problem(("mqtt", field), path,
+                                    f"only used with an mqtts:// broker; mqtt.broker is "
+                                    f"{cfg.mqtt.broker!r}"))
     if cfg.mqtt.tls_ca and not cfg.mqtt.broker.startswith("mqtts://"):
         problems.append(Problem(("mqtt", "tls_ca"), cfg.mqtt.tls_ca,
                                 f"only used with an mqtts:// broker; mqtt.broker is "

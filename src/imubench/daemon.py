@@ -336,8 +336,9 @@ class Daemon:
         publisher = MqttPublisher(
             host, port, cfg.mqtt.station, cfg.mqtt.sensor, username=cfg.mqtt.username,
             password=None if cfg.mqtt.password is None else cfg.mqtt.password.get_secret_value(),
-            tls=tls, tls_ca=cfg.mqtt.tls_ca, qos=cfg.mqtt.qos,
-            keepalive_s=cfg.mqtt.keepalive_s,
+            tls=tls, tls_ca=cfg.mqtt.tls_ca, tls_cert=cfg.mqtt.tls_cert,
+            tls_key=cfg.mqtt.tls_key, tls_insecure=cfg.mqtt.tls_insecure, qos=cfg.mqtt.qos,
+            keepalive_s=cfg.mqtt.keepalive_s, backlog_snapshots=cfg.mqtt.backlog_snapshots,
             status_detail={"phase": self.phase, "source": cfg.source.uri},
         )
         self._publisher = publisher

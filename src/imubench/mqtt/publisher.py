@@ -6,10 +6,17 @@ is retained: JSON ``{"state": "online", ...}`` after each (re)connection, the pl
 ``offline`` after a clean stop, and the same ``offline`` as last will (set at CONNECT, so the
 broker publishes it when the process dies or the link times out).
 
-The caller is never blocked for long: ``publish_allan`` only encodes and buffers. A
-background loop (``run``) connects, publishes, and reconnects with capped exponential
-backoff; while disconnected at most ``buffer_snapshots`` snapshots wait (the oldest are
-dropped and counted in ``dropped_snapshots``).
+The caller is never blocked for long: ``publish_allan`` numbers the snapshot (``seq``,
+0, 1, 2, ...), encodes and queues it. A background loop (``run``) connects, publishes, and
+reconnects with capped exponential backoff with jitter (each wait drawn uniformly from
+[backoff/2, backoff], "equal jitter", AWS Architecture Blog, "Exponential Backoff and
+Jitter", 2015). A snapshot leaves the backlog only once the broker acknowledged it (PUBACK
+for QoS 1, PUBCOMP for QoS 2; QoS 0 only once handed to the socket), so a snapshot in
+flight when the link dies is sent again after reconnection. While disconnected or while the
+broker does not answer, at most ``backlog_snapshots`` snapshots wait; the oldest are dropped,
+counted in ``dropped_snapshots`` (also in the retained status) and logged. A hung broker
+(process stopped, link black-holed) is detected when an acknowledgement does not come within
+``ack_timeout_s`` or by paho's keep-alive (no PINGRESP within ``keepalive_s``).
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ import json
 import logging
 import math
 import os
+import random
 import socket
 import ssl
 import uuid
@@ -71,6 +79,35 @@ def parse_broker_url(url: str) -> BrokerAddress:
     return BrokerAddress(parts.hostname, port or (8883 if tls else 1883), tls)
 
 
+def make_tls_context(
+    ca: str | os.PathLike[str] | None,
+    cert: str | os.PathLike[str] | None = None,
+    key: str | os.PathLike[str] | None = None,
+    insecure: bool = False,
+) -> ssl.SSLContext:
+    """Client TLS context: the server's certificate verified against ``ca`` (PEM; the system
+    store when None), with its host name checked unless ``insecure`` (the chain is still
+    verified), and ``cert``/``key`` (PEM) presented as the client certificate when given.
+
+    Raises ``MqttError`` naming the file that cannot be used.
+    """
+    try:
+        context = ssl.create_default_context(cafile=ca)
+    except (OSError, ssl.SSLError, ValueError) as exc:
+        raise MqttError(f"mqtt.tls_ca {ca}: not a readable PEM CA certificate ({exc})") from None
+    if insecure:
+        context.check_hostname = False
+    if cert is not None:
+        try:
+            context.load_cert_chain(cert, key)
+        except (OSError, ssl.SSLError, ValueError) as exc:
+            raise MqttError(
+                f"mqtt.tls_cert {cert} / mqtt.tls_key {key}: not a matching PEM certificate "
+                f"and private key ({exc})"
+            ) from None
+    return context
+
+
 def _jsonable(value: Any, path: str) -> Any:
     """Convert numpy arrays/scalars to lists/numbers and non-finite floats to None."""
     if value is None or isinstance(value, str | bool | int):
@@ -118,19 +155,25 @@ class MqttPublisher:
         password: str | None = None,
         tls: bool = False,
         tls_ca: str | os.PathLike[str] | None = None,
+        tls_cert: str | os.PathLike[str] | None = None,
+        tls_key: str | os.PathLike[str] | None = None,
+        tls_insecure: bool = False,
         keepalive_s: int = 30,
         client_id: str | None = None,
-        qos: int = 0,
-        buffer_snapshots: int = 3,
+        qos: int = 1,
+        backlog_snapshots: int = 120,
         reconnect_min_s: float = 0.5,
-        reconnect_max_s: float = 30.0,
+        reconnect_max_s: float = 5.0,
         timeout_s: float = 10.0,
+        ack_timeout_s: float | None = None,
         status_detail: Mapping[str, Any] | None = None,
     ) -> None:
         if qos not in (0, 1, 2):
             raise MqttError(f"mqtt qos {qos!r} is invalid; use 0, 1 or 2")
-        if buffer_snapshots < 1:
-            raise MqttError(f"buffer_snapshots {buffer_snapshots} must be at least 1")
+        if backlog_snapshots < 1:
+            raise MqttError(f"backlog_snapshots {backlog_snapshots} must be at least 1")
+        if (tls_cert is None) != (tls_key is None):
+            raise MqttError("mqtt tls_cert and tls_key go together: give both or neither")
         if not 0 < reconnect_min_s <= reconnect_max_s:
             raise MqttError(
                 f"reconnect backoff {reconnect_min_s}..{reconnect_max_s} s is invalid; "
@@ -149,12 +192,17 @@ class MqttPublisher:
         self.client_id = client_id or f"imubench-{station}-{sensor}-{uuid.uuid4().hex[:8]}"
         self._username = username
         self._password = password
-        self._tls_context = ssl.create_default_context(cafile=tls_ca) if tls else None
+        self._tls_context = (
+            make_tls_context(tls_ca, tls_cert, tls_key, tls_insecure) if tls else None
+        )
         self._reconnect_min_s = reconnect_min_s
         self._reconnect_max_s = reconnect_max_s
         self._timeout_s = timeout_s
+        self._ack_timeout_s = float(keepalive_s) if ack_timeout_s is None else ack_timeout_s
         self._buffer: deque[bytes] = deque()
-        self._buffer_max = buffer_snapshots
+        self._buffer_max = backlog_snapshots
+        self._seq = 0
+        self._drops_logged = 0
         self._status_detail: dict[str, Any] = dict(status_detail or {})
         self._status_dirty = True
         self._since = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
@@ -182,15 +230,36 @@ class MqttPublisher:
     async def publish_allan(self, payload: Mapping[str, Any]) -> None:
         """Queue one Allan snapshot for ``allan_topic``; returns at once.
 
-        ``payload`` is encoded as JSON now (numpy arrays allowed, NaN becomes null). When
-        ``buffer_snapshots`` are already waiting, the oldest is dropped and counted.
+        ``payload`` gets ``seq`` (this publisher's snapshot number, from 0) and is encoded as
+        JSON now (numpy arrays allowed, NaN becomes null). When ``backlog_snapshots`` are
+        already waiting, the oldest is dropped and counted in ``dropped_snapshots``.
         """
-        data = encode_json(payload)
+        data = encode_json({**payload, "seq": self._seq})
+        self._seq += 1
         self._buffer.append(data)
+        self._trim_backlog()
+        self._wake.set()
+
+    @property
+    def produced_snapshots(self) -> int:
+        """Snapshots handed to ``publish_allan`` so far (the next ``seq``)."""
+        return self._seq
+
+    def _trim_backlog(self) -> None:
+        dropped = 0
         while len(self._buffer) > self._buffer_max:
             self._buffer.popleft()
-            self.dropped_snapshots += 1
-        self._wake.set()
+            dropped += 1
+        if dropped:
+            self.dropped_snapshots += dropped
+            self._status_dirty = True
+            if self.dropped_snapshots >= 2 * self._drops_logged:  # log at 1, 2, 4, 8, ...
+                self._drops_logged = self.dropped_snapshots
+                log.warning(
+                    "MQTT backlog full (%d snapshots): dropped the oldest, %d dropped so far",
+                    self._buffer_max,
+                    self.dropped_snapshots,
+                )
 
     async def publish_status(self, detail: Mapping[str, Any] | None = None) -> None:
         """Update the retained ``online`` status with ``detail`` merged in; returns at once.
@@ -212,6 +281,8 @@ class MqttPublisher:
             "host": socket.gethostname(),
             "pid": os.getpid(),
             "since": self._since,
+            "dropped_snapshots": self.dropped_snapshots,
+            "published_snapshots": self.published_snapshots,
             **self._status_detail,
         }
         return encode_json(status)
@@ -288,19 +359,22 @@ class MqttPublisher:
             except aiomqtt.MqttError as exc:
                 self.last_error = str(exc)
                 failures += 1
+                wait_s = random.uniform(backoff / 2, backoff)
                 level = logging.WARNING if failures == 1 else logging.DEBUG
                 log.log(
                     level,
-                    "MQTT broker %s:%d unavailable (%s); retrying in %.1f s",
+                    "MQTT broker %s:%d unavailable (%s); retrying in %.1f s, %d snapshots "
+                    "waiting",
                     self.host,
                     self.port,
                     exc,
-                    backoff,
+                    wait_s,
+                    len(self._buffer),
                 )
             finally:
                 self._connected.clear()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._closing.wait(), backoff)
+                await asyncio.wait_for(self._closing.wait(), wait_s)
             backoff = min(backoff * 2, self._reconnect_max_s)
 
     # ------------------------------------------------------------------ internals
@@ -334,18 +408,19 @@ class MqttPublisher:
                         timeout=self._timeout_s,
                     )
                 while self._buffer:
-                    data = self._buffer.popleft()
-                    try:
-                        await client.publish(
-                            self.allan_topic, data, qos=self.qos, timeout=self._timeout_s
-                        )
-                    except BaseException:
-                        self._buffer.appendleft(data)  # retried after reconnection
-                        while len(self._buffer) > self._buffer_max:
-                            self._buffer.popleft()
-                            self.dropped_snapshots += 1
-                        raise
+                    # Leaves the backlog only once acknowledged: a snapshot whose PUBACK
+                    # never came is sent again after reconnection.
+                    data = self._buffer[0]
+                    await client.publish(
+                        self.allan_topic, data, qos=self.qos, timeout=self._ack_timeout_s
+                    )
+                    if self._buffer and self._buffer[0] is data:  # not trimmed meanwhile
+                        self._buffer.popleft()
                     self.published_snapshots += 1
+                    if self._status_dirty:
+                        break  # a drop happened meanwhile: tell the status first
+                if self._status_dirty:
+                    continue
                 if self._closing.is_set():
                     return
                 self._wake.clear()

@@ -1,0 +1,36 @@
+"""Snapshots across a killed and a hung (SIGSTOP) mosquitto on a private port: every
+snapshot the publisher produced reaches a persistent subscriber once, or is reported
+dropped (issue 12, faults survived; the long version is ``bench/fault_mqtt.py``)."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from pathlib import Path
+
+import mqtt_fixtures
+from mqtt_fixtures import MosquittoProcess, deliver_across_faults, persistent_mosquitto_config
+
+private_mosquitto = mqtt_fixtures.private_mosquitto
+
+
+def test_kill_restart_and_sigstop_lose_nothing_within_backlog(
+    private_mosquitto: Callable[..., MosquittoProcess], tmp_path: Path
+) -> None:
+    broker = private_mosquitto(persistent_mosquitto_config(tmp_path))
+    count = asyncio.run(deliver_across_faults(broker, [("kill", 2.0), ("stop", 3.0)]))
+    assert count.produced > 40
+    assert count.connections >= 2  # reconnected after the kill
+    assert (count.received, count.dropped, count.duplicated) == (count.produced, 0, 0), count
+
+
+def test_backlog_overflow_is_reported_not_silent(
+    private_mosquitto: Callable[..., MosquittoProcess], tmp_path: Path
+) -> None:
+    broker = private_mosquitto(persistent_mosquitto_config(tmp_path))
+    count = asyncio.run(
+        deliver_across_faults(broker, [("kill", 2.0)], backlog_snapshots=5, settle_s=0.5)
+    )
+    assert count.dropped > 5  # ~20 produced while down, 5 kept
+    assert count.unaccounted == 0, count
+    assert count.duplicated == 0, count
