@@ -42,11 +42,14 @@ __all__ = [
     "embedded_broker",
     "find_mosquitto",
     "free_port",
+    "fuzz_broker",
+    "malformed_packet",
     "mqtt_broker",
     "persistent_mosquitto_config",
     "private_mosquitto",
     "speaks_mqtt",
     "unique_prefix",
+    "valid_packets",
 ]
 
 LOCALHOST = "127.0.0.1"
@@ -372,3 +375,92 @@ async def deliver_across_faults(
     count.received = len(set(seqs))
     count.duplicated = len(seqs) - count.received
     return count
+
+
+def _remaining_length(n: int) -> bytes:
+    """MQTT variable-length integer (§2.2.3)."""
+    out = bytearray()
+    while True:
+        n, digit = divmod(n, 128)
+        out.append(digit | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def valid_packets(client_id: bytes = b"fuzz") -> list[bytes]:
+    """Well-formed MQTT 3.1.1 packets (CONNECT first), the seeds the fuzzer damages."""
+
+    def frame(first: int, body: bytes) -> bytes:
+        return bytes([first]) + _remaining_length(len(body)) + body
+
+    def utf8(raw: bytes) -> bytes:
+        return len(raw).to_bytes(2, "big") + raw
+
+    connect = utf8(b"MQTT") + b"\x04\x02\x00\x3c" + utf8(client_id)
+    will = utf8(b"MQTT") + b"\x04\x2e\x00\x3c" + utf8(client_id) + utf8(b"w/t") + utf8(b"bye")
+    return [
+        frame(0x10, connect),
+        frame(0x10, will),
+        frame(0x30, utf8(b"a/b") + b"payload"),
+        frame(0x32, utf8(b"a/b") + b"\x00\x07" + b"q1"),
+        frame(0x34, utf8(b"a/b") + b"\x00\x08" + b"q2"),
+        frame(0x31, utf8(b"a/r") + b"retained"),
+        frame(0x82, b"\x00\x01" + utf8(b"a/#") + b"\x01"),
+        frame(0xA2, b"\x00\x02" + utf8(b"a/#")),
+        frame(0x62, b"\x00\x08"),
+        frame(0x40, b"\x00\x01"),
+        b"\xc0\x00",
+        b"\xe0\x00",
+    ]
+
+
+def malformed_packet(rng: Any, max_packet_size: int) -> tuple[str, bytes]:
+    """One damaged packet and its kind: ``random`` bytes, ``truncated`` valid packet,
+    ``bitflip`` in a valid packet, ``bad-length`` (5-byte or lying remaining length),
+    ``oversize`` (remaining length above ``max_packet_size``). ``rng``: numpy Generator."""
+    seeds = valid_packets()
+    kind = ("random", "truncated", "bitflip", "bad-length", "oversize")[int(rng.integers(5))]
+    seed = seeds[int(rng.integers(len(seeds)))]
+    if kind == "random":
+        data = rng.bytes(int(rng.integers(1, 300)))
+    elif kind == "truncated":
+        data = seed[: int(rng.integers(1, len(seed)))]
+    elif kind == "bitflip":
+        buf = bytearray(seed)
+        for _ in range(int(rng.integers(1, 4))):
+            buf[int(rng.integers(len(buf)))] ^= 1 << int(rng.integers(8))
+        data = bytes(buf)
+    elif kind == "bad-length":
+        if rng.integers(2):
+            data = seed[:1] + b"\xff\xff\xff\xff\x7f" + seed[2:]  # 5 length bytes (§2.2.3)
+        else:
+            data = seed[:1] + _remaining_length(len(seed) + int(rng.integers(1, 1000))) + seed[2:]
+    else:
+        data = seed[:1] + _remaining_length(max_packet_size + int(rng.integers(1, 1 << 20)))
+        data += rng.bytes(int(rng.integers(0, 2000)))
+    return kind, data
+
+
+def fuzz_broker(port: int, n_packets: int, seed: int = 0, max_packet_size: int = 1 << 20,
+                check_every: int = 100) -> dict[str, int]:
+    """Send ``n_packets`` damaged packets to the broker on 127.0.0.1:``port``, each on a new
+    connection, half of them after a valid CONNECT; every ``check_every`` packets a
+    well-formed client must get its CONNACK within 5 s. Returns counts per kind, plus
+    ``hangs`` (well-formed clients not served)."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    counts: dict[str, int] = {"hangs": 0}
+    connect = valid_packets(b"fuzz")[0]
+    for i in range(n_packets):
+        kind, data = malformed_packet(rng, max_packet_size)
+        counts[kind] = counts.get(kind, 0) + 1
+        with contextlib.suppress(OSError), socket.create_connection(
+            (LOCALHOST, port), timeout=5
+        ) as sock:
+            if rng.integers(2):
+                sock.sendall(connect)
+            sock.sendall(data)
+        if (i + 1) % check_every == 0 and not speaks_mqtt(LOCALHOST, port, timeout_s=5.0):
+            counts["hangs"] += 1
+    return counts

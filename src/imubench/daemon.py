@@ -320,12 +320,20 @@ class Daemon:
 
         broker = None
         from imubench.mqtt.publisher import MqttPublisher, parse_broker_url
-        from imubench.mqtt.topics import allan_topic
+        from imubench.mqtt.topics import allan_topic, base_topic
 
         if cfg.mqtt.broker == "embedded":
             from imubench.mqtt.broker import EmbeddedBroker
 
-            broker = EmbeddedBroker("127.0.0.1", cfg.mqtt.port)
+            # With mqtt.username/password the embedded broker requires them, and only this
+            # daemon's user may publish, only under its own imubench/<station>/<sensor>/.
+            users = None if cfg.mqtt.username is None or cfg.mqtt.password is None else {
+                cfg.mqtt.username: cfg.mqtt.password.get_secret_value()}
+            broker = EmbeddedBroker(
+                "127.0.0.1", cfg.mqtt.port, users=users,
+                publish_rights=None if cfg.mqtt.username is None else {
+                    cfg.mqtt.username: [f"{base_topic(cfg.mqtt.station, cfg.mqtt.sensor)}/#"]},
+            )
             host, port = await broker.start()
             self.say(f"embedded MQTT broker listening on mqtt://{host}:{port}")
             tls = False

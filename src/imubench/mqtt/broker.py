@@ -11,7 +11,15 @@ session takeover (§3.1.4-2), PUBLISH QoS 0/1/2 both ways, SUBSCRIBE/UNSUBSCRIBE
 and ``#`` (``$``-topics not matched by a leading wildcard, §4.7.2), PINGREQ, DISCONNECT,
 retained messages (an empty retained payload clears, §3.3.1.3), last will on abnormal
 disconnect, keep-alive expiry or protocol error (§3.1.2.5). Not provided: TLS listeners,
-WebSockets, ACLs, bridges, ``$SYS`` topics, persistence to disk, MQTT 5 features.
+WebSockets, bridges, ``$SYS`` topics, persistence to disk, MQTT 5 features.
+
+Security: listens on loopback unless authentication is required (``users`` given and no
+anonymous access): ``0.0.0.0`` or another non-loopback address is refused otherwise.
+``publish_rights`` maps a user name to the topic filters it may publish to; a user without
+an entry, and an anonymous client when users are configured, may only subscribe. A PUBLISH
+outside the rights is acknowledged as QoS requires (MQTT 3.1.1 has no refusal code; mosquitto
+does the same) but not delivered nor retained, and counted (``BrokerStats.denied``). A session
+is taken over only by a client of the same user name.
 
 Back-pressure: each client has its own sender task and a bounded queue (``max_queued``
 messages and ``max_queued_bytes`` bytes). When a subscriber reads too slowly its queue
@@ -28,13 +36,14 @@ import concurrent.futures
 import contextlib
 import errno
 import hmac
+import ipaddress
 import itertools
 import logging
 import signal
 import threading
 import uuid
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from imubench.mqtt import packets as pk
@@ -42,6 +51,16 @@ from imubench.mqtt.errors import MalformedPacket, MqttError
 from imubench.mqtt.topics import is_valid_topic_filter, is_valid_topic_name, topic_matches
 
 log = logging.getLogger(__name__)
+
+def is_loopback(host: str) -> bool:
+    """True for ``localhost`` and loopback addresses (127.0.0.0/8, ::1)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
 
 PORT_SEARCH_SPAN = 100
 """How many consecutive ports ``find_free_port`` tries, starting at the requested one."""
@@ -72,6 +91,9 @@ class BrokerStats:
     sent: int
     dropped: int
     malformed: int
+    denied: int
+    retained_bytes: int
+    retained_dropped: int
 
 
 class _Session:
@@ -79,6 +101,7 @@ class _Session:
 
     def __init__(self, client_id: str, clean: bool, max_queued: int, max_bytes: int) -> None:
         self.client_id = client_id
+        self.username: str | None = None
         self.clean = clean
         self.subscriptions: dict[str, int] = {}
         self.queue: deque[pk.Message] = deque()
@@ -155,8 +178,10 @@ class EmbeddedBroker:
     anonymous ones 0x05 unless ``allow_anonymous``. ``max_queued`` / ``max_queued_bytes``
     bound each client's outgoing queue (oldest dropped first), ``max_inflight`` bounds its
     unacknowledged QoS 1/2 messages, ``max_packet_size`` bounds incoming packets (bytes),
-    ``max_retained`` the number of retained topics, ``connect_timeout_s`` the wait for the
-    first packet (CONNECT) of a new connection.
+    ``max_retained`` the number of retained topics and ``max_retained_bytes`` their payload
+    and topic bytes (beyond either, the oldest retained message is dropped and counted),
+    ``connect_timeout_s`` the wait for the first packet (CONNECT) of a new connection.
+    ``publish_rights`` (user name -> topic filters): see the module docstring.
     """
 
     def __init__(
@@ -173,6 +198,8 @@ class EmbeddedBroker:
         max_packet_size: int = 1024 * 1024,
         connect_timeout_s: float = 10.0,
         max_retained: int = 10_000,
+        max_retained_bytes: int = 16 * 1024 * 1024,
+        publish_rights: Mapping[str, Sequence[str]] | None = None,
     ) -> None:
         if not 0 <= port <= 65535:
             raise MqttError(f"embedded broker port {port} is outside 0..65535; pick another")
@@ -183,13 +210,31 @@ class EmbeddedBroker:
         self.find_free_port = find_free_port
         self._users = dict(users) if users is not None else None
         self._allow_anonymous = users is None if allow_anonymous is None else allow_anonymous
+        if not is_loopback(host) and (self._users is None or self._allow_anonymous):
+            raise MqttError(
+                f"embedded broker refuses to listen on {host!r} without authentication: "
+                "anyone on the network could read and publish; use 127.0.0.1, or configure "
+                "mqtt.username and mqtt.password"
+            )
+        self._publish_rights: dict[str, tuple[str, ...]] = {}
+        for user, filters in (publish_rights or {}).items():
+            for topic_filter in filters:
+                if not is_valid_topic_filter(topic_filter):
+                    raise MqttError(
+                        f"embedded broker publish rights of {user!r}: {topic_filter!r} is not "
+                        "a valid topic filter"
+                    )
+            self._publish_rights[user] = tuple(filters)
+        self._denied = 0
+        self.max_retained_bytes = max_retained_bytes
+        self._retained_bytes = 0
+        self._retained_dropped = 0
         self.max_queued = max_queued
         self.max_queued_bytes = max_queued_bytes
         self.max_inflight = max_inflight
         self.max_packet_size = max_packet_size
         self.connect_timeout_s = connect_timeout_s
         self.max_retained = max_retained
-        self._retained_refused = 0
         self._server: asyncio.Server | None = None
         self._sessions: dict[str, _Session] = {}
         self._retained: dict[str, pk.Message] = {}
@@ -310,6 +355,9 @@ class EmbeddedBroker:
             sent=self._sent,
             dropped=self._dropped,
             malformed=self._malformed,
+            denied=self._denied,
+            retained_bytes=self._retained_bytes,
+            retained_dropped=self._retained_dropped,
         )
 
     def client_stats(self, client_id: str) -> ClientStats | None:
@@ -333,18 +381,29 @@ class EmbeddedBroker:
     def _route(self, message: pk.Message) -> None:
         """Deliver ``message`` to every matching session and update the retained store."""
         if message.retain:
+            old = self._retained.pop(message.topic, None)  # §3.3.1-10/11 (empty: cleared)
+            if old is not None:
+                self._retained_bytes -= len(old.payload) + len(old.topic)
             if message.payload:
-                if message.topic in self._retained or len(self._retained) < self.max_retained:
-                    self._retained[message.topic] = message
-                else:
-                    self._retained_refused += 1
-                    log.warning(
-                        "retained store full (%d topics): not retaining %r; raise max_retained",
-                        self.max_retained,
-                        message.topic,
-                    )
-            else:
-                self._retained.pop(message.topic, None)  # §3.3.1-10/11
+                self._retained[message.topic] = message  # newest last
+                self._retained_bytes += len(message.payload) + len(message.topic)
+                dropped = 0
+                while len(self._retained) > self.max_retained or (
+                    self._retained_bytes > self.max_retained_bytes and len(self._retained) > 1
+                ):
+                    oldest = self._retained.pop(next(iter(self._retained)))
+                    self._retained_bytes -= len(oldest.payload) + len(oldest.topic)
+                    dropped += 1
+                if dropped:
+                    self._retained_dropped += dropped
+                    if self._retained_dropped & (self._retained_dropped - 1) == 0:
+                        log.warning(
+                            "retained store full (%d topics / %d bytes): dropped the oldest, "
+                            "%d dropped so far",
+                            self.max_retained,
+                            self.max_retained_bytes,
+                            self._retained_dropped,
+                        )
         for session in self._sessions.values():
             granted = session.granted_qos(message.topic)
             if granted is None:
@@ -504,6 +563,14 @@ class EmbeddedBroker:
             await self._send(conn, pk.connack(False, code))
             return False
         old = self._sessions.get(client_id)
+        if old is not None and self._users is not None and old.username != connect.username:
+            log.warning(
+                "refusing MQTT client %r from %s: its session belongs to another user",
+                client_id,
+                conn.peer,
+            )
+            await self._send(conn, pk.connack(False, pk.CONNACK_ID_REJECTED))
+            return False
         if old is not None and old.connection is not None:  # §3.1.4-2 session takeover
             log.info(
                 "MQTT client %r reconnected from %s: closing its previous connection",
@@ -526,6 +593,7 @@ class EmbeddedBroker:
             session = old
             present = True
         session.clean = connect.clean_session
+        session.username = connect.username
         session.connection = conn
         conn.session = session
         conn.will = connect.will
@@ -539,6 +607,15 @@ class EmbeddedBroker:
         )
         conn.sender = asyncio.create_task(self._sender(conn, session))
         return True
+
+    def _may_publish(self, session: _Session, topic: str) -> bool:
+        """Publish rights: everything when no users are configured, else only the
+        ``publish_rights`` filters of the session's user."""
+        if self._users is None:
+            return True
+        if session.username is None:
+            return False
+        return any(topic_matches(f, topic) for f in self._publish_rights.get(session.username, ()))
 
     def _check_credentials(self, connect: pk.Connect) -> int:
         if self._users is None:
@@ -564,7 +641,22 @@ class EmbeddedBroker:
                 )
             session.received += 1
             self._received += 1
-            if message.qos == 0:
+            if not self._may_publish(session, message.topic):
+                self._denied += 1
+                if self._denied & (self._denied - 1) == 0:  # log at 1, 2, 4, 8, ...
+                    log.warning(
+                        "MQTT client %r (user %r) may not publish to %r: dropped, %d denied "
+                        "so far",
+                        session.client_id,
+                        session.username,
+                        message.topic,
+                        self._denied,
+                    )
+                if message.qos == 1:
+                    await self._send(conn, pk.ack(pk.PUBACK, publish.packet_id or 0))
+                elif message.qos == 2:
+                    await self._send(conn, pk.ack(pk.PUBREC, publish.packet_id or 0))
+            elif message.qos == 0:
                 self._route(message)
             elif message.qos == 1:
                 self._route(message)
