@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import shutil
 import signal
 import subprocess
@@ -361,6 +362,10 @@ def _make_tls_files(directory: Path) -> bool:
         "-out",
         "server.pem",
     )
+    run("req", "-newkey", "rsa:2048", "-nodes", "-subj", "/CN=imu", "-keyout", "client.key",
+        "-out", "client.csr")
+    run("x509", "-req", "-in", "client.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+        "-CAcreateserial", "-days", "2", "-out", "client.pem")
     run(
         "req",
         "-x509",
@@ -453,3 +458,76 @@ def test_bad_options_rejected() -> None:
         MqttPublisher("127.0.0.1", 1883, "lab", "imu", qos=3)
     with pytest.raises(MqttError, match="reconnect backoff"):
         MqttPublisher("127.0.0.1", 1883, "lab", "imu", reconnect_min_s=5, reconnect_max_s=1)
+
+
+@pytest.mark.skipif(shutil.which("mosquitto_passwd") is None, reason="no mosquitto_passwd")
+def test_tls_client_certificate_password_and_acl(
+    private_mosquitto: MosquittoFactory, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Mosquitto requiring a client certificate, a password and an ACL: the publisher gets
+    in with all three, is refused with a one-line error without any of them, and the ACL
+    keeps it inside its own topics; the password is never logged."""
+    if not _make_tls_files(tmp_path):
+        pytest.skip("no openssl binary to make a test CA")
+    station = station_name()
+    password = "tls-Pw-93kq"
+    password_file = tmp_path / "passwd"
+    subprocess.run(["mosquitto_passwd", "-c", "-b", str(password_file), "imu", password],
+                   check=True, timeout=10)
+    password_file.chmod(0o600)
+    acl = tmp_path / "acl"
+    acl.write_text(f"user imu\ntopic readwrite imubench/{station}/imu0/#\n")
+    acl.chmod(0o600)
+    broker = private_mosquitto(
+        f"cafile {tmp_path / 'ca.pem'}\ncertfile {tmp_path / 'server.pem'}\n"
+        f"keyfile {tmp_path / 'server.key'}\nrequire_certificate true\n"
+        f"password_file {password_file}\nacl_file {acl}\n",
+        allow_anonymous=False,
+    )
+    ca = tmp_path / "ca.pem"
+    cert = {"tls_cert": tmp_path / "client.pem", "tls_key": tmp_path / "client.key"}
+    caplog.set_level(logging.DEBUG)
+
+    def publisher(sensor: str, **kwargs: object) -> MqttPublisher:
+        options: dict[str, object] = {"username": "imu", "password": password, "tls": True,
+                                      "tls_ca": ca, **cert, "reconnect_min_s": 0.1}
+        options.update(kwargs)
+        return MqttPublisher("127.0.0.1", broker.port, station, sensor, **options)  # type: ignore[arg-type]
+
+    async def scenario() -> None:
+        async with aiomqtt.Client(
+            "127.0.0.1", broker.port, username="imu", password=password,
+            tls_params=aiomqtt.TLSParameters(ca_certs=str(ca), certfile=str(cert["tls_cert"]),
+                                             keyfile=str(cert["tls_key"])),
+        ) as sub:
+            await sub.subscribe(f"imubench/{station}/#", qos=1)
+            async with publisher("imu0") as pub:
+                assert await pub.wait_connected(5)
+                await pub.publish_allan({"ok": 1})
+                got = await receive(sub, 2)  # the retained status and the snapshot
+                assert {str(m.topic).rsplit("/", 1)[1] for m in got} == {"status", "allan"}
+            async with publisher("imu1") as outside:  # the ACL does not cover imu1
+                assert await outside.wait_connected(5)
+                await outside.publish_allan({"ok": 2})
+                await _until(lambda: outside.published_snapshots == 1)
+            got = await receive(sub, 1)  # only imu0's offline status: nothing from imu1
+            assert [(str(m.topic), m.payload) for m in got] == [
+                (f"imubench/{station}/imu0/status", b"offline")]
+            with pytest.raises(TimeoutError):
+                await receive(sub, 1, timeout_s=1.0)
+        for bad, needle in (
+            ({"password": "wrong"}, "not authorized"),  # mosquitto 2 answers 0x05
+            ({"tls_cert": None, "tls_key": None}, ""),
+            ({"tls_ca": tmp_path / "other.pem"}, "certificate verify failed"),
+        ):
+            # Without a client certificate TLS 1.3 fails after the handshake, while
+            # waiting for CONNACK: the error is the CONNACK timeout (timeout_s).
+            async with publisher("imu0", timeout_s=2.0, **bad) as refused:
+                await _until(lambda: refused.last_error is not None)
+                assert not refused.connected
+                assert refused.last_error is not None
+                assert "\n" not in refused.last_error
+                assert needle in refused.last_error.lower(), refused.last_error
+
+    asyncio.run(scenario())
+    assert all(password not in r.getMessage() for r in caplog.records)
