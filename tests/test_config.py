@@ -207,6 +207,19 @@ def test_tls_ca_must_be_a_pem_ca_and_need_mqtts(tmp_path: Path) -> None:
     assert "not a PEM CA certificate" in refused(write(tmp_path, good.replace(str(ca), str(junk))))
     msg = refused(write(tmp_path, good.replace("mqtts://", "mqtt://")))
     assert "mqtt.tls_ca" in msg and "mqtts://" in msg
+    # A client certificate needs its key, a matching one, and an mqtts:// broker.
+    key = tmp_path / "k.pem"
+    with_cert = good + f'tls_cert = "{ca}"\n'
+    assert "go together" in refused(write(tmp_path, with_cert))
+    both = with_cert + f'tls_key = "{key}"\n'
+    assert load_config(write(tmp_path, both)).mqtt.tls_key == str(key)
+    other_key = tmp_path / "k2.pem"
+    subprocess.run(["openssl", "genrsa", "-out", str(other_key), "2048"], check=True,
+                   capture_output=True, timeout=60)
+    msg = refused(write(tmp_path, both.replace(str(key), str(other_key))))
+    assert "mqtt.tls_cert" in msg and "not a matching PEM certificate" in msg, msg
+    msg = refused(write(tmp_path, both.replace("mqtts://", "mqtt://")))
+    assert "mqtt.tls_cert" in msg and "mqtts://" in msg
 
 
 def test_tau_specs_from_toml_numbers_and_lists(tmp_path: Path) -> None:

@@ -567,15 +567,22 @@ def cross_checks(cfg: Config) -> list[Problem]:
         field = "tls_key" if cfg.mqtt.tls_key is None else "tls_cert"
         problems.append(Problem(("mqtt", field), None,
                                 "mqtt.tls_cert and mqtt.tls_key go together: give both"))
-    for field, path in (("tls_cert", cfg.mqtt.tls_cert), ("tls_key", cfg.mqtt.tls_key)):
-        if path and not cfg.mqtt.broker.startswith("mqtts://"):
-            problems.append(Problem(("mqtt", field), path,
-                                    f"only used with an mqtts:// broker; mqtt.broker is "
-                                    f"{cfg.mqtt.broker!r}"))
-    if cfg.mqtt.tls_ca and not cfg.mqtt.broker.startswith("mqtts://"):
-        problems.append(Problem(("mqtt", "tls_ca"), cfg.mqtt.tls_ca,
-                                f"only used with an mqtts:// broker; mqtt.broker is "
-                                f"{cfg.mqtt.broker!r}"))
+    if cfg.mqtt.tls_cert and cfg.mqtt.tls_key and cfg.mqtt.broker.startswith("mqtts://"):
+        from imubench.mqtt.errors import MqttError
+        from imubench.mqtt.publisher import make_tls_context
+
+        try:  # the publisher's own context: a key that does not match fails here, not later
+            make_tls_context(cfg.mqtt.tls_ca, cfg.mqtt.tls_cert, cfg.mqtt.tls_key)
+        except MqttError as exc:
+            problems.append(Problem(("mqtt", "tls_cert"), cfg.mqtt.tls_cert, str(exc)))
+    tls_files = [(field, path) for field, path in (
+        ("tls_ca", cfg.mqtt.tls_ca), ("tls_cert", cfg.mqtt.tls_cert),
+        ("tls_key", cfg.mqtt.tls_key)) if path]
+    if tls_files and not cfg.mqtt.broker.startswith("mqtts://"):
+        given = ", ".join(f"mqtt.{field}" for field, _ in tls_files)
+        problems.append(Problem(("mqtt", tls_files[0][0]), tls_files[0][1],
+                                f"only used with an mqtts:// broker ({given} given); "
+                                f"mqtt.broker is {cfg.mqtt.broker!r}"))
     return problems
 
 
