@@ -114,7 +114,7 @@ def test_csv_damaged_lines_are_skipped_counted_and_named(tmp_path: Path,
     assert len(rec) == 38 and rec.lost_samples == 2  # rows 5 and 12 are holes
     assert rec.damage is not None and rec.damage.startswith("3 data line(s) skipped")
     assert "first line 7" in rec.damage
-    assert f"{p}: damaged: 3 data line(s)" in caplog.text
+    assert f"{p}:7: damaged: 3 data line(s)" in caplog.text
     assert rec.channel("gx")[4] == 2.0 and np.isnan(rec.channel("gx")[5])
 
 

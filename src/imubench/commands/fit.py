@@ -18,6 +18,7 @@ from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
 from imubench.noisefit.units import kalibr_yaml
+from imubench.recording.options import add_input_arguments, input_options
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,7 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("recording", type=Path, help="recording (.imbr or .csv)")
+    p.add_argument("recording", type=Path,
+                   help="recording (.imbr, .csv, CSV from elsewhere, text; docs/recordings.md)")
     p.add_argument("--channels", default=None,
                    help="channels to fit, e.g. gx,gy,gz (default: every channel present)")
     p.add_argument("--terms", default="auto",
@@ -41,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")
     p.add_argument("--kalibr", type=Path, default=None, metavar="imu.yaml",
                    help="also write Kalibr noise parameters")
+    add_input_arguments(p)
     add_batch_options(p)
     p.set_defaults(func=run)
 
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
                        "writes into --out-dir)")
     try:
         result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
-                               method=args.method)
+                               method=args.method, options=input_options(args))
         model = result.noise_model()
         args.output.write_text(model.to_toml(), encoding="utf-8")
         if args.json is not None:

@@ -20,7 +20,7 @@ from imubench.noisefit.units import (
 )
 
 if TYPE_CHECKING:
-    from imubench.recording import Recording
+    from imubench.recording import InputOptions, Recording
 
 
 @dataclass(frozen=True)
@@ -83,12 +83,14 @@ def parse_channels(text: str | Sequence[str] | None, available: Iterable[str]) -
 
 
 def fit_recording(path: str | Path, *, channels: str | Sequence[str] | None = None,
-                  terms: str = "auto", method: str = "wls") -> RecordingFit:
-    """Load a recording (.imbr / .csv) and fit the chosen channels."""
+                  terms: str = "auto", method: str = "wls",
+                  options: InputOptions | None = None) -> RecordingFit:
+    """Load a recording (any the reader takes, with ``options``) and fit the chosen
+    channels."""
     from imubench.recording import load_recording
 
-    return fit_loaded(load_recording(path), str(path), channels=channels, terms=terms,
-                      method=method)
+    return fit_loaded(load_recording(path, options), str(path), channels=channels,
+                      terms=terms, method=method)
 
 
 def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | None = None,

@@ -148,19 +148,22 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
         for note in read.notes:
             log.log(logging.WARNING if read.inferred else logging.INFO, "%s", note)
         damage = None
+        where = str(path)
         if read.bad_lines:
             first = read.bad_lines[0]
             damage = (f"{len(read.bad_lines)} data line(s) skipped (unreadable or out of "
                       f"time order), first "
                       + ("at the end of a damaged compressed stream" if first < 0
                          else f"line {first}"))
+            where = f"{path}:{first}" if first > 0 else where
         rec = Recording(path, read.meta, b.index, b.t_s, b.values, b.temp_c, None,
                         read.gaps, damage)
     else:
         rec = _load_native(path, opts)
+        where = str(path)
     if rec.damage:
-        log.warning("%s: damaged: %s; kept %d samples, %d lost in holes", path, rec.damage,
-                    len(rec), rec.lost_samples)
+        log.warning("%s: damaged: %s; kept %d samples, %d lost in holes", where,
+                    rec.damage, len(rec), rec.lost_samples)
     return rec
 
 
