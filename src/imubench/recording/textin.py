@@ -119,8 +119,13 @@ class _Raw:
     delim: str | None = None
     rows: list[list[float]] = field(default_factory=list)
     row_lines: list[int] = field(default_factory=list)
+    row_fail: dict[int, list[int]] = field(default_factory=dict)
+    """Row -> columns that were not numbers (NaN in ``rows``): the row is damaged if a
+    column it needs is among them (a ROS export's ``frame_id`` is text, and unused)."""
     bad_lines: list[int] = field(default_factory=list)
     width: int = 0
+    comment_header: bool = False
+    """The header came from a ``#`` line (EuRoC): dropped if the data do not fit it."""
 
 
 def _scan(path: Path) -> _Raw:
@@ -148,10 +153,11 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
         if raw.header is None and not raw.rows:
             delim = _delimiter(line)
             fields = _split(line, delim)
-            if delim is not None and ":" not in line and _looks_like_header(fields) and any(
-                    c.channel is not None for c in map_columns(fields)):
+            if delim is not None and ":" not in line and _looks_like_header(fields) and sum(
+                    c.channel is not None for c in map_columns(fields)) >= 2:
                 raw.header, raw.header_line, raw.delim = fields, lineno, delim
                 raw.width = len(fields)
+                raw.comment_header = True
                 return
             if ":" in line and line.startswith("#"):
                 key, _, value = line[1:].partition(":")
@@ -160,6 +166,9 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
                 except json.JSONDecodeError:
                     raw.meta[key.strip()] = value.strip()
         return
+    if raw.comment_header and not raw.rows and not raw.bad_lines and len(
+            _split(line, raw.delim)) != raw.width:
+        raw.header, raw.comment_header, raw.width = None, False, 0  # it was a comment
     if raw.header is None and not raw.rows:
         raw.delim = _delimiter(line)
         fields = _split(line, raw.delim)
@@ -171,11 +180,14 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
     if len(fields) != raw.width:
         raw.bad_lines.append(lineno)
         return
-    try:
-        raw.rows.append([_number(f) for f in fields])
-    except ValueError:
-        raw.bad_lines.append(lineno)
-        return
+    row = []
+    for j, f in enumerate(fields):
+        try:
+            row.append(_number(f))
+        except ValueError:
+            row.append(math.nan)
+            raw.row_fail.setdefault(len(raw.rows), []).append(j)
+    raw.rows.append(row)
     raw.row_lines.append(lineno)
 
 
@@ -201,14 +213,16 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     where = str(path)
     raw = _scan(path)
     n_data = len(raw.rows) + len([b for b in raw.bad_lines if b > 0])
+    whole_bad = sum(1 for js in raw.row_fail.values() if len(js) == raw.width)
     if not raw.rows:
         what = "no readable data lines" if raw.header is not None or raw.bad_lines else (
             "no data")
         raise RecordingError(f"{where}: {what}; expected a header such as "
                              "t,gx,gy,gz,ax,ay,az,temp and one sample per line")
-    if len(raw.bad_lines) > MOSTLY_BAD * n_data and len(raw.bad_lines) > 10:
-        raise RecordingError(f"{where}: {len(raw.bad_lines)} of {n_data} data lines cannot "
-                             f"be read (first: line {raw.bad_lines[0]}); not a recording")
+    unreadable = len(raw.bad_lines) + whole_bad
+    if unreadable > MOSTLY_BAD * n_data and unreadable > 10:
+        raise RecordingError(f"{where}: {unreadable} of {n_data} data lines cannot be read; "
+                             "not a recording")
     table = np.asarray(raw.rows, dtype=np.float64)
     notes: list[str] = []
     if raw.header is not None:
@@ -239,6 +253,17 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         seen = ", ".join(c.text for c in cols)
         raise RecordingError(f"{where}: no channel found among the columns {seen}; map "
                              "them with --columns gx=NAME,...,az=NAME (and t=NAME)")
+    used = set(where_col.values())
+    failed = sorted(i for i, js in raw.row_fail.items() if used.intersection(js))
+    if failed:
+        good = np.ones(len(table), dtype=bool)
+        good[failed] = False
+        raw.bad_lines.extend(raw.row_lines[i] for i in failed)
+        table = table[good]
+        raw.row_lines = [ln for i, ln in enumerate(raw.row_lines) if good[i]]
+        if not len(table):
+            raise RecordingError(f"{where}: no readable data lines (first unreadable: line "
+                                 f"{raw.bad_lines[0]})")
     ros, euroc = (raw.header is not None and is_ros_export(raw.header),
                   raw.header is not None and is_euroc(raw.header))
     values = np.full((len(table), len(CHANNELS)), np.nan)

@@ -7,8 +7,10 @@ One rule for every reader (the CSV/text reader, ROS 2 bags, MCAP):
 3. else, with a sample-index column and times, the least-squares slope of t against the
    index; with a sample-index column alone, ``--rate`` is required;
 4. else from the times alone: a first step from the median spacing gives provisional
-   indices ``round((t - t0) / step)``; the rate is then the least-squares slope of t
-   against those indices over the whole record (refit once with the refined indices).
+   indices ``round((t - t0) / step)`` of the first 1000 rows, the least-squares slope of
+   t against them a better step, which indexes 10x as many rows, and so on to the whole
+   record: the rate is the least-squares slope over all of it. (Indexing everything with
+   the median step at once would slip a period every 1 / (relative error) samples.)
    A median step is biased by the rounding of printed times (104 Hz printed to 6
    decimals: median step 0.009615 s -> 104.004 Hz); the slope over N samples is not
    (104.0000 Hz).
@@ -38,6 +40,8 @@ one of s, ms, us, ns fits a given spacing."""
 MJD_RANGE = (40_000.0, 100_000.0)
 """Modified Julian Dates (days) of 1968-2132: a time tag column in this range is MJD."""
 SECONDS_PER_DAY = 86_400.0
+FIRST_FIT_ROWS = 1000
+"""Rows indexed with the median step before the first least-squares refinement."""
 
 
 @dataclass(frozen=True)
@@ -136,19 +140,23 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
         index = index[keep]
         return Timebase(rate_hz, index - index[0], keep, "given")
     step = _median_step(t_s, where)
-    index = np.rint((t_s - t0) / step).astype(np.int64)
-    keep = increasing_rows(index)
-    for _ in range(2):
+    m = min(n, FIRST_FIT_ROWS)
+    while True:  # fit a prefix, then 10x longer ones, so rounding never slips a period
+        index = np.rint((t_s[:m] - t0) / step).astype(np.int64)
+        keep = increasing_rows(index)
         x = index[keep].astype(np.float64)
         if len(x) < 3 or np.ptp(x) == 0:
             raise RecordingError(f"{where}: too few distinct time stamps to infer the rate; "
                                  "give --rate HZ")
-        step = _slope(x, t_s[keep])
+        step = _slope(x, t_s[:m][keep])
         if not step > 0:
             raise RecordingError(f"{where}: the time column does not increase; give "
                                  "--rate HZ")
-        index = np.rint((t_s - t0) / step).astype(np.int64)
-        keep = increasing_rows(index)
+        if m == n:
+            break
+        m = min(n, 10 * m)
+    index = np.rint((t_s - t0) / step).astype(np.int64)
+    keep = increasing_rows(index)
     kept = index[keep]
     return Timebase(1.0 / step, kept - kept[0], keep, "from t (least squares)")
 
