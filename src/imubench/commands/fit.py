@@ -41,6 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, default=None, metavar="MODEL.toml",
                    help="model file to write (required for one recording)")
     p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")
+    p.add_argument("--kalibr-inflate", type=float, default=1.0, metavar="FACTOR",
+                   help="multiply every Kalibr noise value by FACTOR >= 1 (a safety "
+                   "factor for real-world use; docs/noise-fit.md)")
     p.add_argument("--kalibr", type=Path, default=None, metavar="imu.yaml",
                    help="also write Kalibr noise parameters")
     add_input_arguments(p)
@@ -78,7 +81,12 @@ def run(args: argparse.Namespace) -> int:
         if args.json is not None:
             write_json(result.to_dict(), args.json)
         if args.kalibr is not None:
-            args.kalibr.write_text(kalibr_yaml(result.to_dict()["kalibr"]), encoding="utf-8")
+            kalibr = result.kalibr(args.kalibr_inflate)
+            args.kalibr.write_text(kalibr_yaml(kalibr), encoding="utf-8")
+            for key in kalibr["upper_limits"]:
+                print(f"imubench fit: {args.kalibr}: {key} was not detected; wrote its upper "
+                      f"95 % confidence limit {kalibr[key]:.3e} (marked in the file), not "
+                      "zero", file=sys.stderr)
         if args.json != "-":
             print(format_summary(result))
     except OSError as exc:

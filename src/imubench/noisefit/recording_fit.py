@@ -49,6 +49,16 @@ class RecordingFit:
             meta["chip"] = self.chip
         return NoiseModel(channels=chans, meta=meta, source=str(self.source))
 
+    def kalibr(self, inflate: float = 1.0) -> dict[str, Any]:
+        """Kalibr ``imu.yaml`` values (:func:`~imubench.noisefit.units.kalibr_imu`): the
+        terms found present, and the upper 95 % confidence limit of those that were not
+        (marked in ``upper_limits``)."""
+        present = {ch: {k: v for k, v in f.params.items() if k in f.present}
+                   for ch, f in self.fits.items()}
+        limits = {ch: {k: hi for k, (_, hi) in f.ci.items() if k not in f.present}
+                  for ch, f in self.fits.items()}
+        return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: per channel the fit, its datasheet units; Kalibr; datasheet ratio."""
         params = {ch: f.params for ch, f in self.fits.items()}
@@ -61,7 +71,7 @@ class RecordingFit:
                 ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params)}
                 for ch, f in self.fits.items()
             },
-            "kalibr": kalibr_imu(params, self.rate_hz),
+            "kalibr": self.kalibr(),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
         }
 
