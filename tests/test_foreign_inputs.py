@@ -47,7 +47,11 @@ READ: dict[str, tuple[InputOptions, float, tuple[str, ...], float]] = {
     "imubench_t_in_ms.csv": (InputOptions(time_unit="ms"), 104.0, ALL6, 1e-6),
     "headerless_three_columns.txt": (InputOptions(columns={"t": "1", "gx": "2", "gy": "3"}),
                                      104.0, ("gx", "gy"), 1e-6),
+    "ros2_bag": (InputOptions(), 104.0, ALL6, 1e-12),
+    "ros2_imu.mcap": (InputOptions(topic="/imu/data"), 104.0, ALL6, 1e-12),
 }
+BINARY = ("imubench_native.imbr", "ros2_bag", "ros2_imu.mcap")
+"""Compared by content with what the script writes now (they hold write times)."""
 REFUSED: dict[str, str] = {
     # file (read without options): the fix the one-line error must name
     "imubench_t_in_ms.csv": "--time-unit ms",
@@ -60,16 +64,15 @@ REFUSED: dict[str, str] = {
 
 def test_the_corpus_is_what_its_script_writes(tmp_path: Path) -> None:
     assert len(READ) >= 12 and set(REFUSED) - set(READ) == {"binary_junk.csv"}
-    files = sorted(p.name for p in CORPUS.iterdir() if p.name != "make_corpus.py"
-                   and p.suffix != ".pyc" and p.is_file())
+    files = sorted(p.name for p in CORPUS.iterdir()
+                   if p.name not in ("make_corpus.py", "__pycache__"))
     assert files == sorted(set(READ) | set(REFUSED))
     copy = tmp_path / "corpus"
-    shutil.copytree(CORPUS, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    for f in files:
-        (copy / f).unlink()
+    copy.mkdir()
+    shutil.copy(CORPUS / "make_corpus.py", copy)
     subprocess.run([sys.executable, str(copy / "make_corpus.py")], check=True)
     for f in files:
-        if f.endswith(".imbr"):
+        if f in BINARY:
             a, b = load_recording(CORPUS / f), load_recording(copy / f)
             np.testing.assert_array_equal(a.values, b.values)
         else:
@@ -130,10 +133,21 @@ def fuzz(n_per_file: int, tmp: Path, seed: int = 1) -> dict[str, int]:
     rng = random.Random(seed)
     counts = {"read": 0, "damage reported": 0, "refused": 0}
     for name, (options, *_rest) in sorted(READ.items()):
-        data = (CORPUS / name).read_bytes()
+        src = CORPUS / name
+        if src.is_dir():  # a ROS 2 bag: damage its storage file in a copy
+            bag = tmp / name
+            shutil.copytree(src, bag, dirs_exist_ok=True)
+            storage = next(bag.glob("*.db3"))
+            data, target = storage.read_bytes(), bag
+        else:
+            data = src.read_bytes()
         for i in range(n_per_file):
             p = tmp / f"{i % 50}{name}"
-            p.write_bytes(_damaged(data, rng))
+            if src.is_dir():
+                storage.write_bytes(_damaged(data, rng))
+                p = target
+            else:
+                p.write_bytes(_damaged(data, rng))
             try:
                 rec = load_recording(p, options)
             except ImubenchError as exc:
@@ -177,9 +191,41 @@ def test_a_flipped_bit_in_a_native_record_loses_that_record_only(tmp_path: Path)
     assert rec.complete  # the end record after the damage was read
 
 
+def write_mcap(path: Path, t_s: np.ndarray, values: np.ndarray) -> None:
+    """``sensor_msgs/msg/Imu`` messages (rad/s, m/s^2) in a standalone MCAP file, as the
+    corpus script writes them."""
+    import tempfile
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    t = ts.types
+    imu, vec = t["sensor_msgs/msg/Imu"], t["geometry_msgs/msg/Vector3"]
+    with tempfile.TemporaryDirectory() as tmp:
+        with Writer(Path(tmp) / "b", version=8, storage_plugin=StoragePlugin.MCAP) as w:
+            conn = w.add_connection("/imu", imu.__msgtype__, typestore=ts)
+            for ts_s, row in zip(t_s, values, strict=True):
+                ns = 1_700_000_000 * 10**9 + round(ts_s * 1e9)
+                w_, a_ = np.deg2rad(row[:3]), row[3:] * 9.80665
+                msg = imu(header=t["std_msgs/msg/Header"](
+                    stamp=t["builtin_interfaces/msg/Time"](sec=ns // 10**9,
+                                                           nanosec=ns % 10**9),
+                    frame_id="imu"),
+                    orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                    orientation_covariance=np.zeros(9),
+                    angular_velocity=vec(x=w_[0], y=w_[1], z=w_[2]),
+                    angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=vec(x=a_[0], y=a_[1], z=a_[2]),
+                    linear_acceleration_covariance=np.zeros(9))
+                w.write(conn, ns, ts.serialize_cdr(msg, imu.__msgtype__))
+        shutil.copyfile(next((Path(tmp) / "b").glob("*.mcap")), path)
+
+
 def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, InputOptions]]:
     """One simulated recording as .imbr, CSV with metadata, CSV without metadata with t
-    rounded to 6 decimals, .csv.gz, and Stable32 one-column text of gx."""
+    rounded to 6 decimals, .csv.gz, MCAP (sensor_msgs/Imu) and Stable32 one-column text
+    of gx."""
     from imubench.recording import convert
 
     src = tmp / "sim.imbr"
@@ -194,7 +240,9 @@ def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, InputOpti
         for i, row in zip(rec.index, rec.values, strict=True)]
     (tmp / "plain.csv").write_text("\n".join(lines) + "\n")
     (tmp / "gx.txt").write_text("".join(f"{v:.17g}\n" for v in rec.channel("gx")))
+    write_mcap(tmp / "rec.mcap", rec.index / rec.rate_hz, rec.values)
     return {"imbr": (src, InputOptions()), "csv": (tmp / "meta.csv", InputOptions()),
+            "mcap": (tmp / "rec.mcap", InputOptions()),
             "csv.gz": (tmp / "meta.csv.gz", InputOptions()),
             "plain": (tmp / "plain.csv", InputOptions()),
             "stable32": (tmp / "gx.txt", InputOptions(rate_hz=104.0))}

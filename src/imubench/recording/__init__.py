@@ -28,6 +28,7 @@ from imubench.recording.native import (
     NativeWriter,
 )
 from imubench.recording.options import InputOptions
+from imubench.recording.rosin import is_ros2_bag, read_ros
 from imubench.recording.textin import read_text
 
 __all__ = [
@@ -46,19 +47,22 @@ CONVERT_BLOCK = 65536
 
 
 def recording_kind(path: str | Path) -> str:
-    """``native`` (``.imbr``), ``csv`` (``.csv``, ``.csv.gz``: imubench writes these) or
-    ``text`` (other text tables: ``.txt``, ``.dat``, ``.tsv``, each also ``.gz``) from
-    the suffix; RecordingError otherwise."""
+    """``native`` (``.imbr``), ``csv`` (``.csv``, ``.csv.gz``: imubench writes these),
+    ``text`` (other text tables: ``.txt``, ``.dat``, ``.tsv``, each also ``.gz``) or
+    ``ros`` (``.mcap``, a ROS 2 bag folder or its ``.db3``) from the name;
+    RecordingError otherwise."""
     name = Path(path).name.lower()
     if name.endswith(".imbr"):
         return "native"
+    if name.endswith(".mcap") or is_ros2_bag(Path(path)):
+        return "ros"
     if name.endswith((".csv", ".csv.gz")):
         return "csv"
     if name.endswith(TEXT_SUFFIXES + tuple(s + ".gz" for s in TEXT_SUFFIXES)):
         return "text"
     raise RecordingError(
-        f"{path}: unknown recording suffix; use .imbr (native), .csv / .csv.gz, or a text "
-        "table .txt / .dat / .tsv (also .gz)"
+        f"{path}: unknown recording suffix; use .imbr (native), .csv / .csv.gz, a text "
+        "table .txt / .dat / .tsv (also .gz), .mcap or a ROS 2 bag"
     )
 
 
@@ -142,8 +146,9 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
     """
     path = Path(path)
     opts = options or InputOptions()
-    if recording_kind(path) != "native":
-        read = read_text(path, opts)
+    kind = recording_kind(path)
+    if kind != "native":
+        read = read_ros(path, opts) if kind == "ros" else read_text(path, opts)
         b = read.batch
         for note in read.notes:
             log.log(logging.WARNING if read.inferred else logging.INFO, "%s", note)
@@ -151,10 +156,10 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
         where = str(path)
         if read.bad_lines:
             first = read.bad_lines[0]
-            damage = (f"{len(read.bad_lines)} data line(s) skipped (unreadable or out of "
+            damage = (f"{len(read.bad_lines)} {read.item}(s) skipped (unreadable or out of "
                       f"time order), first "
                       + ("at the end of a damaged compressed stream" if first < 0
-                         else f"line {first}"))
+                         else f"{read.item.split()[-1]} {first}"))
             where = f"{path}:{first}" if first > 0 else where
         rec = Recording(path, read.meta, b.index, b.t_s, b.values, b.temp_c, None,
                         read.gaps, damage)
@@ -197,7 +202,7 @@ def open_writer(path: str | Path, metadata: dict[str, Any], **kwargs: Any) -> Wr
     kind = recording_kind(path)
     if kind == "csv":
         return CsvWriter(path, metadata, **kwargs)
-    if kind == "text":
+    if kind in ("text", "ros"):
         raise RecordingError(f"{path}: imubench writes .imbr or .csv / .csv.gz recordings")
     return NativeWriter(path, metadata, **kwargs)
 

@@ -66,6 +66,8 @@ class TextRead:
     inferred: bool = False
     """True when the notes say something the user must know: a foreign format or a rate
     not stated by the file or ``--rate``."""
+    item: str = "data line"
+    """What ``bad_lines`` number: data lines, or messages of a bag."""
 
 
 def open_text(path: Path) -> IO[str]:

@@ -23,6 +23,9 @@ content). Where each layout comes from:
   ``#timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_x [m s^-2],...``.
 - Stable32 / allantools data files: one value per line, or a Modified Julian Date and a
   value per line (Stable32 "Read" of two-column data).
+- ROS 2: a bag (``ros2 bag record``'s folder: ``metadata.yaml`` + SQLite ``.db3``) and a
+  standalone MCAP file of ``sensor_msgs/msg/Imu`` on ``/imu/data`` (CDR, header.stamp in
+  s + ns, REP 103 units), written with ``rosbags`` as ``ros2 bag`` would.
 - A gzip-compressed CSV (``.csv.gz``), imubench's native ``.imbr``.
 - Files that must be refused: ``t`` in milliseconds under imubench's own header, a
   logger CSV without units, a headerless three-column table, binary junk.
@@ -156,6 +159,7 @@ def main() -> None:
     rng = np.random.default_rng(13)
     (HERE / "binary_junk.csv").write_bytes(rng.integers(0, 256, 3000, dtype=np.uint8)
                                            .tobytes())
+    ros2(t, rad, ms2)
     # imubench native
     sys.path.insert(0, str(HERE.parents[2] / "src"))
     from imubench.batch import Batch
@@ -168,6 +172,41 @@ def main() -> None:
             "channels": list((*GYRO, *ACCEL)), "start_utc": "2026-11-24T00:00:00+00:00"}
     with NativeWriter(path, meta) as w:
         w.write(Batch(k.astype(np.int64), t, values, tr["temp"]))
+
+
+def ros2(t: np.ndarray, rad: dict[str, np.ndarray], ms2: dict[str, np.ndarray]) -> None:
+    """A ROS 2 bag (SQLite) and a standalone MCAP file of the same Imu messages."""
+    import shutil
+    import tempfile
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    imu, header, stamp = (ts.types[n] for n in ("sensor_msgs/msg/Imu", "std_msgs/msg/Header",
+                                                  "builtin_interfaces/msg/Time"))
+    quat, vec = ts.types["geometry_msgs/msg/Quaternion"], ts.types["geometry_msgs/msg/Vector3"]
+    with tempfile.TemporaryDirectory() as tmp:
+        for plugin, name in ((StoragePlugin.SQLITE3, "ros2_bag"), (StoragePlugin.MCAP, "m")):
+            out = HERE / name if name == "ros2_bag" else Path(tmp) / name
+            shutil.rmtree(out, ignore_errors=True)
+            with Writer(out, version=8, storage_plugin=plugin) as w:
+                conn = w.add_connection("/imu/data", imu.__msgtype__, typestore=ts)
+                for i in range(N):
+                    ns = T0_NS + round(t[i] * 1e9)
+                    msg = imu(header=header(stamp=stamp(sec=ns // 10**9, nanosec=ns % 10**9),
+                                            frame_id="imu_link"),
+                              orientation=quat(x=0.0, y=0.0, z=0.0, w=1.0),
+                              orientation_covariance=np.zeros(9),
+                              angular_velocity=vec(**{a: float(rad["g" + a][i])
+                                                      for a in "xyz"}),
+                              angular_velocity_covariance=np.zeros(9),
+                              linear_acceleration=vec(**{a: float(ms2["a" + a][i])
+                                                         for a in "xyz"}),
+                              linear_acceleration_covariance=np.zeros(9))
+                    w.write(conn, ns + 1_500_000, ts.serialize_cdr(msg, imu.__msgtype__))
+            if name == "m":
+                shutil.copyfile(next(out.glob("*.mcap")), HERE / "ros2_imu.mcap")
 
 
 if __name__ == "__main__":
