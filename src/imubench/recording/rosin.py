@@ -47,7 +47,7 @@ def _pick_topic(topics: list[str], options: InputOptions, where: str) -> str:
 
 
 def _rows_from(messages: Any) -> list[tuple[float, ...]]:
-    rows = []
+    rows: list[tuple[float, ...]] = []
     for m in messages:
         s = m.header.stamp
         w, a = m.angular_velocity, m.linear_acceleration
