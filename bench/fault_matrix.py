@@ -19,7 +19,7 @@ Cases:
 
 The MQTT faults (broker killed / hung, malformed packets) are in ``bench/fault_mqtt.py``,
 damaged recordings in ``bench/fault_recordings.py`` and damaged configurations in
-``bench/fault_configs.py``; their tables go beside this one in ``docs/benchmarks.md``.
+``bench/bench_config_fuzz.py``; their tables go beside this one in ``docs/benchmarks.md``.
 
 Run: ``.venv/bin/python bench/fault_matrix.py [--sigkills 50] [--repeats 5] [--quick]``.
 """

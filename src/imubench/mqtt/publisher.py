@@ -7,16 +7,17 @@ is retained: JSON ``{"state": "online", ...}`` after each (re)connection, the pl
 broker publishes it when the process dies or the link times out).
 
 The caller is never blocked for long: ``publish_allan`` numbers the snapshot (``seq``,
-0, 1, 2, ...), encodes and queues it. A background loop (``run``) connects, publishes, and
-reconnects with capped exponential backoff with jitter (each wait drawn uniformly from
-[backoff/2, backoff], "equal jitter", AWS Architecture Blog, "Exponential Backoff and
-Jitter", 2015). A snapshot leaves the backlog only once the broker acknowledged it (PUBACK
-for QoS 1, PUBCOMP for QoS 2; QoS 0 only once handed to the socket), so a snapshot in
-flight when the link dies is sent again after reconnection. While disconnected or while the
-broker does not answer, at most ``backlog_snapshots`` snapshots wait; the oldest are dropped,
-counted in ``dropped_snapshots`` (also in the retained status) and logged. A hung broker
-(process stopped, link black-holed) is detected when an acknowledgement does not come within
-``ack_timeout_s`` or by paho's keep-alive (no PINGRESP within ``keepalive_s``).
+0, 1, 2, ... per sensor), encodes and queues it. A background loop (``run``) connects,
+publishes, and reconnects with capped exponential backoff with jitter (each wait drawn
+uniformly from [backoff/2, backoff], "equal jitter", AWS Architecture Blog, "Exponential
+Backoff and Jitter", 2015). A snapshot leaves the backlog only once the broker acknowledged
+it (PUBACK for QoS 1, PUBCOMP for QoS 2; QoS 0 only once handed to the socket), so a
+snapshot in flight when the link dies is sent again after reconnection. While disconnected
+or while the broker does not answer, at most ``backlog_snapshots`` per sensor wait; the
+oldest are dropped, counted in ``dropped_snapshots`` (per sensor in its retained status)
+and logged. A hung broker (process stopped, link black-holed) is detected when an
+acknowledgement does not come within ``ack_timeout_s`` or by paho's keep-alive (no PINGRESP
+within ``keepalive_s``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import socket
 import ssl
 import uuid
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
@@ -41,7 +42,7 @@ from urllib.parse import urlsplit
 import aiomqtt
 
 from imubench.mqtt.errors import MqttError
-from imubench.mqtt.topics import allan_topic, status_topic
+from imubench.mqtt.topics import allan_topic, node_status_topic, status_topic
 
 log = logging.getLogger(__name__)
 
@@ -135,7 +136,14 @@ def encode_json(payload: Mapping[str, Any]) -> bytes:
 
 
 class MqttPublisher:
-    """Publishes one sensor's Allan snapshots and status to an MQTT broker.
+    """Publishes the Allan snapshots and status of one sensor, or of several sensors over
+    one connection, to an MQTT broker.
+
+    With one sensor (``sensor`` a name) the connection's last will is that sensor's
+    retained status. With several (``sensor`` a sequence of names, ``node`` the daemon's
+    name) the will is the node's status (:func:`~imubench.mqtt.topics.node_status_topic`)
+    and each sensor's status names the node, so a subscriber knows that the sensors of a
+    node that died are offline (:class:`imubench.fleet.inventory.Inventory` does).
 
     Use as ``async with MqttPublisher(...) as pub: await pub.publish_allan(d)``, or start
     ``await pub.run()`` as a task and call ``await pub.close()`` to stop. ``qos`` applies to
@@ -149,8 +157,9 @@ class MqttPublisher:
         host: str,
         port: int,
         station: str,
-        sensor: str,
+        sensor: str | Sequence[str],
         *,
+        node: str | None = None,
         username: str | None = None,
         password: str | None = None,
         tls: bool = False,
@@ -181,15 +190,27 @@ class MqttPublisher:
             )
         if not 0 <= keepalive_s <= 65535:
             raise MqttError(f"mqtt keepalive_s {keepalive_s} is outside 0..65535")
+        sensors = [sensor] if isinstance(sensor, str) else list(sensor)
+        if not sensors or len(set(sensors)) != len(sensors):
+            raise MqttError(f"sensor names {sensors!r}: need at least one, each once")
+        if len(sensors) > 1 and node is None:
+            raise MqttError("several sensors over one connection need a node name")
         self.host = host
         self.port = port
         self.station = station
-        self.sensor = sensor
-        self.allan_topic = allan_topic(station, sensor)  # validates station and sensor
-        self.status_topic = status_topic(station, sensor)
+        self.sensors = sensors
+        self.sensor = sensors[0]
+        self.node = node if len(sensors) > 1 else None
+        self.allan_topics = {s: allan_topic(station, s) for s in sensors}  # validates names
+        self.status_topics = {s: status_topic(station, s) for s in sensors}
+        self.allan_topic = self.allan_topics[self.sensor]
+        self.status_topic = self.status_topics[self.sensor]
+        self.will_topic = (self.status_topic if self.node is None
+                           else node_status_topic(station, self.node))
         self.qos = qos
         self.keepalive_s = keepalive_s
-        self.client_id = client_id or f"imubench-{station}-{sensor}-{uuid.uuid4().hex[:8]}"
+        self.client_id = client_id or (
+            f"imubench-{station}-{self.node or self.sensor}-{uuid.uuid4().hex[:8]}")
         self._username = username
         self._password = password
         self._tls_context = (
@@ -199,12 +220,15 @@ class MqttPublisher:
         self._reconnect_max_s = reconnect_max_s
         self._timeout_s = timeout_s
         self._ack_timeout_s = float(keepalive_s) if ack_timeout_s is None else ack_timeout_s
-        self._buffer: deque[bytes] = deque()
-        self._buffer_max = backlog_snapshots
-        self._seq = 0
+        self._buffer: deque[tuple[str, bytes]] = deque()  # (sensor, JSON)
+        self._buffer_max = backlog_snapshots * len(sensors)
+        self._seq = dict.fromkeys(sensors, 0)
+        self.dropped_by_sensor = dict.fromkeys(sensors, 0)
         self._drops_logged = 0
-        self._status_detail: dict[str, Any] = dict(status_detail or {})
-        self._status_dirty = True
+        self._status_detail: dict[str, dict[str, Any]] = {
+            s: dict(status_detail or {}) for s in sensors}
+        self._status_dirty: set[str] = set(sensors)
+        self._node_dirty = True
         self._since = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
         self._wake = asyncio.Event()
         self._closing = asyncio.Event()
@@ -227,32 +251,36 @@ class MqttPublisher:
         """Snapshots waiting to be published."""
         return len(self._buffer)
 
-    async def publish_allan(self, payload: Mapping[str, Any]) -> None:
-        """Queue one Allan snapshot for ``allan_topic``; returns at once.
+    async def publish_allan(self, payload: Mapping[str, Any], sensor: str | None = None
+                            ) -> None:
+        """Queue one Allan snapshot of ``sensor`` (default: the first) for its allan
+        topic; returns at once.
 
-        ``payload`` gets ``seq`` (this publisher's snapshot number, from 0) and is encoded as
-        JSON now (numpy arrays allowed, NaN becomes null). When ``backlog_snapshots`` are
-        already waiting, the oldest is dropped and counted in ``dropped_snapshots``.
+        ``payload`` gets ``seq`` (the sensor's snapshot number, from 0) and is encoded as
+        JSON now (numpy arrays allowed, NaN becomes null). When ``backlog_snapshots`` per
+        sensor are already waiting, the oldest is dropped and counted.
         """
-        data = encode_json({**payload, "seq": self._seq})
-        self._seq += 1
-        self._buffer.append(data)
+        name = sensor or self.sensor
+        data = encode_json({**payload, "seq": self._seq[name]})
+        self._seq[name] += 1
+        self._buffer.append((name, data))
         self._trim_backlog()
         self._wake.set()
 
     @property
     def produced_snapshots(self) -> int:
-        """Snapshots handed to ``publish_allan`` so far (the next ``seq``)."""
-        return self._seq
+        """Snapshots handed to ``publish_allan`` so far, all sensors."""
+        return sum(self._seq.values())
 
     def _trim_backlog(self) -> None:
         dropped = 0
         while len(self._buffer) > self._buffer_max:
-            self._buffer.popleft()
+            name, _ = self._buffer.popleft()
+            self.dropped_by_sensor[name] += 1
+            self._status_dirty.add(name)
             dropped += 1
         if dropped:
             self.dropped_snapshots += dropped
-            self._status_dirty = True
             if self.dropped_snapshots >= 2 * self._drops_logged:  # log at 1, 2, 4, 8, ...
                 self._drops_logged = self.dropped_snapshots
                 log.warning(
@@ -261,31 +289,47 @@ class MqttPublisher:
                     self.dropped_snapshots,
                 )
 
-    async def publish_status(self, detail: Mapping[str, Any] | None = None) -> None:
-        """Update the retained ``online`` status with ``detail`` merged in; returns at once.
+    async def publish_status(self, detail: Mapping[str, Any] | None = None,
+                             sensor: str | None = None) -> None:
+        """Update the retained ``online`` status of ``sensor`` (default: the first) with
+        ``detail`` merged in; returns at once.
 
-        The status is republished after every reconnection, so subscribers always find it.
+        Statuses are republished after every reconnection, so subscribers always find them.
         """
+        name = sensor or self.sensor
         if detail:
-            self._status_detail.update(detail)
-        self._status_dirty = True
+            self._status_detail[name].update(detail)
+        self._status_dirty.add(name)
         self._wake.set()
 
-    def status_payload(self) -> bytes:
-        """The JSON of the retained online status (``state``, identity, ``since``, detail)."""
-        status = {
-            "state": "online",
-            "station": self.station,
-            "sensor": self.sensor,
-            "client_id": self.client_id,
-            "host": socket.gethostname(),
-            "pid": os.getpid(),
-            "since": self._since,
-            "dropped_snapshots": self.dropped_snapshots,
-            "published_snapshots": self.published_snapshots,
-            **self._status_detail,
-        }
+    def _identity(self) -> dict[str, Any]:
+        return {"client_id": self.client_id, "host": socket.gethostname(),
+                "pid": os.getpid(), "since": self._since}
+
+    def status_payload(self, sensor: str | None = None) -> bytes:
+        """The JSON of a sensor's retained online status (``state``, identity, ``node``
+        when several sensors share the connection, ``since``, detail)."""
+        name = sensor or self.sensor
+        status = {"state": "online", "station": self.station, "sensor": name,
+                  **({} if self.node is None else {"node": self.node}),
+                  **self._identity(), "dropped_snapshots": self.dropped_by_sensor[name],
+                  **self._status_detail[name]}
         return encode_json(status)
+
+    def node_payload(self) -> bytes:
+        """The JSON of the node's retained online status (several sensors only)."""
+        return encode_json({"state": "online", "station": self.station, "node": self.node,
+                            "sensors": self.sensors, **self._identity()})
+
+    async def _publish_offline(self, client: aiomqtt.Client, qos: int,
+                               timeout: float | None) -> None:
+        """Retained ``offline`` on every sensor's status (and the node's)."""
+        topics = list(self.status_topics.values())
+        if self.node is not None:
+            topics.append(self.will_topic)
+        for topic in topics:
+            await client.publish(topic, OFFLINE_PAYLOAD, qos=qos, retain=True,
+                                 timeout=timeout)
 
     async def wait_connected(self, timeout_s: float) -> bool:
         """Wait until connected (True) or ``timeout_s`` passed (False)."""
@@ -333,7 +377,8 @@ class MqttPublisher:
                     self.connections += 1
                     failures = 0
                     backoff = self._reconnect_min_s
-                    self._status_dirty = True
+                    self._status_dirty = set(self.sensors)
+                    self._node_dirty = True
                     self._connected.set()
                     log.info(
                         "MQTT publisher %s connected to %s:%d", self.client_id, self.host, self.port
@@ -343,18 +388,10 @@ class MqttPublisher:
                     except asyncio.CancelledError:
                         # Cancelled instead of closed: still leave a truthful status behind.
                         with contextlib.suppress(Exception):
-                            await client.publish(
-                                self.status_topic, OFFLINE_PAYLOAD, qos=0, retain=True
-                            )
+                            await self._publish_offline(client, 0, None)
                         raise
                     # Clean stop: the broker will not publish the will after DISCONNECT.
-                    await client.publish(
-                        self.status_topic,
-                        OFFLINE_PAYLOAD,
-                        qos=1,
-                        retain=True,
-                        timeout=self._timeout_s,
-                    )
+                    await self._publish_offline(client, 1, self._timeout_s)
                     return
             except aiomqtt.MqttError as exc:
                 self.last_error = str(exc)
@@ -386,7 +423,7 @@ class MqttPublisher:
             username=self._username,
             password=self._password,
             identifier=self.client_id,
-            will=aiomqtt.Will(self.status_topic, OFFLINE_PAYLOAD, qos=1, retain=True),
+            will=aiomqtt.Will(self.will_topic, OFFLINE_PAYLOAD, qos=1, retain=True),
             clean_session=True,
             keepalive=self.keepalive_s,
             timeout=self._timeout_s,
@@ -399,22 +436,27 @@ class MqttPublisher:
         try:
             while True:
                 if self._status_dirty:
-                    self._status_dirty = False
-                    await client.publish(
-                        self.status_topic,
-                        self.status_payload(),
-                        qos=1,
-                        retain=True,
-                        timeout=self._timeout_s,
-                    )
+                    dirty, self._status_dirty = self._status_dirty, set()
+                    if self.node is not None and self._node_dirty:
+                        self._node_dirty = False
+                        await client.publish(self.will_topic, self.node_payload(), qos=1,
+                                             retain=True, timeout=self._timeout_s)
+                    for name in self.sensors:
+                        if name in dirty:
+                            await client.publish(
+                                self.status_topics[name],
+                                self.status_payload(name),
+                                qos=1,
+                                retain=True,
+                                timeout=self._timeout_s,
+                            )
                 while self._buffer:
                     # Leaves the backlog only once acknowledged: a snapshot whose PUBACK
                     # never came is sent again after reconnection.
-                    data = self._buffer[0]
-                    await client.publish(
-                        self.allan_topic, data, qos=self.qos, timeout=self._ack_timeout_s
-                    )
-                    if self._buffer and self._buffer[0] is data:  # not trimmed meanwhile
+                    head = self._buffer[0]
+                    await client.publish(self.allan_topics[head[0]], head[1], qos=self.qos,
+                                         timeout=self._ack_timeout_s)
+                    if self._buffer and self._buffer[0] is head:  # not trimmed meanwhile
                         self._buffer.popleft()
                     self.published_snapshots += 1
                     if self._status_dirty:
