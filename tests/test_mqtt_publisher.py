@@ -231,7 +231,8 @@ def test_reconnects_after_broker_restart_with_bounded_buffer(
             async with aiomqtt.Client(broker.host, broker.port) as sub:
                 await sub.subscribe(f"imubench/{station}/#")
                 retained = (await receive(sub, 1))[0]
-                assert json.loads(retained.payload)["state"] == "online"  # type: ignore[arg-type]
+                status = json.loads(retained.payload)  # type: ignore[arg-type]
+                assert (status["state"], status["dropped_snapshots"]) == ("online", 2)
                 await pub.publish_allan(snapshot(9))
                 fresh = (await receive(sub, 1))[0]
                 assert json.loads(fresh.payload)["n_samples"] == 9000  # type: ignore[arg-type]
