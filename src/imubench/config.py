@@ -423,7 +423,20 @@ class MqttConfig(_Section):
     tls_ca: str | None = Field(
         None, description="CA certificate file (PEM) for `mqtts://` (unit: path)"
     )
-    qos: int = Field(0, ge=0, le=2, description="QoS of the snapshots (unit: -)")
+    tls_cert: str | None = Field(
+        None, description="Client certificate file (PEM) for brokers that require one, with "
+        "`tls_key` (unit: path)")
+    tls_key: str | None = Field(
+        None, description="Private key of `tls_cert` (PEM, unencrypted) (unit: path)")
+    qos: int = Field(
+        1, ge=0, le=2, description="QoS of the snapshots (unit: -); 1 (default): a snapshot "
+        "the broker did not acknowledge is sent again after reconnecting, none is lost "
+        "within `backlog_snapshots`")
+    backlog_snapshots: int = Field(
+        120, ge=1, le=100_000,
+        description="Snapshots per sensor kept while the broker is unreachable, published "
+        "when it is back (unit: snapshots); older ones are dropped and counted "
+        "(`health.mqtt.dropped_snapshots`)")
     keepalive_s: int = Field(30, ge=5, le=3600, description="MQTT keep-alive (unit: s)")
 
     @field_validator("station", "sensor", "node")
@@ -452,6 +465,26 @@ class MqttConfig(_Section):
             except MqttError as exc:
                 raise ValueError(str(exc)) from None
         return value
+
+    @field_validator("tls_cert", "tls_key")
+    @classmethod
+    def _tls_client_file(cls, value: str | None) -> str | None:
+        if not value:
+            return None
+        check_readable_file(Path(value))
+        return value
+
+    @model_validator(mode="after")
+    def _tls_pair(self) -> MqttConfig:
+        if bool(self.tls_cert) != bool(self.tls_key):
+            raise ValueError("mqtt.tls_cert and mqtt.tls_key go together")
+        if self.tls_cert:
+            try:
+                ssl.create_default_context().load_cert_chain(self.tls_cert, self.tls_key)
+            except (ssl.SSLError, OSError) as exc:
+                raise ValueError(f"mqtt.tls_cert / tls_key: not a PEM certificate and its "
+                                 f"key ({exc})") from None
+        return self
 
     @field_validator("tls_ca")
     @classmethod
@@ -652,6 +685,10 @@ def cross_checks(cfg: Config) -> list[Problem]:
             except ValueError as exc:
                 problems.append(Problem(("log", "path"), cfg.log.path, str(exc)))
                 break
+    if cfg.mqtt.tls_cert and not cfg.mqtt.broker.startswith("mqtts://"):
+        problems.append(Problem(("mqtt", "tls_cert"), cfg.mqtt.tls_cert,
+                                f"only used with an mqtts:// broker; mqtt.broker is "
+                                f"{cfg.mqtt.broker!r}"))
     if cfg.mqtt.tls_ca and not cfg.mqtt.broker.startswith("mqtts://"):
         problems.append(Problem(("mqtt", "tls_ca"), cfg.mqtt.tls_ca,
                                 f"only used with an mqtts:// broker; mqtt.broker is "

@@ -105,8 +105,23 @@ class Daemon:
             next_t += interval
             if snap is None:
                 continue
-            await publisher.publish_allan(unit.snapshot_payload(snap), unit.name)
-            unit.published += 1
+            await publisher.publish_allan(self._payload(unit, snap), unit.name)
+
+    def _payload(self, unit: SensorRun, snap: Any) -> dict[str, Any]:
+        """The snapshot payload with its sequence number (``seq``: 0, 1, ... per sensor and
+        run, so a subscriber counts what it missed or got twice) and the broker link's
+        health (``health.mqtt``)."""
+        payload = unit.snapshot_payload(snap)
+        payload["seq"] = unit.published
+        unit.published += 1
+        pub = self._publisher
+        payload["health"]["mqtt"] = {
+            "connected": pub.connected, "connections": pub.connections,
+            "published_snapshots": pub.published_snapshots,
+            "dropped_snapshots": pub.dropped_snapshots,
+            "backlog_snapshots": pub.buffered_snapshots,
+        }
+        return payload
 
     async def _sleep_until(self, t: float) -> bool:
         """Sleep until monotonic time ``t``; True if a stop was requested meanwhile."""
@@ -190,8 +205,9 @@ class Daemon:
             node=cfg.mqtt.node_name if self.several else None,
             username=cfg.mqtt.username,
             password=None if cfg.mqtt.password is None else cfg.mqtt.password.get_secret_value(),
-            tls=tls, tls_ca=cfg.mqtt.tls_ca, qos=cfg.mqtt.qos,
-            keepalive_s=cfg.mqtt.keepalive_s,
+            tls=tls, tls_ca=cfg.mqtt.tls_ca, tls_cert=cfg.mqtt.tls_cert,
+            tls_key=cfg.mqtt.tls_key, qos=cfg.mqtt.qos, keepalive_s=cfg.mqtt.keepalive_s,
+            buffer_snapshots=cfg.mqtt.backlog_snapshots,
         )
         for unit in self.sensors:
             await publisher.publish_status(unit.status_detail(), unit.name)
@@ -347,7 +363,7 @@ class Daemon:
                 continue
             with contextlib.suppress(Exception):
                 snap = await asyncio.wait_for(unit.snapshot(), 1.0)
-                await publisher.publish_allan(unit.snapshot_payload(snap), unit.name)
+                await publisher.publish_allan(self._payload(unit, snap), unit.name)
             unit.save_state()
         await publisher.close(timeout_s=1.0)
         if broker is not None:

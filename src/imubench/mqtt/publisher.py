@@ -8,8 +8,11 @@ broker publishes it when the process dies or the link times out).
 
 The caller is never blocked for long: ``publish_allan`` only encodes and buffers. A
 background loop (``run``) connects, publishes, and reconnects with capped exponential
-backoff; while disconnected at most ``buffer_snapshots`` snapshots wait (the oldest are
-dropped and counted in ``dropped_snapshots``).
+backoff; while disconnected at most ``buffer_snapshots`` snapshots per sensor wait (the
+oldest are dropped and counted in ``dropped_snapshots``). With ``qos`` 1 a snapshot that
+the broker did not acknowledge (a broker that hangs: the publish times out after
+``timeout_s``) goes back into the backlog and is sent again after reconnecting, so none
+is lost within the backlog; a subscriber may then see it twice (its ``seq`` tells).
 """
 
 from __future__ import annotations
@@ -126,6 +129,8 @@ class MqttPublisher:
         password: str | None = None,
         tls: bool = False,
         tls_ca: str | os.PathLike[str] | None = None,
+        tls_cert: str | os.PathLike[str] | None = None,
+        tls_key: str | os.PathLike[str] | None = None,
         keepalive_s: int = 30,
         client_id: str | None = None,
         qos: int = 0,
@@ -170,6 +175,8 @@ class MqttPublisher:
         self._username = username
         self._password = password
         self._tls_context = ssl.create_default_context(cafile=tls_ca) if tls else None
+        if self._tls_context is not None and tls_cert is not None:
+            self._tls_context.load_cert_chain(tls_cert, tls_key)
         self._reconnect_min_s = reconnect_min_s
         self._reconnect_max_s = reconnect_max_s
         self._timeout_s = timeout_s
