@@ -151,9 +151,11 @@ def check_log_path(value: str) -> None:
     from imubench.recording import recording_kind
 
     try:
-        recording_kind(value)
+        kind = recording_kind(value)
     except ImubenchError:
-        raise ValueError("the suffix must be .imbr (native), .csv or .csv.gz") from None
+        kind = None
+    if kind not in ("native", "csv"):
+        raise ValueError("the suffix must be .imbr (native), .csv or .csv.gz")
 
 
 def _uri_odr_hz(uri: str) -> float | None:

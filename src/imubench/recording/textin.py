@@ -328,7 +328,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                  + (f"; {time_note}" if time_note else "")
                  + (f"; units {units}" if units else ""))
     batch = Batch(index=tb.index, t_s=t_s[keep], values=values[keep], temp_c=temp[keep])
-    inferred = fmt != "imubench CSV" or how not in ("--rate", "# odr_hz")
+    inferred = not ((fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
+                    or (raw.width == 1 and raw.header is None))  # allan's plain series
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
 
 
