@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import filecmp
 import json
-import random
 import shutil
 import subprocess
 import sys
@@ -18,12 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imubench.errors import ImubenchError, RecordingError
+from imubench.errors import RecordingError
 from imubench.recording import InputOptions, load_recording
 
 CORPUS = Path(__file__).parent / "data" / "foreign"
 sys.path.insert(0, str(CORPUS))
 import make_corpus  # noqa: E402
+from recording_damage import fuzz  # noqa: E402
 
 TRUTH = make_corpus.truth()
 ALL6 = ("gx", "gy", "gz", "ax", "ay", "az")
@@ -116,58 +116,15 @@ def test_commands_name_the_file_and_never_print_a_traceback() -> None:
                 assert "rate 104 Hz (from t (least squares))" in p.stderr
 
 
-def _damaged(data: bytes, rng: random.Random) -> bytes:
-    if rng.random() < 0.4:
-        return data[: rng.randrange(len(data))]
-    out = bytearray(data)
-    for _ in range(rng.randint(1, 6)):
-        i = rng.randrange(len(out))
-        out[i] = rng.randrange(256) if rng.random() < 0.5 else out[i] ^ (1 << rng.randrange(8))
-    return bytes(out)
-
-
-def fuzz(n_per_file: int, tmp: Path, seed: int = 1) -> dict[str, int]:
-    """Truncations and byte/bit flips of every corpus file through the reader: each is
-    read (perhaps with damage reported) or refused with ImubenchError; counts by outcome.
-    Anything else raised fails."""
-    rng = random.Random(seed)
-    counts = {"read": 0, "damage reported": 0, "refused": 0}
-    for name, (options, *_rest) in sorted(READ.items()):
-        src = CORPUS / name
-        if src.is_dir():  # a ROS 2 bag: damage its storage file in a copy
-            bag = tmp / name
-            shutil.copytree(src, bag, dirs_exist_ok=True)
-            storage = next(bag.glob("*.db3"))
-            data, target = storage.read_bytes(), bag
-        else:
-            data = src.read_bytes()
-        for i in range(n_per_file):
-            p = tmp / f"{i % 50}{name}"
-            if src.is_dir():
-                storage.write_bytes(_damaged(data, rng))
-                p = target
-            else:
-                p.write_bytes(_damaged(data, rng))
-            try:
-                rec = load_recording(p, options)
-            except ImubenchError as exc:
-                assert str(exc).startswith(str(p)), exc
-                counts["refused"] += 1
-                continue
-            assert len(rec) <= make_corpus.N + 1
-            counts["damage reported" if rec.damage else "read"] += 1
-    return counts
-
-
 def test_fuzzed_corpus_never_raises_anything_but_a_named_error(tmp_path: Path) -> None:
-    counts = fuzz(60, tmp_path)
+    counts = fuzz(READ, 60, tmp_path)
     assert sum(counts.values()) == 60 * len(READ)
     assert counts["refused"] and counts["damage reported"] and counts["read"]
 
 
 @pytest.mark.slow
 def test_fuzzed_corpus_1000_each(tmp_path: Path) -> None:
-    counts = fuzz(1000, tmp_path)
+    counts = fuzz(READ, 1000, tmp_path)
     assert sum(counts.values()) == 1000 * len(READ)
 
 

@@ -426,24 +426,22 @@ class MqttConfig(_Section):
         None, description="CA certificate file (PEM) for `mqtts://` (unit: path)"
     )
     tls_cert: str | None = Field(
-        None, description="Client certificate file (PEM) for `mqtts://`, with `tls_key` "
-        "(unit: path)"
-    )
+        None, description="Client certificate file (PEM) for brokers that require one, with "
+        "`tls_key` (unit: path)")
     tls_key: str | None = Field(
-        None, description="Private key file (PEM, unencrypted) of `tls_cert` (unit: path)"
-    )
+        None, description="Private key of `tls_cert` (PEM, unencrypted) (unit: path)")
     tls_insecure: bool = Field(
         False, description="Skip the check of the broker's host name against its certificate "
-        "(the chain is still verified against `tls_ca`) (unit: -)"
-    )
+        "(the chain is still verified against `tls_ca`) (unit: -)")
     qos: int = Field(
-        1, ge=0, le=2, description="QoS of the snapshots; 1 or 2 keep a snapshot in the "
-        "backlog until the broker acknowledged it (unit: -)"
-    )
+        1, ge=0, le=2, description="QoS of the snapshots (unit: -); 1 (default): a snapshot "
+        "the broker did not acknowledge is sent again after reconnecting, none is lost "
+        "within `backlog_snapshots`")
     backlog_snapshots: int = Field(
-        120, ge=1, le=100_000, description="Snapshots kept while the broker is unreachable; "
-        "the oldest beyond are dropped and counted in `dropped_snapshots` (unit: snapshots)"
-    )
+        120, ge=1, le=100_000,
+        description="Snapshots per sensor kept while the broker is unreachable, published "
+        "when it is back (unit: snapshots); older ones are dropped and counted "
+        "(`health.mqtt.dropped_snapshots`)")
     keepalive_s: int = Field(30, ge=5, le=3600, description="MQTT keep-alive (unit: s)")
 
     @field_validator("station", "sensor", "node")
@@ -475,11 +473,23 @@ class MqttConfig(_Section):
 
     @field_validator("tls_cert", "tls_key")
     @classmethod
-    def _tls_file(cls, value: str | None) -> str | None:
+    def _tls_client_file(cls, value: str | None) -> str | None:
         if not value:
             return None
         check_readable_file(Path(value))
         return value
+
+    @model_validator(mode="after")
+    def _tls_pair(self) -> MqttConfig:
+        if bool(self.tls_cert) != bool(self.tls_key):
+            raise ValueError("mqtt.tls_cert and mqtt.tls_key go together")
+        if self.tls_cert:
+            try:
+                ssl.create_default_context().load_cert_chain(self.tls_cert, self.tls_key)
+            except (ssl.SSLError, OSError) as exc:
+                raise ValueError(f"mqtt.tls_cert / tls_key: not a PEM certificate and its "
+                                 f"key ({exc})") from None
+        return self
 
     @field_validator("tls_ca")
     @classmethod
@@ -680,18 +690,6 @@ def cross_checks(cfg: Config) -> list[Problem]:
             except ValueError as exc:
                 problems.append(Problem(("log", "path"), cfg.log.path, str(exc)))
                 break
-    if (cfg.mqtt.tls_cert is None) != (cfg.mqtt.tls_key is None):
-        field = "tls_key" if cfg.mqtt.tls_key is None else "tls_cert"
-        problems.append(Problem(("mqtt", field), None,
-                                "mqtt.tls_cert and mqtt.tls_key go together: give both"))
-    if cfg.mqtt.tls_cert and cfg.mqtt.tls_key and cfg.mqtt.broker.startswith("mqtts://"):
-        from imubench.mqtt.errors import MqttError
-        from imubench.mqtt.publisher import make_tls_context
-
-        try:  # the publisher's own context: a key that does not match fails here, not later
-            make_tls_context(cfg.mqtt.tls_ca, cfg.mqtt.tls_cert, cfg.mqtt.tls_key)
-        except MqttError as exc:
-            problems.append(Problem(("mqtt", "tls_cert"), cfg.mqtt.tls_cert, str(exc)))
     tls_files = [(field, path) for field, path in (
         ("tls_ca", cfg.mqtt.tls_ca), ("tls_cert", cfg.mqtt.tls_cert),
         ("tls_key", cfg.mqtt.tls_key)) if path]

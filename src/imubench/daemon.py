@@ -105,8 +105,22 @@ class Daemon:
             next_t += interval
             if snap is None:
                 continue
-            await publisher.publish_allan(unit.snapshot_payload(snap), unit.name)
-            unit.published += 1
+            await publisher.publish_allan(self._payload(unit, snap), unit.name)
+
+    def _payload(self, unit: SensorRun, snap: Any) -> dict[str, Any]:
+        """The snapshot payload with the broker link's health (``health.mqtt``); the
+        publisher adds its sequence number (``seq``: 0, 1, ... per sensor and run, so a
+        subscriber counts what it missed or got twice)."""
+        payload = unit.snapshot_payload(snap)
+        unit.published += 1  # the publisher adds ``seq``, counted per sensor
+        pub = self._publisher
+        payload["health"]["mqtt"] = {
+            "connected": pub.connected, "connections": pub.connections,
+            "published_snapshots": pub.published_snapshots,
+            "dropped_snapshots": pub.dropped_snapshots,
+            "backlog_snapshots": pub.buffered_snapshots,
+        }
+        return payload
 
     async def _sleep_until(self, t: float) -> bool:
         """Sleep until monotonic time ``t``; True if a stop was requested meanwhile."""
@@ -359,7 +373,7 @@ class Daemon:
                 continue
             with contextlib.suppress(Exception):
                 snap = await asyncio.wait_for(unit.snapshot(), 1.0)
-                await publisher.publish_allan(unit.snapshot_payload(snap), unit.name)
+                await publisher.publish_allan(self._payload(unit, snap), unit.name)
             unit.save_state()
         await publisher.close(timeout_s=1.0)
         if broker is not None:
