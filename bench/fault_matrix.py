@@ -17,11 +17,13 @@ Cases:
 * ``disk-full``: a 512 KiB tmpfs filled then emptied under a running daemon (needs root
   and ``mount``; skipped otherwise): segments + gap records account for every sample.
 
-The MQTT faults (broker killed / hung, malformed packets) are in ``bench/fault_mqtt.py``,
-damaged recordings in ``bench/fault_recordings.py`` and damaged configurations in
-``bench/fault_configs.py``; their tables go beside this one in ``docs/benchmarks.md``.
+The MQTT faults (broker stopped, killed and hung; malformed packets) are in
+``bench/fault_mqtt.py``, damaged recordings in ``bench/fault_recordings.py`` and damaged
+configurations in ``bench/bench_config_fuzz.py``; ``--all`` runs them after this table
+and prints theirs (figures in ``docs/benchmarks.md``).
 
-Run: ``.venv/bin/python bench/fault_matrix.py [--sigkills 50] [--repeats 5] [--quick]``.
+Run: ``.venv/bin/python bench/fault_matrix.py [--sigkills 50] [--repeats 5] [--quick]
+[--all]``.
 """
 
 from __future__ import annotations
@@ -233,6 +235,8 @@ def main() -> None:
     ap.add_argument("--sigkills", type=int, default=50)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="5 kills, 1 repeat")
+    ap.add_argument("--all", action="store_true",
+                    help="then run fault_mqtt.py, fault_recordings.py, bench_config_fuzz.py")
     args = ap.parse_args()
     if args.quick:
         args.sigkills, args.repeats = 5, 1
@@ -250,6 +254,13 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(r.line())
+    if args.all:
+        quick = {"fault_mqtt.py": ["--quick"], "fault_recordings.py": ["--n", "60"],
+                 "bench_config_fuzz.py": ["--n", "1000", "--cli", "5"]}
+        for script in ("fault_mqtt.py", "fault_recordings.py", "bench_config_fuzz.py"):
+            print(f"\n## {script}", flush=True)
+            subprocess.run([sys.executable, str(REPO / "bench" / script),
+                            *(quick[script] if args.quick else [])], check=False)
 
 
 if __name__ == "__main__":

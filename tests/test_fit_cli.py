@@ -58,6 +58,47 @@ def test_fit_cli_writes_a_model_the_simulator_loads(recording: Path, tmp_path: P
     assert doc["datasheet_comparison"]["gx"]["ratio"] == pytest.approx(1.0, rel=0.03)
     assert doc["kalibr"]["update_rate"] == RATE
     assert "gyroscope_noise_density" in kal.read_text()
+
+
+def test_kalibr_never_writes_a_zero_random_walk(recording: Path, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """gx is white noise only (its random walk is below detection): the file holds the
+    upper 95 % confidence limit of the fit, marked as such on its line and in the header,
+    and the terminal says so; --kalibr-inflate multiplies every value. The noise density
+    is checked against an independent figure: white noise of std sigma at rate f has the
+    density sigma / sqrt(f) (dps/sqrt(Hz)), in rad/s/sqrt(Hz) times pi/180."""
+    kal, js = tmp_path / "imu.yaml", tmp_path / "f.json"
+    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m.toml"),
+               "--kalibr", str(kal), "--json", str(js)])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    doc = json.loads(js.read_text())
+    gx = doc["channels"]["gx"]
+    assert "random_walk" not in gx["present"]
+    upper = gx["ci95"]["random_walk"][1]
+    assert upper > 0
+    text = kal.read_text()
+    line = next(ln for ln in text.splitlines() if ln.startswith("gyroscope_random_walk:"))
+    value = float(line.split()[1])
+    assert value == pytest.approx(upper * np.pi / 180, rel=1e-6) and value > 0
+    assert "upper 95 % limit: not detected" in line
+    assert "below detection, written as the upper 95 % confidence limit" in text
+    assert "gyroscope_random_walk was not detected; wrote its upper 95 % confidence" in err
+    from imubench.recording import load_recording
+
+    data = load_recording(recording).channel("gx")
+    density = float(np.std(data)) / np.sqrt(RATE) * np.pi / 180
+    nd = float(next(ln for ln in text.splitlines()
+                    if ln.startswith("gyroscope_noise_density:")).split()[1])
+    assert nd == pytest.approx(density, rel=0.03)
+    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m2.toml"),
+               "--kalibr", str(tmp_path / "x2.yaml"), "--kalibr-inflate", "10"])
+    assert rc == 0
+    inflated = (tmp_path / "x2.yaml").read_text()
+    assert "multiplied by 10 (--kalibr-inflate)" in inflated
+    assert float(next(ln for ln in inflated.splitlines()
+                      if ln.startswith("gyroscope_noise_density:")).split()[1]) == \
+        pytest.approx(10 * nd, rel=1e-6)
     assert "gx: white=" in capsys.readouterr().out
 
 

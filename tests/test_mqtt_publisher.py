@@ -435,6 +435,39 @@ def test_tls_with_self_signed_ca(private_mosquitto: MosquittoFactory, tmp_path: 
     asyncio.run(scenario())
 
 
+def test_tls_client_certificate_required(private_mosquitto: MosquittoFactory,
+                                          tmp_path: Path) -> None:
+    """A broker that requires a client certificate (``require_certificate true``) accepts
+    the publisher with ``tls_cert``/``tls_key`` signed by its CA, and refuses it without."""
+    if not _make_tls_files(tmp_path):
+        pytest.skip("no openssl binary to make a test CA")
+    for args in (("req", "-newkey", "rsa:2048", "-nodes", "-subj", "/CN=imubench-client",
+                  "-keyout", "client.key", "-out", "client.csr"),
+                 ("x509", "-req", "-in", "client.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+                  "-CAcreateserial", "-days", "2", "-out", "client.pem")):
+        subprocess.run(["openssl", *args], cwd=tmp_path, check=True, capture_output=True)
+    broker = private_mosquitto(
+        f"cafile {tmp_path / 'ca.pem'}\ncertfile {tmp_path / 'server.pem'}\n"
+        f"keyfile {tmp_path / 'server.key'}\nrequire_certificate true\n"
+    )
+    station = station_name()
+
+    async def scenario() -> None:
+        async with MqttPublisher(
+            "127.0.0.1", broker.port, station, "imu0", tls=True, tls_ca=tmp_path / "ca.pem",
+            tls_cert=tmp_path / "client.pem", tls_key=tmp_path / "client.key",
+        ) as pub:
+            assert await pub.wait_connected(5), pub.last_error
+        async with MqttPublisher(
+            "127.0.0.1", broker.port, station, "imu1", tls=True, tls_ca=tmp_path / "ca.pem",
+            reconnect_min_s=0.1,
+        ) as anon:
+            assert not await anon.wait_connected(1.5)
+            assert anon.published_snapshots == 0
+
+    asyncio.run(scenario())
+
+
 @pytest.mark.parametrize(
     ("station", "sensor", "needle"),
     [

@@ -10,7 +10,7 @@ import pytest
 from imubench.batch import Batch, Gap
 from imubench.cli import main
 from imubench.errors import RecordingError
-from imubench.recording import load_recording, open_writer
+from imubench.recording import InputOptions, load_recording, open_writer
 
 SENS = np.array([8.75e-3] * 3 + [0.061e-3] * 3)
 
@@ -98,15 +98,44 @@ def test_csv_subset_of_columns_and_rate_inference(tmp_path: Path) -> None:
     assert np.isnan(rec.channel("gx")).all()
 
 
+def test_csv_damaged_lines_are_skipped_counted_and_named(tmp_path: Path,
+                                                         caplog: pytest.LogCaptureFixture
+                                                         ) -> None:
+    """An unreadable line (a flipped byte, a wrong field count, a partial last line)
+    costs that line only: skipped, counted in ``damage`` and in the warning, its sample a
+    hole in the indices (lost), never a traceback nor the rest of the file."""
+    rows = [f"{i / 100:.2f},{i * 0.5},{0.01 * i}" for i in range(40)]
+    rows[5] = "0.05,abc,0.05"  # not a number
+    rows[12] = "0.12,6.0"  # a field short
+    p = tmp_path / "bad.csv"
+    p.write_text("t,gx,ax\n" + "\n".join(rows) + "\n0.4,20.")  # + a partial last line
+    rec = load_recording(p, InputOptions(gyro_unit="dps", accel_unit="g"))
+    assert rec.rate_hz == pytest.approx(100.0)
+    assert len(rec) == 38 and rec.lost_samples == 2  # rows 5 and 12 are holes
+    assert rec.damage is not None and rec.damage.startswith("3 data line(s) skipped")
+    assert "first line 7" in rec.damage
+    assert f"{p}:7: damaged: 3 data line(s)" in caplog.text
+    assert rec.channel("gx")[4] == 2.0 and np.isnan(rec.channel("gx")[5])
+
+
 @pytest.mark.parametrize(
     ("text", "where"),
     [
-        ("t,gx\n0,1\n0.1,abc\n", ":3: column 'gx': 'abc' is not a number"),
-        ("t,gx,bogus\n0,1,2\n", ":1: bad CSV header"),
-        ("t,gx\n0,1\n0.1\n", ":3: 1 fields, header has 2"),
+        ("t,gyro_x\n" + "".join(f"{i / 100},{i}\n" for i in range(5)),
+         ": the unit of column 'gyro_x' is not stated; give --units"),
+        ("t,bogus\n0,1\n0.1,2\n", ": no channel found among the columns t, bogus"),
+        ("t,gx\n0,1\n", ": 1 row(s) are too few to infer the rate; give --rate"),
+        ("t,gx\n" + "".join(f"{i * 0.5},{i}\n" for i in range(5)),
+         ": column t steps by 0.5: 2 Hz if in seconds (as imubench writes it), 2000 Hz if "
+         "in ms; give --time-unit ms or --time-unit s"),
+        ("time,gx\n" + "".join(f"{i * 10**11},{i}\n" for i in range(5)),
+         ": cannot tell the unit of the time column (median step 1e+11)"),
+        ("".join(f"{i},{i},{i}\n" for i in range(5)),
+         ": 3 columns without a header; name them with --columns"),
     ],
 )
-def test_csv_errors_name_file_line_and_column(tmp_path: Path, text: str, where: str) -> None:
+def test_text_refusals_name_the_file_and_the_fix(tmp_path: Path, text: str,
+                                                 where: str) -> None:
     p = tmp_path / "bad.csv"
     p.write_text(text)
     with pytest.raises(RecordingError) as err:
@@ -120,7 +149,7 @@ def test_never_overwrites_and_rejects_unknown_suffix(tmp_path: Path) -> None:
     with pytest.raises(RecordingError, match="exists already"):
         open_writer(p, meta())
     with pytest.raises(RecordingError, match="unknown recording suffix"):
-        open_writer(tmp_path / "x.dat", meta())
+        open_writer(tmp_path / "x.xyz", meta())
 
 
 def test_not_a_recording(tmp_path: Path) -> None:

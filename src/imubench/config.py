@@ -24,6 +24,7 @@ from __future__ import annotations
 import datetime as dt
 import os
 import re
+import socket
 import ssl
 import string
 import tomllib
@@ -150,9 +151,11 @@ def check_log_path(value: str) -> None:
     from imubench.recording import recording_kind
 
     try:
-        recording_kind(value)
+        kind = recording_kind(value)
     except ImubenchError:
-        raise ValueError("the suffix must be .imbr (native), .csv or .csv.gz") from None
+        kind = None
+    if kind not in ("native", "csv"):
+        raise ValueError("the suffix must be .imbr (native), .csv or .csv.gz")
 
 
 def _uri_odr_hz(uri: str) -> float | None:
@@ -186,6 +189,40 @@ class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
 
 
+def _check_source_uri(value: str) -> str:
+    from imubench.sources.registry import check_source_uri
+
+    try:  # scheme, parameters, chip, ODR, full scales, model and replay files
+        check_source_uri(value)
+    except SourceError as exc:
+        raise ValueError(str(exc)) from None
+    except OSError as exc:
+        raise ValueError(f"cannot check it: {exc.strerror}") from None
+    return value
+
+
+def _check_calibration_file(value: str | None) -> str | None:
+    if value is None:
+        return None
+    from imubench.calibration import Calibration, CalibrationError
+
+    try:
+        Calibration.load(value)
+    except CalibrationError as exc:
+        raise ValueError(str(exc)) from None
+    return value
+
+
+def _check_topic_level(value: str, what: str) -> str:
+    from imubench.mqtt.errors import MqttError
+    from imubench.mqtt.topics import validate_topic_level
+
+    try:
+        return validate_topic_level(value, what)
+    except MqttError as exc:
+        raise ValueError(str(exc)) from None
+
+
 class SourceConfig(_Section):
     uri: str = Field(
         "sim://lsm6dsl?odr_hz=104&seed=1&clock=wall",
@@ -197,15 +234,7 @@ class SourceConfig(_Section):
     @field_validator("uri")
     @classmethod
     def _uri(cls, value: str) -> str:
-        from imubench.sources.registry import check_source_uri
-
-        try:  # scheme, parameters, chip, ODR, full scales, model and replay files
-            check_source_uri(value)
-        except SourceError as exc:
-            raise ValueError(str(exc)) from None
-        except OSError as exc:
-            raise ValueError(f"cannot check it: {exc.strerror}") from None
-        return value
+        return _check_source_uri(value)
 
 
 class LogConfig(_Section):
@@ -238,15 +267,41 @@ class CalibrationConfig(_Section):
     @field_validator("file")
     @classmethod
     def _file(cls, value: str | None) -> str | None:
-        if value is None:
-            return None
-        from imubench.calibration import Calibration, CalibrationError
+        return _check_calibration_file(value)
 
-        try:
-            Calibration.load(value)
-        except CalibrationError as exc:
-            raise ValueError(str(exc)) from None
-        return value
+
+class SensorConfig(_Section):
+    """One sensor of a daemon that reads several (``[[sensors]]``)."""
+
+    name: str = Field(description="Sensor name, its MQTT topic level and the `{sensor}` of "
+                      "log.path and allan.state_path (unit: -)")
+    uri: str = Field(description="Its data source URI, as `source.uri` (unit: -)")
+    calibration: str | None = Field(
+        None, description="Its calibration file, as `calibration.file` (unit: path)")
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, value: str) -> str:
+        return _check_topic_level(value, "sensors.name")
+
+    @field_validator("uri")
+    @classmethod
+    def _uri(cls, value: str) -> str:
+        return _check_source_uri(value)
+
+    @field_validator("calibration")
+    @classmethod
+    def _calibration(cls, value: str | None) -> str | None:
+        return _check_calibration_file(value)
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """What the daemon runs for one sensor: its name, source URI and calibration file."""
+
+    name: str
+    uri: str
+    calibration: str | None
 
 
 StatName = Literal["oadev", "adev", "mdev", "tdev", "hdev", "ohdev", "stdev", "ostdev"]
@@ -275,7 +330,8 @@ class AllanConfig(_Section):
     state_path: str | None = Field(
         None,
         description="Save the engine state here on exit and resume from it on start "
-        "(unit: path); empty for none",
+        "(unit: path); empty for none; `{sensor}` is replaced by the sensor name (needed "
+        "with several `[[sensors]]`)",
     )
 
     @field_validator("stats", mode="before")
@@ -322,8 +378,15 @@ class AllanConfig(_Section):
     def _state_path(cls, value: str | None) -> str | None:
         if not value:
             return None
-        check_creatable_file(Path(value))
+        if set(re.findall(r"{(\w*)}", value)) - {"sensor"}:
+            raise ValueError("the only placeholder is {sensor}")
+        check_creatable_file(Path(value.replace("{sensor}", "imu0")))
         return value
+
+    def state_file(self, sensor: str) -> Path | None:
+        """``state_path`` for ``sensor`` (None when unset)."""
+        return None if not self.state_path else Path(
+            self.state_path.replace("{sensor}", sensor))
 
     @property
     def tau_spec(self) -> str | int | list[float]:
@@ -346,7 +409,12 @@ class MqttConfig(_Section):
         "(unit: TCP port)",
     )
     station: str = Field("bench1", description="Station name, one MQTT topic level (unit: -)")
-    sensor: str = Field("imu0", description="Sensor name, one MQTT topic level (unit: -)")
+    sensor: str = Field("imu0", description="Sensor name, one MQTT topic level (unit: -); "
+                        "with `[[sensors]]` each sensor has its own `name` instead")
+    node: str | None = Field(
+        None, description="Name of this daemon when it reads several `[[sensors]]` over one "
+        "broker connection: its status topic `imubench/<station>/node/<node>/status` carries "
+        "the connection's last will (unit: -); default: the host name")
     publish_interval_s: float = Field(
         1.0, ge=0.01, le=86400, description="Interval between Allan snapshots (unit: s)"
     )
@@ -357,19 +425,35 @@ class MqttConfig(_Section):
     tls_ca: str | None = Field(
         None, description="CA certificate file (PEM) for `mqtts://` (unit: path)"
     )
-    qos: int = Field(0, ge=0, le=2, description="QoS of the snapshots (unit: -)")
+    tls_cert: str | None = Field(
+        None, description="Client certificate file (PEM) for brokers that require one, with "
+        "`tls_key` (unit: path)")
+    tls_key: str | None = Field(
+        None, description="Private key of `tls_cert` (PEM, unencrypted) (unit: path)")
+    qos: int = Field(
+        1, ge=0, le=2, description="QoS of the snapshots (unit: -); 1 (default): a snapshot "
+        "the broker did not acknowledge is sent again after reconnecting, none is lost "
+        "within `backlog_snapshots`")
+    backlog_snapshots: int = Field(
+        120, ge=1, le=100_000,
+        description="Snapshots per sensor kept while the broker is unreachable, published "
+        "when it is back (unit: snapshots); older ones are dropped and counted "
+        "(`health.mqtt.dropped_snapshots`)")
     keepalive_s: int = Field(30, ge=5, le=3600, description="MQTT keep-alive (unit: s)")
 
-    @field_validator("station", "sensor")
+    @field_validator("station", "sensor", "node")
     @classmethod
-    def _topic_level(cls, value: str, info: ValidationInfo) -> str:
-        from imubench.mqtt.errors import MqttError
-        from imubench.mqtt.topics import validate_topic_level
+    def _topic_level(cls, value: str | None, info: ValidationInfo) -> str | None:
+        return None if value is None else _check_topic_level(value, f"mqtt.{info.field_name}")
 
-        try:
-            return validate_topic_level(value, f"mqtt.{info.field_name}")
-        except MqttError as exc:
-            raise ValueError(str(exc)) from None
+    @property
+    def node_name(self) -> str:
+        """``node``, else this host's name (with ``/``, ``+``, ``#`` replaced)."""
+        from imubench.mqtt.topics import MAX_LEVEL_LENGTH
+
+        if self.node is not None:
+            return self.node
+        return re.sub(r"[/+#\s]", "_", socket.gethostname())[:MAX_LEVEL_LENGTH] or "node"
 
     @field_validator("broker")
     @classmethod
@@ -383,6 +467,26 @@ class MqttConfig(_Section):
             except MqttError as exc:
                 raise ValueError(str(exc)) from None
         return value
+
+    @field_validator("tls_cert", "tls_key")
+    @classmethod
+    def _tls_client_file(cls, value: str | None) -> str | None:
+        if not value:
+            return None
+        check_readable_file(Path(value))
+        return value
+
+    @model_validator(mode="after")
+    def _tls_pair(self) -> MqttConfig:
+        if bool(self.tls_cert) != bool(self.tls_key):
+            raise ValueError("mqtt.tls_cert and mqtt.tls_key go together")
+        if self.tls_cert:
+            try:
+                ssl.create_default_context().load_cert_chain(self.tls_cert, self.tls_key)
+            except (ssl.SSLError, OSError) as exc:
+                raise ValueError(f"mqtt.tls_cert / tls_key: not a PEM certificate and its "
+                                 f"key ({exc})") from None
+        return self
 
     @field_validator("tls_ca")
     @classmethod
@@ -467,6 +571,41 @@ class Config(BaseSettings):
     run: RunConfig = Field(default_factory=lambda: RunConfig())
     calibration: CalibrationConfig = Field(default_factory=lambda: CalibrationConfig())
     web: WebConfig = Field(default_factory=lambda: WebConfig())
+    sensors: list[SensorConfig] = Field(
+        default_factory=list,
+        description="Several sensors in one daemon (`[[sensors]]` tables of name, uri, "
+        "calibration), each with its own pipeline, recording, engine state and topics over "
+        "one broker connection; replaces `[source]`, `mqtt.sensor` and `[calibration]`")
+
+    @model_validator(mode="after")
+    def _sensors(self) -> Config:
+        if not self.sensors:
+            return self
+        names = [s.name for s in self.sensors]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"sensors: name {', '.join(twice)} appears more than once")
+        given = [f"[{k}]" for k in ("source", "calibration") if k in self.model_fields_set]
+        if "sensor" in self.mqtt.model_fields_set:
+            given.append("mqtt.sensor")
+        if given:
+            raise ValueError(f"sensors: [[sensors]] replaces {' and '.join(given)}; give "
+                             "each sensor's uri, name and calibration in its table")
+        if len(self.sensors) > 1:
+            if self.log.enabled and "{sensor}" not in self.log.path:
+                raise ValueError("sensors: with several sensors log.path needs {sensor}, "
+                                 f"or their recordings collide (log.path = {self.log.path!r})")
+            if self.allan.state_path and "{sensor}" not in self.allan.state_path:
+                raise ValueError("sensors: with several sensors allan.state_path needs "
+                                 "{sensor}, or their engine states collide")
+        return self
+
+    def sensor_specs(self) -> list[SensorSpec]:
+        """The sensors this daemon runs: the ``[[sensors]]`` tables, else one sensor from
+        ``[source]``, ``mqtt.sensor`` and ``[calibration]``."""
+        if self.sensors:
+            return [SensorSpec(s.name, s.uri, s.calibration) for s in self.sensors]
+        return [SensorSpec(self.mqtt.sensor, self.source.uri, self.calibration.file)]
 
     @classmethod
     def settings_customise_sources(
@@ -499,44 +638,59 @@ class Problem:
 
 
 def cross_checks(cfg: Config) -> list[Problem]:
-    """What no single field can check: memory at the source's ODR, the taus against the
-    ODR and ``max_tau_s``, ``log.path``'s directory, TLS files against the broker."""
+    """What no single field can check: memory at the sources' ODRs (all sensors together),
+    the taus against each ODR and ``max_tau_s``, ``log.path``'s directory, TLS files
+    against the broker."""
     problems: list[Problem] = []
-    odr = _uri_odr_hz(cfg.source.uri)
-    odr_known = odr is not None
-    rate = odr if odr is not None else _fastest_odr_hz()
-    ring = cfg.buffer.capacity_s * rate * RING_BYTES_PER_SAMPLE
+    specs = cfg.sensor_specs()
+    several = bool(cfg.sensors)
+    odrs = [_uri_odr_hz(spec.uri) for spec in specs]
+    rates = [odr if odr is not None else _fastest_odr_hz() for odr in odrs]
+    ring = sum(cfg.buffer.capacity_s * rate * RING_BYTES_PER_SAMPLE for rate in rates)
     engine = 0.0
     if cfg.allan.memory == "exact":
-        engine = (3 * cfg.allan.max_tau_s * rate + 1) * 6 * 8
+        engine = sum((3 * cfg.allan.max_tau_s * rate + 1) * 6 * 8 for rate in rates)
     budget = MEMORY_FRACTION * physical_memory_bytes()
     if ring + engine > budget:
-        at = f"{rate:g} Hz" + ("" if odr_known else " (the fastest ODR; the URI states none)")
-        room_s = max(0.0, budget - engine) / (rate * RING_BYTES_PER_SAMPLE)
+        at = ", ".join(f"{rate:g} Hz" for rate in rates) + (
+            "" if None not in odrs else " (the fastest ODR where the URI states none)")
+        per_s = sum(rates) * RING_BYTES_PER_SAMPLE
+        room_s = max(0.0, budget - engine) / per_s
         problems.append(Problem(
             ("buffer", "capacity_s"), cfg.buffer.capacity_s,
-            f"the ring buffer needs {_size(ring)}"
+            f"the ring buffer{'s need' if several else ' needs'} {_size(ring)}"
             + (f" and the exact-memory engine {_size(engine)}" if engine else "")
             + f" at {at}; at most {MEMORY_FRACTION:.0%} of the physical memory "
             f"({_size(budget)}) may be used: capacity_s <= {room_s:.4g}"
             + ("" if room_s > 0 else " (use allan.memory = 'bounded')"),
         ))
-    if odr is not None:
-        from imubench.stats.taus import streaming_factors
+    from imubench.stats.taus import streaming_factors
 
+    for i, (spec, odr) in enumerate(zip(specs, odrs, strict=True)):
+        if odr is None:
+            continue
         try:  # the streaming engine's own rule, without loading its kernels
             streaming_factors(cfg.allan.stats, cfg.allan.tau_spec, odr, cfg.allan.max_tau_s)
         except ImubenchError as exc:
             problems.append(Problem(("allan", "taus"), cfg.allan.taus,
                                     f"{exc} (allan.max_tau_s = {cfg.allan.max_tau_s:g} s, "
-                                    f"ODR {odr:g} Hz)"))
+                                    f"ODR {odr:g} Hz"
+                                    + (f" of sensors[{i}] {spec.name!r})" if several
+                                       else ")")))
     if cfg.log.enabled:
-        sample = cfg.log.path.format(station=cfg.mqtt.station, sensor=cfg.mqtt.sensor,
-                                     start=dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ"))
-        try:
-            check_creatable_file(Path(sample))
-        except ValueError as exc:
-            problems.append(Problem(("log", "path"), cfg.log.path, str(exc)))
+        start = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+        for spec in specs:
+            sample = cfg.log.path.format(station=cfg.mqtt.station, sensor=spec.name,
+                                         start=start)
+            try:
+                check_creatable_file(Path(sample))
+            except ValueError as exc:
+                problems.append(Problem(("log", "path"), cfg.log.path, str(exc)))
+                break
+    if cfg.mqtt.tls_cert and not cfg.mqtt.broker.startswith("mqtts://"):
+        problems.append(Problem(("mqtt", "tls_cert"), cfg.mqtt.tls_cert,
+                                f"only used with an mqtts:// broker; mqtt.broker is "
+                                f"{cfg.mqtt.broker!r}"))
     if cfg.mqtt.tls_ca and not cfg.mqtt.broker.startswith("mqtts://"):
         problems.append(Problem(("mqtt", "tls_ca"), cfg.mqtt.tls_ca,
                                 f"only used with an mqtts:// broker; mqtt.broker is "
@@ -555,19 +709,30 @@ def _size(n_bytes: float) -> str:
 
 
 def _find_line(text: str, loc: tuple[Any, ...]) -> int | None:
-    """Best-effort 1-based line of key path ``loc`` in TOML ``text``."""
+    """Best-effort 1-based line of key path ``loc`` in TOML ``text`` (``("sensors", 1,
+    "uri")`` is the ``uri`` of the second ``[[sensors]]`` table)."""
     keys = [str(k) for k in loc if not isinstance(k, int)]
     if not keys:
         return None
+    index = next((k for k in loc if isinstance(k, int)), None)
     section, key = keys[:-1], keys[-1]
     current: list[str] = []
+    seen: dict[str, int] = {}  # tables of an array seen so far, by name
+    current_index: int | None = None
     for lineno, line in enumerate(text.splitlines(), 1):
         stripped = line.strip()
-        m = re.fullmatch(r"\[([^\[\]]+)\]\s*(#.*)?", stripped)
+        m = re.fullmatch(r"(\[\[?)([^\[\]]+)\]\]?\s*(#.*)?", stripped)
         if m:
-            current = [p.strip().strip('"') for p in m.group(1).split(".")]
+            current = [p.strip().strip('"') for p in m.group(2).split(".")]
+            current_index = None
+            if m.group(1) == "[[":
+                name = ".".join(current)
+                current_index = seen[name] = seen.get(name, -1) + 1
+                if not section and current == keys and current_index == index:
+                    return lineno  # the table itself (a check across its keys)
             continue
-        if current == section and re.match(rf'"?{re.escape(key)}"?\s*=', stripped):
+        if (current == section and (index is None or current_index == index)
+                and re.match(rf'"?{re.escape(key)}"?\s*=', stripped)):
             return lineno
         if not current and section and re.match(
             rf'{re.escape(".".join(section))}\s*\.\s*"?{re.escape(key)}"?\s*=', stripped
@@ -679,14 +844,23 @@ def load_config(path: str | Path | Traversable | None) -> Config:
     return cfg
 
 
+def config_sections() -> list[tuple[str, type[BaseModel]]]:
+    """Every table of the configuration: ``(name, model)``, the ``[[sensors]]`` tables
+    as ``sensors[]``."""
+    sections: list[tuple[str, type[BaseModel]]] = [
+        (name, f.annotation) for name, f in Config.model_fields.items()
+        if isinstance(f.annotation, type) and issubclass(f.annotation, BaseModel)]
+    sections.append(("sensors[]", SensorConfig))
+    return sections
+
+
 def reference_markdown() -> str:
     """The configuration reference (every key, default, unit, description) as Markdown."""
     rows = ["| key | default | description |", "|---|---|---|"]
-    for section_name, section_field in Config.model_fields.items():
-        section = section_field.annotation
-        assert isinstance(section, type) and issubclass(section, BaseModel)
+    for section_name, section in config_sections():
         for key, field in section.model_fields.items():
             default = field.get_default(call_default_factory=True)
-            shown = "(none)" if default is None else f"`{default!r}`"
+            shown = ("(required)" if field.is_required() else "(none)" if default is None
+                     else f"`{default!r}`")
             rows.append(f"| `{section_name}.{key}` | {shown} | {field.description} |")
     return "\n".join(rows)

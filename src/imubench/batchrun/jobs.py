@@ -38,6 +38,7 @@ from imubench.batchrun.runner import (
     run_recordings,
 )
 from imubench.commands import write_json
+from imubench.recording.options import InputOptions, input_options
 
 
 # -- common -------------------------------------------------------------------------------
@@ -106,11 +107,12 @@ def _run(label: str, args: argparse.Namespace, spec: Path, plan: Plan,
 
 
 # -- allan --------------------------------------------------------------------------------
-def allan_plan(column: str | None, path: Path, name: str) -> list[str]:
+def allan_plan(column: str | None, options: InputOptions, path: Path, name: str
+               ) -> list[str]:
     """``--column`` if given (checked), else every gyro/accel channel with data."""
     from imubench.recording import load_recording
 
-    chans = [c for c in load_recording(path).channels if c != "temp"]
+    chans = [c for c in load_recording(path, options).channels if c != "temp"]
     if column is not None:
         if column not in [*chans, "temp"]:
             raise BatchError(f"{name}: no channel {column!r}; channels are {chans}")
@@ -125,7 +127,7 @@ def allan_work(args: argparse.Namespace, path: Path, name: str, channel: str
     """``imubench allan PATH --column CHANNEL --json``'s document."""
     from imubench.commands.allan import analyse, load_input
 
-    data, rate = load_input(path, channel)
+    data, rate = load_input(path, channel, input_options(args))
     return dict(analyse(args, data, rate).to_dict())
 
 
@@ -138,7 +140,8 @@ def allan_rows(rec: Path, channel: str, doc: dict[str, Any]) -> Iterable[dict[st
 
 def run_allan_batch(args: argparse.Namespace) -> int:
     out_dir = _check_options(args, (("json", "--json"),))
-    outcomes = _run("allan", args, args.input, functools.partial(allan_plan, args.column),
+    outcomes = _run("allan", args, args.input,
+                    functools.partial(allan_plan, args.column, input_options(args)),
                     functools.partial(allan_work, args))
     rows: list[dict[str, Any]] = []
     for o in outcomes:
@@ -152,24 +155,26 @@ def run_allan_batch(args: argparse.Namespace) -> int:
 
 
 # -- fit ----------------------------------------------------------------------------------
-def fit_plan(channels: str | None, path: Path, name: str) -> list[str]:
+def fit_plan(channels: str | None, options: InputOptions, path: Path, name: str
+             ) -> list[str]:
     """The channels ``imubench fit`` fits, in its order."""
     from imubench.noisefit.errors import FitError
     from imubench.noisefit.recording_fit import parse_channels
     from imubench.recording import load_recording
 
-    chans = parse_channels(channels, load_recording(path).channels)
+    chans = parse_channels(channels, load_recording(path, options).channels)
     if not chans:
         raise FitError(f"{name}: no gyro or accel channel with data to fit")
     return chans
 
 
-def fit_work(terms: str, method: str, path: Path, name: str, channel: str) -> Any:
+def fit_work(terms: str, method: str, options: InputOptions, path: Path, name: str,
+             channel: str) -> Any:
     """``fit_recording``'s work for one channel (a RecordingFit with one fit)."""
     from imubench.noisefit.recording_fit import fit_loaded
     from imubench.recording import load_recording
 
-    return fit_loaded(load_recording(path), name, channels=[channel], terms=terms,
+    return fit_loaded(load_recording(path, options), name, channels=[channel], terms=terms,
                       method=method)
 
 
@@ -191,8 +196,10 @@ def run_fit_batch(args: argparse.Namespace) -> int:
 
     out_dir = _check_options(args, (("output", "-o"), ("json", "--json"),
                                     ("kalibr", "--kalibr")))
-    outcomes = _run("fit", args, args.recording, functools.partial(fit_plan, args.channels),
-                    functools.partial(fit_work, args.terms, args.method))
+    options = input_options(args)
+    outcomes = _run("fit", args, args.recording,
+                    functools.partial(fit_plan, args.channels, options),
+                    functools.partial(fit_work, args.terms, args.method, options))
     rows: list[dict[str, Any]] = []
     for o in outcomes:
         done = [ch for ch in o.channels if ch in o.results]
@@ -210,11 +217,12 @@ def run_fit_batch(args: argparse.Namespace) -> int:
 
 
 # -- gap ----------------------------------------------------------------------------------
-def gap_plan(channels: list[str] | None, path: Path, name: str) -> list[str]:
+def gap_plan(channels: list[str] | None, options: InputOptions, path: Path, name: str
+             ) -> list[str]:
     from imubench.gap.recording import pick_channels
     from imubench.recording import load_recording
 
-    return pick_channels(load_recording(path), channels)
+    return pick_channels(load_recording(path, options), channels)
 
 
 def gap_work(args: argparse.Namespace, path: Path, name: str, channel: str
@@ -226,7 +234,7 @@ def gap_work(args: argparse.Namespace, path: Path, name: str, channel: str
     from imubench.gap import diagnose_recording
     from imubench.recording import load_recording
 
-    rec = dataclasses.replace(load_recording(path), path=Path(name))
+    rec = dataclasses.replace(load_recording(path, input_options(args)), path=Path(name))
     out, diags = diagnose_recording(rec, load_model(args.model), [channel],
                                     gap_options(args), [],
                                     effects_requested=args.effects is not None)
@@ -243,7 +251,8 @@ def gap_rows(rec: Path, doc: dict[str, Any]) -> Iterable[dict[str, Any]]:
 
 def run_gap_batch(args: argparse.Namespace) -> int:
     out_dir = _check_options(args, (("json", "--json"), ("holdout", "--holdout")))
-    outcomes = _run("gap", args, args.real, functools.partial(gap_plan, args.channels),
+    outcomes = _run("gap", args, args.real,
+                    functools.partial(gap_plan, args.channels, input_options(args)),
                     functools.partial(gap_work, args))
     rows: list[dict[str, Any]] = []
     for o in outcomes:

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import norm
+from scipy.special import ndtri  # the normal quantile (scipy.stats' norm.ppf, lighter)
 
 from imubench.calibration.errors import CalibrationError
 
@@ -47,7 +47,7 @@ class LinearFit:
 
     def ci(self, confidence: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) of each parameter: ``params -+ z stderr`` (normal quantile)."""
-        z = float(norm.ppf(0.5 + confidence / 2.0))
+        z = float(ndtri(0.5 + confidence / 2.0))
         return self.params - z * self.stderr, self.params + z * self.stderr
 
 

@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import t as student_t
+from scipy.special import stdtrit  # Student's t quantile stdtrit(df, p) = t.ppf(p, df)
 
 from imubench import stats
 from imubench.calibration.errors import CalibrationError
@@ -57,9 +57,9 @@ class MeanEstimate:
 
     def ci(self, confidence: float = 0.95) -> tuple[float, float]:
         """Two-sided interval ``mean -+ t_{(1+c)/2}(edf) stderr``."""
-        q = float(student_t.ppf(0.5 + confidence / 2.0, self.edf)) if math.isfinite(
+        q = float(stdtrit(self.edf, 0.5 + confidence / 2.0)) if math.isfinite(
             self.edf
-        ) else float(student_t.ppf(0.5 + confidence / 2.0, 1e9))
+        ) else float(stdtrit(1e9, 0.5 + confidence / 2.0))
         return self.mean - q * self.stderr, self.mean + q * self.stderr
 
 

@@ -1,15 +1,17 @@
-"""``imubench allan``: one Allan-family statistic of a recording or a one-column file.
+"""``imubench allan``: one Allan-family statistic of a recording or a text table.
 
-INPUT is a recording (``.imbr`` native or ``.csv``; pick the channel with ``--column``) or
-a one-column text file (one value per line, ``#`` comments, optionally ``.gz``). Prints a
-table, or JSON with ``--json PATH`` (``-`` for stdout). Exit status 0 on success, 2 on an
-imubench error (the message says what and where).
+INPUT is a recording (``.imbr`` native, ``.csv``; pick the channel with ``--column``), a
+CSV from elsewhere (``--columns``, ``--units``, ``--time-unit``: docs/recordings.md) or a
+Stable32 / allantools text file (one value per line, or time tag and value; ``#``
+comments; ``.gz`` ok; without a rate its tau is in samples). Prints a table, or JSON with
+``--json PATH`` (``-`` for stdout). Exit status 0 on success, 2 on an imubench error (the
+message says what and where).
 """
 
 from __future__ import annotations
 
 import argparse
-import gzip
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +21,7 @@ from imubench.batchrun import add_batch_options, is_batch
 from imubench.commands import write_json
 from imubench.errors import RecordingError
 from imubench.progress import progress
+from imubench.recording.options import InputOptions, add_input_arguments, input_options
 from imubench.stats import STATISTICS, compute
 from imubench.stats.taus import parse_taus
 
@@ -30,7 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("input", type=Path, help="recording (.imbr/.csv) or one-column text (.gz ok)")
+    p.add_argument("input", type=Path,
+                   help="recording (.imbr/.csv), CSV from elsewhere or Stable32 text (.gz ok)")
     p.add_argument("--stat", required=True, choices=STATISTICS, help="statistic (deviation)")
     p.add_argument(
         "--data-type",
@@ -42,7 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--rate",
         type=float,
         default=None,
-        help="sample rate in Hz (default: the recording's, or 1.0 for text)",
+        help="sample rate in Hz (default: the recording's; 1 Hz, tau in samples, for a "
+        "text file that states none)",
     )
     p.add_argument(
         "--taus",
@@ -71,49 +76,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--remove-drift", action="store_true", help="remove linear frequency drift first (reported)"
     )
     p.add_argument("--json", default=None, metavar="PATH|-", help="write JSON here")
+    add_input_arguments(p, rate=False)
     add_batch_options(p)
     p.set_defaults(func=run)
 
 
-def read_column_text(path: Path) -> np.ndarray:
-    """One value per line, '#' comments and blank lines ignored, 'nan' marks a gap; .gz ok."""
-    opener: Any = gzip.open if path.suffix == ".gz" else open
-    values: list[float] = []
-    try:
-        with opener(path, "rt", encoding="utf-8") as fh:
-            for lineno, line in enumerate(fh, 1):
-                s = line.split("#", 1)[0].strip()
-                if not s:
-                    continue
-                try:
-                    values.append(float(s.split()[0]))
-                except ValueError:
-                    raise RecordingError(
-                        f"{path}:{lineno}: {s!r} is not a number; one value per line expected"
-                    ) from None
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot read ({exc})") from exc
-    if not values:
-        raise RecordingError(f"{path}: no values found")
-    return np.asarray(values, dtype=np.float64)
+def load_input(path: Path, column: str | None, options: InputOptions
+               ) -> tuple[np.ndarray, float]:
+    """(data, rate_hz) of one channel of a recording or a text table (the one reader,
+    :func:`imubench.recording.load_recording`; a file that states no rate and has no time
+    column is read at 1 Hz, tau in samples, as Stable32 and allantools do)."""
+    from imubench.recording import load_recording
 
-
-def load_input(path: Path, column: str | None) -> tuple[np.ndarray, float | None]:
-    """(data, rate_hz or None) from a recording or a one-column text file."""
-    name = path.name.lower()
-    if name.endswith((".imbr", ".csv")):
-        from imubench.recording import load_recording  # lazily: owned by the lead
-
-        rec = load_recording(path)
-        chans = list(rec.channels)
-        if column is None:
-            if len(chans) != 1:
-                raise RecordingError(f"{path}: pick a channel with --column (one of {chans})")
-            column = chans[0]
-        if column not in chans:
-            raise RecordingError(f"{path}: no channel {column!r}; channels are {chans}")
-        return np.asarray(rec.channel(column), dtype=np.float64), float(rec.rate_hz)
-    return read_column_text(path), None
+    rec = load_recording(path, dataclasses.replace(options, default_rate_hz=1.0))
+    chans = list(rec.channels)
+    if column is None:
+        if len(chans) != 1:
+            raise RecordingError(f"{path}: pick a channel with --column (one of {chans})")
+        column = chans[0]
+    if column not in chans:
+        raise RecordingError(f"{path}: no channel {column!r}; channels are {chans}")
+    return np.asarray(rec.channel(column), dtype=np.float64), float(rec.rate_hz)
 
 
 def format_table(res: Any) -> str:
@@ -158,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         from imubench.batchrun.jobs import run_allan_batch
 
         return run_allan_batch(args)
-    data, rec_rate = load_input(args.input, args.column)
+    data, rec_rate = load_input(args.input, args.column, input_options(args))
     with progress(100, args.stat, unit="%") as bar:
         res = analyse(args, data, rec_rate, bar.fraction)
     if args.json is None:

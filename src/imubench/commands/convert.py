@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from imubench.recording import convert
+from imubench.recording.options import add_input_arguments, input_options
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -14,14 +15,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(.imbr native, .csv or .csv.gz CSV). Metadata, gaps and raw counts are kept "
         "where the target format can hold them.",
     )
-    p.add_argument("input", metavar="IN", help="recording to read (.imbr, .csv, .csv.gz)")
+    p.add_argument("input", metavar="IN",
+                   help="recording to read (.imbr, .csv, CSV from elsewhere, text; .gz ok)")
     p.add_argument("output", metavar="OUT",
                    help="recording to write (.imbr, .csv, .csv.gz); never overwritten")
+    add_input_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = convert(args.input, args.output)
+    rec = convert(args.input, args.output, input_options(args))
     note = f"; input was damaged: {rec.damage}" if rec.damage else ""
     print(f"{args.input} -> {args.output}: {len(rec)} samples, {len(rec.gaps)} gaps{note}")
     return 0

@@ -18,6 +18,7 @@ from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
 from imubench.noisefit.units import kalibr_yaml
+from imubench.recording.options import add_input_arguments, input_options
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,7 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("recording", type=Path, help="recording (.imbr or .csv)")
+    p.add_argument("recording", type=Path,
+                   help="recording (.imbr, .csv, CSV from elsewhere, text; docs/recordings.md)")
     p.add_argument("--channels", default=None,
                    help="channels to fit, e.g. gx,gy,gz (default: every channel present)")
     p.add_argument("--terms", default="auto",
@@ -39,8 +41,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, default=None, metavar="MODEL.toml",
                    help="model file to write (required for one recording)")
     p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")
+    p.add_argument("--kalibr-inflate", type=float, default=1.0, metavar="FACTOR",
+                   help="multiply every Kalibr noise value by FACTOR >= 1 (a safety "
+                   "factor for real-world use; docs/noise-fit.md)")
     p.add_argument("--kalibr", type=Path, default=None, metavar="imu.yaml",
                    help="also write Kalibr noise parameters")
+    add_input_arguments(p)
     add_batch_options(p)
     p.set_defaults(func=run)
 
@@ -69,13 +75,18 @@ def run(args: argparse.Namespace) -> int:
                        "writes into --out-dir)")
     try:
         result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
-                               method=args.method)
+                               method=args.method, options=input_options(args))
         model = result.noise_model()
         args.output.write_text(model.to_toml(), encoding="utf-8")
         if args.json is not None:
             write_json(result.to_dict(), args.json)
         if args.kalibr is not None:
-            args.kalibr.write_text(kalibr_yaml(result.to_dict()["kalibr"]), encoding="utf-8")
+            kalibr = result.kalibr(args.kalibr_inflate)
+            args.kalibr.write_text(kalibr_yaml(kalibr), encoding="utf-8")
+            for key in kalibr["upper_limits"]:
+                print(f"imubench fit: {args.kalibr}: {key} was not detected; wrote its upper "
+                      f"95 % confidence limit {kalibr[key]:.3e} (marked in the file), not "
+                      "zero", file=sys.stderr)
         if args.json != "-":
             print(format_summary(result))
     except OSError as exc:

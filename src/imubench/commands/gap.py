@@ -24,6 +24,7 @@ from imubench.gap.errors import GapError
 from imubench.gap.explain import explain_channel
 from imubench.progress import progress
 from imubench.recording import load_recording
+from imubench.recording.options import add_input_arguments, input_options
 
 
 def _fraction(text: str) -> float:
@@ -65,6 +66,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="write PNG/SVG plots and index.html here")
     p.add_argument("--json", default=None, metavar="OUT|-",
                    help="write the JSON here (required for one recording)")
+    add_input_arguments(p)
     add_batch_options(p)
     p.set_defaults(func=run)
 
@@ -85,8 +87,9 @@ def run(args: argparse.Namespace) -> int:
                        "writes into --out-dir)")
     options = gap_options(args)
     model = load_model(args.model)
-    rec = load_recording(args.real)
-    reps = [load_recording(p) for p in args.holdout]
+    reading = input_options(args)
+    rec = load_recording(args.real, reading)
+    reps = [load_recording(p, reading) for p in args.holdout]
 
     n_channels = len(args.channels) if args.channels else len(rec.channels)
     with progress(n_channels, "gap", unit="channel") as bar:

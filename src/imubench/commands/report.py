@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from imubench.noisefit.fit import METHODS
+from imubench.recording.options import add_input_arguments, input_options
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -23,6 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--terms", default="auto", help="as for imubench fit")
     p.add_argument("--method", choices=METHODS, default="wls", help="as for imubench fit")
+    add_input_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -30,7 +32,8 @@ def run(args: argparse.Namespace) -> int:
     from imubench.noisefit.report import write_report
 
     try:
-        files = write_report(args.recording, args.out, terms=args.terms, method=args.method)
+        files = write_report(args.recording, args.out, terms=args.terms, method=args.method,
+                             options=input_options(args))
     except OSError as exc:
         print(f"imubench report: error: {exc}", file=sys.stderr)
         return 2

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from imubench.batch import Batch
+from imubench.recording.options import InputOptions, add_input_arguments, input_options
 from imubench.tilt.angles import FORMS, block_average, tilt
 from imubench.tilt.errors import TiltError
 
@@ -54,15 +55,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="print this error budget instead of computing angles")
     p.add_argument("--json", type=Path, default=None, metavar="PATH",
                    help="write the angles (or the budget) as JSON here (- for stdout)")
+    add_input_arguments(p)
     p.set_defaults(func=run)
 
 
-def _read_source(text: str, duration_s: float | None) -> tuple[Batch, float, dict[str, Any]]:
-    """(batch, odr_hz, metadata) of a recording or a live source."""
+def _read_source(text: str, duration_s: float | None, options: InputOptions
+                 ) -> tuple[Batch, float, dict[str, Any]]:
+    """(batch, odr_hz, metadata) of a recording (read with ``options``) or a live
+    source."""
     if "://" not in text:
         from imubench.recording import load_recording
 
-        rec = load_recording(text)
+        rec = load_recording(text, options)
         return rec.batch(), rec.rate_hz, dict(rec.metadata)
     if duration_s is None or duration_s <= 0:
         raise TiltError("a live source needs --duration-s > 0")
@@ -126,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.source is None:
         raise TiltError("give SOURCE (a recording or a URI) or --budget FILE")
-    batch, odr, meta = _read_source(args.source, args.duration_s)
+    batch, odr, meta = _read_source(args.source, args.duration_s, input_options(args))
     calibration = None
     if args.calibration is not None:
         from imubench.calibration import Calibration

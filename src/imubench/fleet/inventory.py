@@ -8,6 +8,10 @@
   sensor is dropped from the inventory);
 - ``allan``: the JSON snapshot (``statistics.<stat>.<channel>`` with ``tau_s``, ``dev``,
   ``ci_low``, ``ci_high``, ``units``; ``samples``, ``lost_samples``, ...);
+- ``imubench/<station>/node/<node>/status`` (retained): the status of a daemon that
+  publishes several sensors over one connection (it carries that connection's last
+  will); a sensor whose status names a node (``"node": NAME``) is offline while that
+  node is;
 - ``jig``: a JSON result ``{"verdict": ..., "measurements": [{"name", "value", "unit",
   "low", "high", "ci_low", "ci_high", "verdict"}]}``.
 
@@ -31,13 +35,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from imubench.fleet.readouts import sensor_readouts
-from imubench.mqtt.topics import TOPIC_ROOT
+from imubench.mqtt.topics import NODE_LEVEL, TOPIC_ROOT
 
 log = logging.getLogger(__name__)
 
 TOPIC_KINDS: tuple[str, ...] = ("status", "allan", "jig")
-SUBSCRIPTIONS: tuple[str, ...] = tuple(f"{TOPIC_ROOT}/+/+/{k}" for k in TOPIC_KINDS)
-"""Topic filters of the fleet view: every station's and sensor's status, allan, jig."""
+SUBSCRIPTIONS: tuple[str, ...] = (
+    *(f"{TOPIC_ROOT}/+/+/{k}" for k in TOPIC_KINDS), f"{TOPIC_ROOT}/+/{NODE_LEVEL}/+/status")
+"""Topic filters of the fleet view: every station's and sensor's status, allan, jig, and
+the status of every node (daemon of several sensors)."""
 
 HEALTH_FIELDS: tuple[tuple[str, str, str, tuple[str, ...]], ...] = (
     ("phase", "phase", "", ("health.phase",)),
@@ -85,6 +91,9 @@ class SensorState:
     sensor: str
     online: bool | None = None
     """From the retained status: True online, False offline, None none seen."""
+    node_online: bool | None = None
+    """From the retained status of the node named in the status (None: no node, or its
+    status not seen); False makes the sensor offline."""
     status: dict[str, Any] = field(default_factory=dict)
     offline_at: str | None = None
     allan: dict[str, Any] | None = None
@@ -119,8 +128,14 @@ class SensorState:
             return None
         return (n1 - n0) / (t1 - t0)
 
+    @property
+    def node(self) -> str | None:
+        """The node (daemon of several sensors) this sensor's status names, if any."""
+        node = self.status.get("node")
+        return node if isinstance(node, str) else None
+
     def state(self, now: float, min_stale_s: float, stale_factor: float) -> str:
-        if self.online is False:
+        if self.online is False or self.node_online is False:
             return "offline"
         if self.allan_at is None:
             return "waiting"
@@ -143,6 +158,8 @@ class Inventory:
         self.stale_factor = stale_factor
         self.sensors: dict[str, SensorState] = {}
         self.removed: dict[str, int] = {}
+        self.nodes: dict[str, bool] = {}
+        """``station/node`` -> online, from the nodes' retained statuses."""
         self.version = 0
         self.messages = 0
 
@@ -160,6 +177,9 @@ class Inventory:
         """Take one message; True when the inventory changed. Topics outside
         ``imubench/<station>/<sensor>/{status,allan,jig}`` are ignored."""
         parts = topic.split("/")
+        if (len(parts) == 5 and parts[0] == TOPIC_ROOT and parts[2] == NODE_LEVEL
+                and parts[4] == "status"):
+            return self._apply_node(parts[1], parts[3], payload)
         if len(parts) != 4 or parts[0] != TOPIC_ROOT or parts[3] not in TOPIC_KINDS:
             return False
         self.messages += 1
@@ -185,6 +205,31 @@ class Inventory:
         self._touch(s)
         return True
 
+    def _apply_node(self, station: str, node: str, payload: bytes) -> bool:
+        """A node's retained status: every sensor naming it follows (offline with it)."""
+        self.messages += 1
+        key = f"{station}/{node}"
+        if payload == b"":
+            online: bool | None = None
+        elif payload.strip() == b"offline":
+            online = False
+        else:
+            doc = _json_object(payload)
+            online = doc is None or str(doc.get("state", "online")) != "offline"
+        if online is None:
+            self.nodes.pop(key, None)
+        else:
+            self.nodes[key] = online
+        changed = False
+        for s in self.sensors.values():
+            if s.station == station and s.node == node and s.node_online != online:
+                if online is False and s.online is not False:
+                    s.offline_at = _utc_now()
+                s.node_online = online
+                self._touch(s)
+                changed = True
+        return changed
+
     def _apply_status(self, s: SensorState, payload: bytes) -> None:
         if payload.strip() == b"offline":
             if s.online is not False:
@@ -204,6 +249,8 @@ class Inventory:
             s.online = True
             s.offline_at = None
         s.status = doc
+        node = s.node
+        s.node_online = None if node is None else self.nodes.get(f"{s.station}/{node}")
 
     def _apply_allan(self, s: SensorState, payload: bytes, now: float) -> None:
         doc = _json_object(payload)
@@ -289,8 +336,9 @@ class Inventory:
             "key": s.key, "station": s.station, "sensor": s.sensor,
             "state": s.state(now, self.min_stale_s, self.stale_factor),
             "status_state": (None if s.online is None
-                             else str(s.status.get("state", "online")) if s.online
-                             else "offline"),
+                             else "offline" if not s.online or s.node_online is False
+                             else str(s.status.get("state", "online"))),
+            "node": s.node,
             "offline_at": s.offline_at, "version": s.version,
             "age_s": None if s.allan_at is None else round(now - s.allan_at, 3),
             "interval_s": s.interval_s(),

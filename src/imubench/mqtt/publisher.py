@@ -8,8 +8,11 @@ broker publishes it when the process dies or the link times out).
 
 The caller is never blocked for long: ``publish_allan`` only encodes and buffers. A
 background loop (``run``) connects, publishes, and reconnects with capped exponential
-backoff; while disconnected at most ``buffer_snapshots`` snapshots wait (the oldest are
-dropped and counted in ``dropped_snapshots``).
+backoff; while disconnected at most ``buffer_snapshots`` snapshots per sensor wait (the
+oldest are dropped and counted in ``dropped_snapshots``). With ``qos`` 1 a snapshot that
+the broker did not acknowledge (a broker that hangs: the publish times out after
+``timeout_s``) goes back into the backlog and is sent again after reconnecting, so none
+is lost within the backlog; a subscriber may then see it twice (its ``seq`` tells).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import socket
 import ssl
 import uuid
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
@@ -33,7 +36,7 @@ from urllib.parse import urlsplit
 import aiomqtt
 
 from imubench.mqtt.errors import MqttError
-from imubench.mqtt.topics import allan_topic, status_topic
+from imubench.mqtt.topics import allan_topic, node_status_topic, status_topic
 
 log = logging.getLogger(__name__)
 
@@ -98,7 +101,14 @@ def encode_json(payload: Mapping[str, Any]) -> bytes:
 
 
 class MqttPublisher:
-    """Publishes one sensor's Allan snapshots and status to an MQTT broker.
+    """Publishes the Allan snapshots and status of one sensor, or of several sensors over
+    one connection, to an MQTT broker.
+
+    With one sensor (``sensor`` a name) the connection's last will is that sensor's
+    retained status. With several (``sensor`` a sequence of names, ``node`` the daemon's
+    name) the will is the node's status (:func:`~imubench.mqtt.topics.node_status_topic`)
+    and each sensor's status names the node, so a subscriber knows that the sensors of a
+    node that died are offline (:class:`imubench.fleet.inventory.Inventory` does).
 
     Use as ``async with MqttPublisher(...) as pub: await pub.publish_allan(d)``, or start
     ``await pub.run()`` as a task and call ``await pub.close()`` to stop. ``qos`` applies to
@@ -112,12 +122,15 @@ class MqttPublisher:
         host: str,
         port: int,
         station: str,
-        sensor: str,
+        sensor: str | Sequence[str],
         *,
+        node: str | None = None,
         username: str | None = None,
         password: str | None = None,
         tls: bool = False,
         tls_ca: str | os.PathLike[str] | None = None,
+        tls_cert: str | os.PathLike[str] | None = None,
+        tls_key: str | os.PathLike[str] | None = None,
         keepalive_s: int = 30,
         client_id: str | None = None,
         qos: int = 0,
@@ -138,25 +151,41 @@ class MqttPublisher:
             )
         if not 0 <= keepalive_s <= 65535:
             raise MqttError(f"mqtt keepalive_s {keepalive_s} is outside 0..65535")
+        sensors = [sensor] if isinstance(sensor, str) else list(sensor)
+        if not sensors or len(set(sensors)) != len(sensors):
+            raise MqttError(f"sensor names {sensors!r}: need at least one, each once")
+        if len(sensors) > 1 and node is None:
+            raise MqttError("several sensors over one connection need a node name")
         self.host = host
         self.port = port
         self.station = station
-        self.sensor = sensor
-        self.allan_topic = allan_topic(station, sensor)  # validates station and sensor
-        self.status_topic = status_topic(station, sensor)
+        self.sensors = sensors
+        self.sensor = sensors[0]
+        self.node = node if len(sensors) > 1 else None
+        self.allan_topics = {s: allan_topic(station, s) for s in sensors}  # validates names
+        self.status_topics = {s: status_topic(station, s) for s in sensors}
+        self.allan_topic = self.allan_topics[self.sensor]
+        self.status_topic = self.status_topics[self.sensor]
+        self.will_topic = (self.status_topic if self.node is None
+                           else node_status_topic(station, self.node))
         self.qos = qos
         self.keepalive_s = keepalive_s
-        self.client_id = client_id or f"imubench-{station}-{sensor}-{uuid.uuid4().hex[:8]}"
+        self.client_id = client_id or (
+            f"imubench-{station}-{self.node or self.sensor}-{uuid.uuid4().hex[:8]}")
         self._username = username
         self._password = password
         self._tls_context = ssl.create_default_context(cafile=tls_ca) if tls else None
+        if self._tls_context is not None and tls_cert is not None:
+            self._tls_context.load_cert_chain(tls_cert, tls_key)
         self._reconnect_min_s = reconnect_min_s
         self._reconnect_max_s = reconnect_max_s
         self._timeout_s = timeout_s
-        self._buffer: deque[bytes] = deque()
-        self._buffer_max = buffer_snapshots
-        self._status_detail: dict[str, Any] = dict(status_detail or {})
-        self._status_dirty = True
+        self._buffer: deque[tuple[str, bytes]] = deque()
+        self._buffer_max = buffer_snapshots * len(sensors)
+        self._status_detail: dict[str, dict[str, Any]] = {
+            s: dict(status_detail or {}) for s in sensors}
+        self._status_dirty: set[str] = set(sensors)
+        self._node_dirty = True
         self._since = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
         self._wake = asyncio.Event()
         self._closing = asyncio.Event()
@@ -179,42 +208,62 @@ class MqttPublisher:
         """Snapshots waiting to be published."""
         return len(self._buffer)
 
-    async def publish_allan(self, payload: Mapping[str, Any]) -> None:
-        """Queue one Allan snapshot for ``allan_topic``; returns at once.
+    async def publish_allan(self, payload: Mapping[str, Any], sensor: str | None = None
+                            ) -> None:
+        """Queue one Allan snapshot of ``sensor`` (default: the first) for its allan
+        topic; returns at once.
 
         ``payload`` is encoded as JSON now (numpy arrays allowed, NaN becomes null). When
-        ``buffer_snapshots`` are already waiting, the oldest is dropped and counted.
+        ``buffer_snapshots`` per sensor are already waiting, the oldest is dropped and
+        counted.
         """
         data = encode_json(payload)
-        self._buffer.append(data)
+        self._buffer.append((self.allan_topics[sensor or self.sensor], data))
         while len(self._buffer) > self._buffer_max:
             self._buffer.popleft()
             self.dropped_snapshots += 1
         self._wake.set()
 
-    async def publish_status(self, detail: Mapping[str, Any] | None = None) -> None:
-        """Update the retained ``online`` status with ``detail`` merged in; returns at once.
+    async def publish_status(self, detail: Mapping[str, Any] | None = None,
+                             sensor: str | None = None) -> None:
+        """Update the retained ``online`` status of ``sensor`` (default: the first) with
+        ``detail`` merged in; returns at once.
 
-        The status is republished after every reconnection, so subscribers always find it.
+        Statuses are republished after every reconnection, so subscribers always find them.
         """
+        name = sensor or self.sensor
         if detail:
-            self._status_detail.update(detail)
-        self._status_dirty = True
+            self._status_detail[name].update(detail)
+        self._status_dirty.add(name)
         self._wake.set()
 
-    def status_payload(self) -> bytes:
-        """The JSON of the retained online status (``state``, identity, ``since``, detail)."""
-        status = {
-            "state": "online",
-            "station": self.station,
-            "sensor": self.sensor,
-            "client_id": self.client_id,
-            "host": socket.gethostname(),
-            "pid": os.getpid(),
-            "since": self._since,
-            **self._status_detail,
-        }
+    def _identity(self) -> dict[str, Any]:
+        return {"client_id": self.client_id, "host": socket.gethostname(),
+                "pid": os.getpid(), "since": self._since}
+
+    def status_payload(self, sensor: str | None = None) -> bytes:
+        """The JSON of a sensor's retained online status (``state``, identity, ``node``
+        when several sensors share the connection, ``since``, detail)."""
+        name = sensor or self.sensor
+        status = {"state": "online", "station": self.station, "sensor": name,
+                  **({} if self.node is None else {"node": self.node}),
+                  **self._identity(), **self._status_detail[name]}
         return encode_json(status)
+
+    def node_payload(self) -> bytes:
+        """The JSON of the node's retained online status (several sensors only)."""
+        return encode_json({"state": "online", "station": self.station, "node": self.node,
+                            "sensors": self.sensors, **self._identity()})
+
+    async def _publish_offline(self, client: aiomqtt.Client, qos: int,
+                               timeout: float | None) -> None:
+        """Retained ``offline`` on every sensor's status (and the node's)."""
+        topics = list(self.status_topics.values())
+        if self.node is not None:
+            topics.append(self.will_topic)
+        for topic in topics:
+            await client.publish(topic, OFFLINE_PAYLOAD, qos=qos, retain=True,
+                                 timeout=timeout)
 
     async def wait_connected(self, timeout_s: float) -> bool:
         """Wait until connected (True) or ``timeout_s`` passed (False)."""
@@ -262,7 +311,8 @@ class MqttPublisher:
                     self.connections += 1
                     failures = 0
                     backoff = self._reconnect_min_s
-                    self._status_dirty = True
+                    self._status_dirty = set(self.sensors)
+                    self._node_dirty = True
                     self._connected.set()
                     log.info(
                         "MQTT publisher %s connected to %s:%d", self.client_id, self.host, self.port
@@ -272,18 +322,10 @@ class MqttPublisher:
                     except asyncio.CancelledError:
                         # Cancelled instead of closed: still leave a truthful status behind.
                         with contextlib.suppress(Exception):
-                            await client.publish(
-                                self.status_topic, OFFLINE_PAYLOAD, qos=0, retain=True
-                            )
+                            await self._publish_offline(client, 0, None)
                         raise
                     # Clean stop: the broker will not publish the will after DISCONNECT.
-                    await client.publish(
-                        self.status_topic,
-                        OFFLINE_PAYLOAD,
-                        qos=1,
-                        retain=True,
-                        timeout=self._timeout_s,
-                    )
+                    await self._publish_offline(client, 1, self._timeout_s)
                     return
             except aiomqtt.MqttError as exc:
                 self.last_error = str(exc)
@@ -312,7 +354,7 @@ class MqttPublisher:
             username=self._username,
             password=self._password,
             identifier=self.client_id,
-            will=aiomqtt.Will(self.status_topic, OFFLINE_PAYLOAD, qos=1, retain=True),
+            will=aiomqtt.Will(self.will_topic, OFFLINE_PAYLOAD, qos=1, retain=True),
             clean_session=True,
             keepalive=self.keepalive_s,
             timeout=self._timeout_s,
@@ -325,22 +367,28 @@ class MqttPublisher:
         try:
             while True:
                 if self._status_dirty:
-                    self._status_dirty = False
-                    await client.publish(
-                        self.status_topic,
-                        self.status_payload(),
-                        qos=1,
-                        retain=True,
-                        timeout=self._timeout_s,
-                    )
+                    dirty, self._status_dirty = self._status_dirty, set()
+                    if self.node is not None and self._node_dirty:
+                        self._node_dirty = False
+                        await client.publish(self.will_topic, self.node_payload(), qos=1,
+                                             retain=True, timeout=self._timeout_s)
+                    for name in self.sensors:
+                        if name in dirty:
+                            await client.publish(
+                                self.status_topics[name],
+                                self.status_payload(name),
+                                qos=1,
+                                retain=True,
+                                timeout=self._timeout_s,
+                            )
                 while self._buffer:
-                    data = self._buffer.popleft()
+                    topic, data = self._buffer.popleft()
                     try:
                         await client.publish(
-                            self.allan_topic, data, qos=self.qos, timeout=self._timeout_s
+                            topic, data, qos=self.qos, timeout=self._timeout_s
                         )
                     except BaseException:
-                        self._buffer.appendleft(data)  # retried after reconnection
+                        self._buffer.appendleft((topic, data))  # retried after reconnection
                         while len(self._buffer) > self._buffer_max:
                             self._buffer.popleft()
                             self.dropped_snapshots += 1

@@ -76,6 +76,21 @@ def status_topic(station: str, sensor: str) -> str:
     return f"{base_topic(station, sensor)}/status"
 
 
+NODE_LEVEL = "node"
+"""The topic level under a station that holds the nodes (daemons) of several sensors."""
+
+
+def node_status_topic(station: str, node: str) -> str:
+    """Retained status of a daemon that publishes several sensors over one connection:
+    ``imubench/<station>/node/<node>/status`` (five levels, so it never matches a
+    sensor's ``imubench/+/+/status``). It carries the connection's last will; each
+    sensor's own status names its node (``"node": NAME``), and a sensor whose node is
+    offline is offline, like Sparkplug B's NDEATH for its devices."""
+    validate_topic_level(station, "station name")
+    validate_topic_level(node, "node name")
+    return f"{TOPIC_ROOT}/{station}/{NODE_LEVEL}/{node}/status"
+
+
 def is_valid_topic_name(topic: str) -> bool:
     """True when ``topic`` may be published to (MQTT 3.1.1 sections 4.7.1 and 4.7.3).
 

@@ -20,7 +20,7 @@ from imubench.noisefit.units import (
 )
 
 if TYPE_CHECKING:
-    from imubench.recording import Recording
+    from imubench.recording import InputOptions, Recording
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,16 @@ class RecordingFit:
             meta["chip"] = self.chip
         return NoiseModel(channels=chans, meta=meta, source=str(self.source))
 
+    def kalibr(self, inflate: float = 1.0) -> dict[str, Any]:
+        """Kalibr ``imu.yaml`` values (:func:`~imubench.noisefit.units.kalibr_imu`): the
+        terms found present, and the upper 95 % confidence limit of those that were not
+        (marked in ``upper_limits``)."""
+        present = {ch: {k: v for k, v in f.params.items() if k in f.present}
+                   for ch, f in self.fits.items()}
+        limits = {ch: {k: hi for k, (_, hi) in f.ci.items() if k not in f.present}
+                  for ch, f in self.fits.items()}
+        return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: per channel the fit, its datasheet units; Kalibr; datasheet ratio."""
         params = {ch: f.params for ch, f in self.fits.items()}
@@ -61,7 +71,7 @@ class RecordingFit:
                 ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params)}
                 for ch, f in self.fits.items()
             },
-            "kalibr": kalibr_imu(params, self.rate_hz),
+            "kalibr": self.kalibr(),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
         }
 
@@ -83,12 +93,14 @@ def parse_channels(text: str | Sequence[str] | None, available: Iterable[str]) -
 
 
 def fit_recording(path: str | Path, *, channels: str | Sequence[str] | None = None,
-                  terms: str = "auto", method: str = "wls") -> RecordingFit:
-    """Load a recording (.imbr / .csv) and fit the chosen channels."""
+                  terms: str = "auto", method: str = "wls",
+                  options: InputOptions | None = None) -> RecordingFit:
+    """Load a recording (any the reader takes, with ``options``) and fit the chosen
+    channels."""
     from imubench.recording import load_recording
 
-    return fit_loaded(load_recording(path), str(path), channels=channels, terms=terms,
-                      method=method)
+    return fit_loaded(load_recording(path, options), str(path), channels=channels,
+                      terms=terms, method=method)
 
 
 def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | None = None,

@@ -18,6 +18,7 @@ import numpy as np
 
 from imubench.noisefit.recording_fit import RecordingFit, fit_loaded
 from imubench.noisefit.units import kalibr_yaml
+from imubench.recording.options import InputOptions
 
 SENSORS = {"gyro": (("gx", "gy", "gz"), "dps"), "accel": (("ax", "ay", "az"), "g")}
 COLORS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
@@ -147,13 +148,14 @@ fit.json, imu.yaml (Kalibr).</p>
 
 
 def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "auto",
-                 method: str = "wls") -> list[Path]:
-    """Fit the recording and write every report file into ``out_dir``; return the paths."""
+                 method: str = "wls", options: InputOptions | None = None) -> list[Path]:
+    """Fit the recording (read with ``options``) and write every report file into
+    ``out_dir``; return the paths."""
     from imubench.recording import load_recording
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rec = load_recording(recording)
+    rec = load_recording(recording, options)
     result = fit_loaded(rec, str(recording), terms=terms, method=method)
     data = {ch: rec.channel(ch) for ch in result.fits}
     files: list[Path] = []

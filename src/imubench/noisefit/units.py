@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Any
 
 from imubench.noisefit.errors import FitError
 
@@ -62,28 +63,63 @@ def datasheet_units(channel: str, params: Mapping[str, float]) -> dict[str, floa
     raise FitError(f"units: unknown channel {channel!r}; channels are gx gy gz ax ay az")
 
 
+KALIBR_TERMS: dict[str, tuple[str, str]] = {
+    "gyroscope_noise_density": ("gyro", "white"),
+    "gyroscope_random_walk": ("gyro", "random_walk"),
+    "accelerometer_noise_density": ("accel", "white"),
+    "accelerometer_random_walk": ("accel", "random_walk"),
+}
+"""Kalibr key -> (sensor, model-file key of the fitted term)."""
+
+
 def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: float,
-               rostopic: str = "/imu0") -> dict[str, float | str]:
+               rostopic: str = "/imu0", *,
+               upper_limits: Mapping[str, Mapping[str, float]] | None = None,
+               inflate: float = 1.0) -> dict[str, Any]:
     """Kalibr ``imu.yaml`` values: the worst (largest) axis of each sensor, SI units.
 
     Kalibr has one density per sensor, so the largest axis value is taken (the usual
-    conservative choice); channels that were not fitted are skipped.
+    conservative choice); channels that were not fitted are skipped. A term that was not
+    detected on an axis (absent from ``params_by_channel``, or zero) contributes its
+    upper 95 % confidence limit from ``upper_limits`` instead, and the key is listed in
+    ``upper_limits`` of the result: a zero random walk would make Kalibr and every VIO
+    filter that reads the file trust the bias forever. ``inflate`` multiplies every
+    noise value (a safety factor for real-world use; recorded as ``inflate``).
     """
-    out: dict[str, float | str] = {"rostopic": rostopic, "update_rate": float(rate_hz)}
-    gyro = [params_by_channel[c] for c in GYRO if c in params_by_channel]
-    accel = [params_by_channel[c] for c in ACCEL if c in params_by_channel]
-    if gyro:
-        out["gyroscope_noise_density"] = max(float(p.get("white", 0.0)) for p in gyro) * DEG
-        out["gyroscope_random_walk"] = max(float(p.get("random_walk", 0.0)) for p in gyro) * DEG
-    if accel:
-        out["accelerometer_noise_density"] = max(float(p.get("white", 0.0)) for p in accel) * G0
-        out["accelerometer_random_walk"] = (
-            max(float(p.get("random_walk", 0.0)) for p in accel) * G0)
+    if not (math.isfinite(inflate) and inflate >= 1.0):
+        raise FitError(f"--kalibr-inflate {inflate}: must be a number >= 1")
+    limits = upper_limits or {}
+    out: dict[str, Any] = {"rostopic": rostopic, "update_rate": float(rate_hz)}
+    marked: list[str] = []
+    for key, (sensor, term) in KALIBR_TERMS.items():
+        chans = GYRO if sensor == "gyro" else ACCEL
+        scale = DEG if sensor == "gyro" else G0
+        values: list[tuple[float, bool]] = []  # (value, is an upper limit)
+        for ch in chans:
+            if ch not in params_by_channel:
+                continue
+            v = float(params_by_channel[ch].get(term, 0.0))
+            if v <= 0.0 and term in limits.get(ch, {}):
+                values.append((float(limits[ch][term]), True))
+            else:
+                values.append((v, False))
+        if not values:
+            continue
+        worst, limited = max(values)
+        if worst <= 0.0:
+            raise FitError(f"Kalibr {key}: no axis has a value or an upper limit for "
+                           f"{term}; refusing to write zero")
+        out[key] = worst * scale * inflate
+        if limited:
+            marked.append(key)
+    out["upper_limits"] = marked
+    out["inflate"] = float(inflate)
     return out
 
 
-def kalibr_yaml(values: Mapping[str, float | str]) -> str:
-    """The ``imu.yaml`` text (flat YAML, one key per line, units in comments)."""
+def kalibr_yaml(values: Mapping[str, Any]) -> str:
+    """The ``imu.yaml`` text (flat YAML, one key per line, units in comments; a value that
+    is an upper confidence limit says so on its line and in the header)."""
     units = {
         "accelerometer_noise_density": "m/s^2/sqrt(Hz)",
         "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
@@ -91,14 +127,25 @@ def kalibr_yaml(values: Mapping[str, float | str]) -> str:
         "gyroscope_random_walk": "rad/s^2/sqrt(Hz)",
         "update_rate": "Hz",
     }
+    limits = list(values.get("upper_limits", []))
+    inflate = float(values.get("inflate", 1.0))
     lines = ["# Kalibr IMU noise parameters written by imubench fit (continuous time, SI)"]
+    if inflate != 1.0:
+        lines.append(f"# imubench: every noise value multiplied by {inflate:g} "
+                     "(--kalibr-inflate)")
+    if limits:
+        lines.append("# imubench: below detection, written as the upper 95 % confidence "
+                     f"limit (never zero): {', '.join(limits)}")
     for key in ("rostopic", "update_rate", "accelerometer_noise_density",
                 "accelerometer_random_walk", "gyroscope_noise_density", "gyroscope_random_walk"):
         if key not in values:
             continue
         v = values[key]
         text = v if isinstance(v, str) else f"{float(v):.6e}"
-        lines.append(f"{key}: {text}" + (f"  # {units[key]}" if key in units else ""))
+        note = f"  # {units[key]}" if key in units else ""
+        if key in limits:
+            note += ", upper 95 % limit: not detected"
+        lines.append(f"{key}: {text}{note}")
     return "\n".join(lines) + "\n"
 
 

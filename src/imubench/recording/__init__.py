@@ -1,12 +1,17 @@
-"""Recordings: the native ``.imbr`` format and CSV interchange, chosen by file suffix.
+"""Recordings: the native ``.imbr`` format, CSV and other text tables, chosen by suffix.
 
-* :func:`load_recording` reads a whole recording into a :class:`Recording`.
+* :func:`load_recording` reads a whole recording into a :class:`Recording`: the one
+  reader of every command, with :class:`~imubench.recording.options.InputOptions` for
+  files from elsewhere (docs/recordings.md). What it had to infer (rate, time unit) and
+  any damage it read around (how much was kept) is logged as a warning on
+  ``imubench.recording``, the same for every command.
 * :func:`open_writer` opens a writer (native or CSV) for a new file.
-* :func:`convert` converts between the two.
+* :func:`convert` converts between them.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,18 +20,26 @@ import numpy as np
 
 from imubench.batch import CHANNELS, Batch, Gap
 from imubench.errors import RecordingError
-from imubench.recording.csvio import CsvWriter, read_csv
+from imubench.recording.csvio import CsvWriter
 from imubench.recording.native import (
     STORAGE_FLOAT,
     STORAGE_RAW,
     NativeReader,
     NativeWriter,
 )
+from imubench.recording.options import InputOptions
+from imubench.recording.rosin import is_ros2_bag, read_ros
+from imubench.recording.textin import read_text
 
 __all__ = [
-    "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "NativeReader", "NativeWriter",
-    "Recording", "convert", "load_recording", "open_writer", "recording_kind",
+    "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "InputOptions", "NativeReader",
+    "NativeWriter", "Recording", "convert", "load_recording", "open_writer",
+    "recording_kind",
 ]
+
+log = logging.getLogger(__name__)
+TEXT_SUFFIXES = (".csv", ".txt", ".dat", ".tsv")
+"""Text tables (each also as ``.gz``)."""
 
 Writer = NativeWriter | CsvWriter
 CONVERT_BLOCK = 65536
@@ -34,14 +47,22 @@ CONVERT_BLOCK = 65536
 
 
 def recording_kind(path: str | Path) -> str:
-    """``native`` or ``csv`` from the suffix; RecordingError otherwise."""
+    """``native`` (``.imbr``), ``csv`` (``.csv``, ``.csv.gz``: imubench writes these),
+    ``text`` (other text tables: ``.txt``, ``.dat``, ``.tsv``, each also ``.gz``) or
+    ``ros`` (``.mcap``, a ROS 2 bag folder or its ``.db3``) from the name;
+    RecordingError otherwise."""
     name = Path(path).name.lower()
     if name.endswith(".imbr"):
         return "native"
+    if name.endswith(".mcap") or is_ros2_bag(Path(path)):
+        return "ros"
     if name.endswith((".csv", ".csv.gz")):
         return "csv"
+    if name.endswith(TEXT_SUFFIXES + tuple(s + ".gz" for s in TEXT_SUFFIXES)):
+        return "text"
     raise RecordingError(
-        f"{path}: unknown recording suffix; use .imbr (native) or .csv / .csv.gz"
+        f"{path}: unknown recording suffix; use .imbr (native), .csv / .csv.gz, a text "
+        "table .txt / .dat / .tsv (also .gz), .mcap or a ROS 2 bag"
     )
 
 
@@ -115,13 +136,43 @@ class Recording:
         return Batch(self.index, self.t_s, self.values, self.temp_c, self.raw)
 
 
-def load_recording(path: str | Path) -> Recording:
-    """Read a native (``.imbr``) or CSV (``.csv``, ``.csv.gz``) recording."""
+def load_recording(path: str | Path, options: InputOptions | None = None) -> Recording:
+    """Read a recording (:func:`recording_kind`). ``options`` override what the file
+    states (rate) or say what it does not (columns, units, time unit).
+
+    A damaged file is read around its damage (native: the damaged records are skipped;
+    text: the unreadable lines), with one warning saying what was kept; a file that
+    cannot be read at all raises RecordingError naming the file and the fix.
+    """
     path = Path(path)
-    if recording_kind(path) == "csv":
-        meta, batch, gaps = read_csv(path)
-        return Recording(path, meta, batch.index, batch.t_s, batch.values, batch.temp_c,
-                         None, gaps)
+    opts = options or InputOptions()
+    kind = recording_kind(path)
+    if kind != "native":
+        read = read_ros(path, opts) if kind == "ros" else read_text(path, opts)
+        b = read.batch
+        for note in read.notes:
+            log.log(logging.WARNING if read.inferred else logging.INFO, "%s", note)
+        damage = None
+        where = str(path)
+        if read.bad_lines:
+            first = read.bad_lines[0]
+            damage = (f"{len(read.bad_lines)} {read.item}(s) skipped (unreadable or out of "
+                      f"time order), first "
+                      + ("at the end of a damaged compressed stream" if first < 0
+                         else f"{read.item.split()[-1]} {first}"))
+            where = f"{path}:{first}" if first > 0 else where
+        rec = Recording(path, read.meta, b.index, b.t_s, b.values, b.temp_c, None,
+                        read.gaps, damage)
+    else:
+        rec = _load_native(path, opts)
+        where = str(path)
+    if rec.damage:
+        log.warning("%s: damaged: %s; kept %d samples, %d lost in holes", where,
+                    rec.damage, len(rec), rec.lost_samples)
+    return rec
+
+
+def _load_native(path: Path, opts: InputOptions) -> Recording:
     with NativeReader(path) as reader:
         batches = list(reader.batches())
         if batches:
@@ -130,20 +181,36 @@ def load_recording(path: str | Path) -> Recording:
             empty = np.zeros(0)
             b = Batch(np.zeros(0, np.int64), empty, np.zeros((0, 6)), empty,
                       np.zeros((0, 6), np.int16) if reader.storage == STORAGE_RAW else None)
-        return Recording(path, reader.metadata, b.index, b.t_s, b.values, b.temp_c, b.raw,
+        meta = dict(reader.metadata)
+        cal = meta.get("calibration")
+        if reader.storage == STORAGE_RAW and isinstance(cal, dict) and cal.get("applied"):
+            # raw counts are stored; the values were recorded calibrated: calibrate again
+            from imubench.calibration import Calibration, CalibrationError
+
+            try:
+                b = Calibration.from_description(cal).apply(b)
+            except CalibrationError as exc:
+                raise RecordingError(f"{path}: header calibration: {exc}") from None
+        if opts.rate_hz is not None:
+            meta["odr_hz"] = opts.rate_hz
+        return Recording(path, meta, b.index, b.t_s, b.values, b.temp_c, b.raw,
                          reader.gaps, reader.damage, reader.end is not None)
 
 
 def open_writer(path: str | Path, metadata: dict[str, Any], **kwargs: Any) -> Writer:
     """Writer for a new recording, native or CSV by suffix."""
-    if recording_kind(path) == "csv":
+    kind = recording_kind(path)
+    if kind == "csv":
         return CsvWriter(path, metadata, **kwargs)
+    if kind in ("text", "ros"):
+        raise RecordingError(f"{path}: imubench writes .imbr or .csv / .csv.gz recordings")
     return NativeWriter(path, metadata, **kwargs)
 
 
-def convert(src: str | Path, dst: str | Path) -> Recording:
+def convert(src: str | Path, dst: str | Path,
+            options: InputOptions | None = None) -> Recording:
     """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts."""
-    rec = load_recording(src)
+    rec = load_recording(src, options)
     meta = dict(rec.metadata)
     meta["converted_from"] = str(src)
     if recording_kind(dst) == "native":

@@ -18,7 +18,7 @@ Record kinds:
   reports lost samples; the hole is also visible in the data's sample indices.
 * ``E`` end: JSON ``{"samples": n, "gaps": k, "lost_samples": l, "stopped_utc": ...}``
   written by a clean close. Its absence means the writer died; everything before the
-  first incomplete or damaged record is still read.
+  first incomplete record is still read.
 
 The header's JSON metadata holds: ``format``, ``version``, ``chip``, ``odr_hz``,
 ``fs_dps``, ``fs_g``, ``gyro_sensitivity_dps`` and ``accel_sensitivity_g`` (per LSB),
@@ -26,13 +26,17 @@ The header's JSON metadata holds: ``format``, ``version``, ``chip``, ``odr_hz``,
 configuration) and any extra keys the writer was given.
 
 Crash safety: records are written whole with one ``write`` call and flushed; ``fsync``
-runs at least every ``fsync_interval_s``. A reader stops at the first record that is
-truncated or fails its CRC and reports it (:attr:`NativeReader.damage`), never
-returning data from a damaged record.
+runs at least every ``fsync_interval_s``. A reader never returns data from a damaged
+record: a record that fails its CRC (or whose length or sample count is impossible) is
+skipped, and reading resumes at the next byte offset where a whole record with a valid
+CRC starts (a false match has probability 2^-32 per candidate), so a flipped bit loses
+that one record; a truncated tail ends the reading. Each is reported
+(:attr:`NativeReader.damage`, :attr:`NativeReader.damaged`).
 """
 
 from __future__ import annotations
 
+import heapq
 import json
 import os
 import struct
@@ -51,6 +55,10 @@ MAGIC = b"IMBR"
 VERSION = 1
 _PREAMBLE = MAGIC + struct.pack("<H", VERSION) + b"\r\n"
 _REC = struct.Struct("<cII")
+MAX_RECORD_BYTES = 1 << 26
+"""Largest record a reader accepts (64 MiB; writers emit at most a few MiB): a corrupted
+length field beyond it is damage, not a reason to read gigabytes."""
+_KINDS = (b"D", b"G", b"E")
 STORAGE_RAW = "raw_int16"
 STORAGE_FLOAT = "float64"
 
@@ -180,12 +188,20 @@ class NativeWriter:
         self.close()
 
 
+def _find_all(data: bytes, needle: bytes) -> Iterator[int]:
+    i = data.find(needle)
+    while i >= 0:
+        yield i
+        i = data.find(needle, i + 1)
+
+
 class NativeReader:
     """Reads ``.imbr`` files; tolerant of a crashed writer's truncated tail."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.damage: str | None = None
+        self.damaged: list[str] = []
+        """Every damaged or truncated stretch, in file order (what was skipped)."""
         self.end: dict[str, Any] | None = None
         self.gaps: list[Gap] = []
         try:
@@ -226,8 +242,17 @@ class NativeReader:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    @property
+    def damage(self) -> str | None:
+        """The damage found, in one line (None for an intact file)."""
+        if not self.damaged:
+            return None
+        more = f" (and {len(self.damaged) - 1} more)" if len(self.damaged) > 1 else ""
+        return self.damaged[0] + more
+
     def batches(self) -> Iterator[Batch]:
-        """Yield the data records as Batches (gap records are collected in ``gaps``)."""
+        """Yield the data records as Batches (gap records are collected in ``gaps``),
+        skipping damaged records (:attr:`damaged`)."""
         fh = self._fh
         while True:
             offset = fh.tell()
@@ -235,36 +260,75 @@ class NativeReader:
             if not head:
                 return
             if len(head) < _REC.size:
-                self.damage = f"truncated record header at byte {offset}"
+                self.damaged.append(f"truncated record header at byte {offset}")
                 return
             kind, length, crc = _REC.unpack(head)
-            payload = fh.read(length)
-            if len(payload) < length:
-                self.damage = f"truncated record at byte {offset}"
-                return
-            if zlib.crc32(payload) != crc:
-                self.damage = f"CRC mismatch in record at byte {offset}"
-                return
-            if kind == b"D":
-                yield self._decode(payload, offset)
-            elif kind == b"G":
-                at, lost = struct.unpack_from("<qq", payload)
-                self.gaps.append(Gap(at, lost, payload[16:].decode(errors="replace")))
-            elif kind == b"E":
-                self.end = json.loads(payload)
+            problem = None
+            if kind not in _KINDS:
+                problem = f"unknown record kind {kind!r} at byte {offset}"
+            elif length > MAX_RECORD_BYTES:
+                problem = f"impossible record length {length} at byte {offset}"
             else:
-                self.damage = f"unknown record kind {kind!r} at byte {offset}"
-                return
+                payload = fh.read(length)
+                if len(payload) < length:
+                    self.damaged.append(f"truncated record at byte {offset}")
+                    return
+                if zlib.crc32(payload) != crc:
+                    problem = f"CRC mismatch in record at byte {offset}"
+                else:
+                    problem = self._take(kind, payload, offset)
+                    if problem is None and kind == b"D":
+                        yield self._decode(payload)
+            if problem is not None:
+                nxt = self._resync(offset + 1)
+                if nxt is None:
+                    self.damaged.append(f"{problem}; no whole record after it")
+                    return
+                self.damaged.append(f"{problem}; resumed at byte {nxt}")
+                fh.seek(nxt)
 
-    def _decode(self, payload: bytes, offset: int) -> Batch:
+    def _take(self, kind: bytes, payload: bytes, offset: int) -> str | None:
+        """Check a record that passed its CRC; take gap and end records. A problem
+        description, or None."""
+        if kind == b"D":
+            if len(payload) < 4:
+                return f"data record at byte {offset} too short"
+            (n,) = struct.unpack_from("<I", payload)
+            width = 2 if self.storage == STORAGE_RAW else 8
+            expected = 4 + n * (8 + 8 + 4 + 6 * width)
+            if len(payload) != expected:
+                return (f"data record at byte {offset} has {len(payload)} bytes, expected "
+                        f"{expected} for {n} samples")
+        elif kind == b"G":
+            if len(payload) < 16:
+                return f"gap record at byte {offset} too short"
+            at, lost = struct.unpack_from("<qq", payload)
+            self.gaps.append(Gap(at, lost, payload[16:].decode(errors="replace")))
+        else:
+            try:
+                self.end = json.loads(payload)
+            except ValueError:
+                return f"end record at byte {offset} is not JSON"
+        return None
+
+    def _resync(self, start: int) -> int | None:
+        """The first byte offset at or after ``start`` where a whole record with a valid
+        CRC begins (None if there is none)."""
+        fh = self._fh
+        fh.seek(start)
+        rest = fh.read()
+        for i in heapq.merge(*(_find_all(rest, k) for k in _KINDS)):
+            if i + _REC.size > len(rest):
+                break
+            _, length, crc = _REC.unpack_from(rest, i)
+            end = i + _REC.size + length
+            if length <= MAX_RECORD_BYTES and end <= len(rest) and zlib.crc32(
+                    rest[i + _REC.size:end]) == crc:
+                return start + i
+        return None
+
+    def _decode(self, payload: bytes) -> Batch:
         (n,) = struct.unpack_from("<I", payload)
-        width = 2 if self.storage == STORAGE_RAW else 8
-        expected = 4 + n * (8 + 8 + 4 + 6 * width)
-        if len(payload) != expected:
-            raise RecordingError(
-                f"{self.path}: data record at byte {offset} has {len(payload)} bytes, "
-                f"expected {expected} for {n} samples"
-            )
         pos = 4
         index = np.frombuffer(payload, "<i8", n, pos).astype(np.int64)
         pos += 8 * n

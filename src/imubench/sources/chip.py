@@ -45,7 +45,13 @@ from lsm6ds.stream import FifoStream, StreamChunk
 from imubench.batch import Batch, Gap
 from imubench.errors import SourceError
 from imubench.sources.base import Source, SourceInfo
-from imubench.sources.registry import Backend, Param, SourceURI, register_backend
+from imubench.sources.registry import (
+    Backend,
+    Param,
+    SourceURI,
+    check_model_param,
+    register_backend,
+)
 
 if TYPE_CHECKING:
     from lsm6ds_sim.chip import SimChip
@@ -359,13 +365,7 @@ per-call cost of the FIFO read loop; the values do not depend on it)."""
 def sim_options(uri: SourceURI) -> ChipOptions:
     opts = _chip_options(uri, SIM_PARAMS, uri.target.strip("/").lower() or "lsm6dsl")
     v = opts.values
-    if v["model"]:
-        from lsm6ds_sim.model import load_model
-
-        try:
-            load_model(v["model"])
-        except Exception as exc:  # ModelError and file errors, reported with the URI
-            raise SourceError(f"source URI {uri.text!r}: model {v['model']!r}: {exc}") from None
+    check_model_param(uri, v["model"])
     _fault_plan(uri, v)
     return opts
 

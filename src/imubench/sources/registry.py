@@ -142,6 +142,19 @@ class Backend:
         return any(p.name == name for p in self.params)
 
 
+def check_model_param(uri: SourceURI, model: str | None) -> None:
+    """A simulator's ``model=`` (a noise model file or ``datasheet:CHIP``) loads; a
+    SourceError naming the URI and the model otherwise."""
+    if not model:
+        return
+    from lsm6ds_sim.model import load_model
+
+    try:
+        load_model(model)
+    except Exception as exc:  # ModelError and file errors, reported with the URI
+        raise SourceError(f"source URI {uri.text!r}: model {model!r}: {exc}") from None
+
+
 def register_backend(backend: Backend) -> Backend:
     _REGISTRY[backend.scheme.lower()] = backend
     return backend

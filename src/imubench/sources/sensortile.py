@@ -39,7 +39,13 @@ from lsm6ds.sensortile.stream import FLAG_TEMP, RtcTimeline, StreamFrame
 from imubench.batch import Batch, Gap
 from imubench.errors import SourceError
 from imubench.sources.base import Source, SourceInfo
-from imubench.sources.registry import Backend, Param, SourceURI, register_backend
+from imubench.sources.registry import (
+    Backend,
+    Param,
+    SourceURI,
+    check_model_param,
+    register_backend,
+)
 
 DEFAULT_MASK = int(
     cmds.SensorMask.ACCELEROMETER | cmds.SensorMask.GYROSCOPE | cmds.SensorMask.TEMPERATURE
@@ -369,13 +375,7 @@ def sensortile_sim_options(uri: SourceURI) -> SensorTileOptions:
             "10 ms in binary mode (the RTC stamps frames in hundredths of a second)"
         )
     v = opts.values
-    if v["model"]:
-        from lsm6ds_sim.model import load_model
-
-        try:
-            load_model(v["model"])
-        except Exception as exc:  # ModelError and file errors, reported with the URI
-            raise SourceError(f"source URI {uri.text!r}: model {v['model']!r}: {exc}") from None
+    check_model_param(uri, v["model"])
     _serial_faults(uri, v)
     return opts
 

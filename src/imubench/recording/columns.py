@@ -1,0 +1,123 @@
+"""Which column of a foreign table is which channel, and in which unit.
+
+Header names are normalised (lower case; a leading ``#`` or ``%``, a ``field.`` prefix
+and a unit in brackets or parentheses removed and kept as the column's unit; ``.``,
+``-`` and spaces become ``_``) and looked up in :data:`ALIASES`, which covers imubench's
+own CSV, common logger headers (``timestamp,gyro_x,...,acc_x``), ROS ``rostopic echo -p``
+exports of ``sensor_msgs/Imu`` (``%time,field.header.stamp,...,
+field.angular_velocity.x,...,field.linear_acceleration.x``) and EuRoC / TUM-VI
+``imu0/data.csv`` (``#timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_x [m s^-2]``).
+
+Units come, in this order, from ``--units`` / ``--time-unit``, from the header (a unit
+in brackets, or the format: ROS and EuRoC are SI with times in ns), from imubench's own
+column names (``gx``.. in dps, ``ax``.. in g, ``t`` in s). A foreign gyro or
+accelerometer column whose unit nothing states is refused with the ``--units`` fix,
+never guessed.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from imubench.batch import CHANNELS
+
+_GYRO_STEMS = ("g", "gyro", "gyr", "gyroscope", "w", "omega", "angular_velocity", "w_rs_s",
+               "rate", "gyro_rate")
+_ACCEL_STEMS = ("a", "acc", "accel", "accelerometer", "acceleration", "linear_acceleration",
+                "a_rs_s")
+_TIME_NAMES = ("t", "time", "timestamp", "stamp", "time_s", "t_s", "header_stamp",
+               "seconds", "sec", "time_stamp")
+_TIME_SUFFIXES = {"_ms": "ms", "_us": "us", "_ns": "ns", "_s": "s"}
+
+
+def _aliases() -> dict[str, str]:
+    out: dict[str, str] = {}
+    for axis in "xyz":
+        for stem in _GYRO_STEMS:
+            for sep in ("", "_"):
+                out[f"{stem}{sep}{axis}"] = f"g{axis}"
+        for stem in _ACCEL_STEMS:
+            for sep in ("", "_"):
+                out[f"{stem}{sep}{axis}"] = f"a{axis}"
+    for name in _TIME_NAMES:
+        out[name] = "t"
+        for suffix in _TIME_SUFFIXES:
+            out[name + suffix] = "t"
+    out.update({"temp": "temp", "temperature": "temp", "temp_c": "temp", "die_temp": "temp",
+                "index": "index", "sample": "index", "sample_index": "index"})
+    return out
+
+
+ALIASES: dict[str, str] = _aliases()
+"""Normalised header name -> channel (``t``, ``index``, ``gx``..``az``, ``temp``)."""
+OWN_NAMES = frozenset({"t", "index", "temp", *CHANNELS})
+"""imubench's own CSV header names (their units are fixed: s, dps, g, degC)."""
+
+_UNIT_WORDS = {
+    "rad s^-1": "rad/s", "rad/s": "rad/s", "rad s-1": "rad/s", "rads": "rad/s",
+    "deg/s": "dps", "dps": "dps", "deg s^-1": "dps", "°/s": "dps", "mdps": "mdps",
+    "m s^-2": "m/s2", "m/s^2": "m/s2", "m/s2": "m/s2", "m s-2": "m/s2", "g": "g", "mg": "mg",
+    "s": "s", "sec": "s", "ms": "ms", "us": "us", "µs": "us", "ns": "ns",
+    "degc": "degC", "°c": "degC", "c": "degC",
+}
+
+
+@dataclass(frozen=True)
+class Column:
+    """One header column: its text, normalised name, channel (or None) and unit."""
+
+    text: str
+    name: str
+    channel: str | None
+    unit: str | None
+
+
+def normalise(text: str) -> tuple[str, str | None]:
+    """(normalised name, unit from brackets or a time suffix, or None)."""
+    s = text.strip().strip('"').strip()
+    unit = None
+    m = re.search(r"[\[(]([^\])]*)[\])]\s*$", s)
+    if m:
+        unit = _UNIT_WORDS.get(m.group(1).strip().lower(), m.group(1).strip())
+        s = s[: m.start()]
+    s = s.strip().lstrip("#%").strip().lower()
+    s = re.sub(r"[.\-\s]+", "_", s)
+    if s.startswith("field_"):
+        s = s[len("field_"):]
+    if unit is None:
+        for suffix, u in _TIME_SUFFIXES.items():
+            if s.endswith(suffix) and ALIASES.get(s) == "t":
+                unit = u
+                break
+    return s, unit
+
+
+def is_ros_export(names: list[str]) -> bool:
+    """A ``rostopic echo -p`` table (``%time`` and ``field.*`` columns)."""
+    return any(n.startswith("%time") for n in names) or any(
+        n.startswith("field.") for n in names)
+
+
+def is_euroc(names: list[str]) -> bool:
+    """A EuRoC / TUM-VI ``imu0/data.csv`` header."""
+    return any("w_RS_S" in n for n in names) or any("a_RS_S" in n for n in names)
+
+
+def map_columns(header: list[str]) -> list[Column]:
+    """Each header column with the channel its name stands for (first one wins; a ROS
+    export's ``%time`` (receipt) yields to ``field.header.stamp`` (the sensor's time))."""
+    cols = []
+    taken: set[str] = set()
+    names = [normalise(h) for h in header]
+    stamp = any(n == "header_stamp" for n, _ in names)
+    for text, (name, unit) in zip(header, names, strict=True):
+        channel = ALIASES.get(name)
+        if channel == "t" and stamp and name != "header_stamp":
+            channel = None
+        if channel in taken:
+            channel = None
+        if channel is not None:
+            taken.add(channel)
+        cols.append(Column(text, name, channel, unit))
+    return cols

@@ -1,0 +1,120 @@
+"""Reading ``sensor_msgs/msg/Imu`` from ROS 2 bags and MCAP files.
+
+* A ROS 2 bag (a folder with ``metadata.yaml`` and its ``.db3`` or ``.mcap`` storage, or
+  the ``.db3`` file itself): the maintained ``rosbags`` package (no ROS installation).
+* A standalone ``.mcap`` file: the ``mcap`` reader with ``mcap-ros2-support``'s decoder.
+
+The times are the messages' ``header.stamp`` (the sensor's clock; the bag's receipt
+times carry the transport's jitter), the values ``angular_velocity`` in rad/s and
+``linear_acceleration`` in m/s^2 (REP 103), converted to dps and g. With several Imu
+topics, ``--topic`` picks one (refused otherwise, listing them). Rate and indices:
+:mod:`imubench.recording.timebase`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imubench.batch import Batch
+from imubench.errors import RecordingError
+from imubench.recording.options import ACCEL_UNITS_G, GYRO_UNITS_DPS, InputOptions
+from imubench.recording.textin import TextRead
+from imubench.recording.timebase import timebase_from_times
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+
+
+def is_ros2_bag(path: Path) -> bool:
+    """A ROS 2 bag folder (``metadata.yaml`` inside) or its ``.db3`` storage file."""
+    return (path.is_dir() and (path / "metadata.yaml").is_file()) or path.suffix == ".db3"
+
+
+def _pick_topic(topics: list[str], options: InputOptions, where: str) -> str:
+    if not topics:
+        raise RecordingError(f"{where}: no {IMU_TYPE} topic in this file")
+    if options.topic is not None:
+        if options.topic not in topics:
+            raise RecordingError(f"{where}: no {IMU_TYPE} topic {options.topic!r}; the "
+                                 f"file has {', '.join(topics)}")
+        return options.topic
+    if len(topics) > 1:
+        raise RecordingError(f"{where}: several {IMU_TYPE} topics ({', '.join(topics)}); "
+                             "pick one with --topic")
+    return topics[0]
+
+
+def _rows_from(messages: Any) -> list[tuple[float, ...]]:
+    rows: list[tuple[float, ...]] = []
+    for m in messages:
+        s = m.header.stamp
+        w, a = m.angular_velocity, m.linear_acceleration
+        rows.append((s.sec + s.nanosec * 1e-9, w.x, w.y, w.z, a.x, a.y, a.z))
+    return rows
+
+
+def _read_bag(path: Path, options: InputOptions, where: str) -> tuple[str, list[Any]]:
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    bag = path.parent if path.suffix == ".db3" else path
+    try:
+        with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as r:
+            conns = [c for c in r.connections if c.msgtype == IMU_TYPE]
+            topic = _pick_topic(sorted({c.topic for c in conns}), options, where)
+            mine = [c for c in conns if c.topic == topic]
+            return topic, _rows_from(r.deserialize(raw, c.msgtype)
+                                     for c, _, raw in r.messages(connections=mine))
+    except RecordingError:
+        raise
+    except Exception as exc:  # rosbags' own errors: unreadable or damaged storage
+        raise RecordingError(f"{where}: cannot read the ROS 2 bag: {exc}") from None
+
+
+def _read_mcap(path: Path, options: InputOptions, where: str) -> tuple[str, list[Any]]:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    try:
+        with open(path, "rb") as fh:
+            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            summary = reader.get_summary()
+            if summary is None:
+                raise RecordingError(f"{where}: MCAP file without a summary (truncated?)")
+            topics = sorted({ch.topic for ch in summary.channels.values()
+                             if summary.schemas[ch.schema_id].name == IMU_TYPE})
+            topic = _pick_topic(topics, options, where)
+            return topic, _rows_from(dec for _, _, _, dec in
+                                     reader.iter_decoded_messages(topics=[topic]))
+    except RecordingError:
+        raise
+    except Exception as exc:  # the mcap reader's errors: bad magic, CRC, truncation
+        raise RecordingError(f"{where}: cannot read the MCAP file: {exc}") from None
+
+
+def read_ros(path: str | Path, options: InputOptions) -> TextRead:
+    """Read the Imu messages of a ROS 2 bag or an MCAP file (module docstring)."""
+    path = Path(path)
+    where = str(path)
+    fmt = "ROS 2 bag" if is_ros2_bag(path) else "MCAP"
+    topic, rows = (_read_bag if fmt == "ROS 2 bag" else _read_mcap)(path, options, where)
+    if not rows:
+        raise RecordingError(f"{where}: topic {topic} holds no messages")
+    table = np.asarray(rows, dtype=np.float64)
+    gyro = options.gyro_unit or "rad/s"
+    accel = options.accel_unit or "m/s2"
+    values = np.column_stack([table[:, 1:4] * GYRO_UNITS_DPS[gyro],
+                              table[:, 4:7] * ACCEL_UNITS_G[accel]])
+    tb = timebase_from_times(table[:, 0], where, options.rate_hz)
+    keep = tb.keep
+    meta: dict[str, Any] = {"odr_hz": float(tb.rate_hz), "source_format": fmt,
+                            "topic": topic, "channels": ["gx", "gy", "gz", "ax", "ay", "az"]}
+    how = "--rate" if options.rate_hz is not None else tb.how
+    note = (f"{where}: read as {fmt}: topic {topic}, {len(rows)} messages; rate "
+            f"{tb.rate_hz:.6g} Hz ({how}, header.stamp); units gyro {gyro}, accel {accel}")
+    batch = Batch(index=tb.index, t_s=table[keep, 0] - table[0, 0], values=values[keep],
+                  temp_c=np.full(int(keep.sum()), np.nan))
+    bad = [int(i) + 1 for i in np.nonzero(~keep)[0]]  # message numbers out of time order
+    return TextRead(meta, batch, [], bad, [note], True, "message")

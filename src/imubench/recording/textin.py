@@ -1,0 +1,413 @@
+"""Reading delimited text recordings: imubench's CSV, other loggers' CSV, ROS and EuRoC
+exports, Stable32 / allantools one- and two-column files (``.gz`` for all).
+
+* Delimiter: comma, semicolon (a decimal comma is then read as a point), tab, or runs of
+  spaces, from the header (or first data) line.
+* Header: the first line that is not a comment, or a ``#`` line whose fields are column
+  names (EuRoC writes ``#timestamp [ns],...``). ``# key: value`` lines before it are
+  metadata (imubench writes ``# odr_hz: 104``), ``# gap at_index=N lost=M reason=TEXT``
+  lines anywhere are declared gaps. Columns: :mod:`imubench.recording.columns`.
+* No header (all numbers): one column is the values; two columns are (time tag, value),
+  as Stable32 and allantools write them; more need ``--columns`` by number.
+* Rate and indices: :mod:`imubench.recording.timebase`; units:
+  :mod:`imubench.recording.options`.
+* A data line that cannot be read (wrong number of fields, not a number: a truncated
+  last line, a flipped byte) is skipped and counted, and so is a row whose time stamp
+  falls on an earlier sample than the rows around it; the caller reports them. A file
+  in which most lines cannot be read is refused.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import re
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from imubench.batch import CHANNELS, Batch, Gap
+from imubench.errors import RecordingError
+from imubench.recording.columns import OWN_NAMES, Column, is_euroc, is_ros_export, map_columns
+from imubench.recording.options import (
+    ACCEL_UNITS_G,
+    GYRO_UNITS_DPS,
+    TIME_UNITS_S,
+    InputOptions,
+)
+from imubench.recording.timebase import (
+    SECONDS_PER_DAY,
+    Timebase,
+    time_unit_from_spacing,
+    timebase_from_index,
+    timebase_from_times,
+)
+
+GAP_LINE = re.compile(r"#\s*gap\s+at_index=(-?\d+)\s+lost=(\d+)(?:\s+reason=(.*))?")
+MOSTLY_BAD = 0.5
+"""A file whose data lines are more than this share unreadable is not a table."""
+
+
+@dataclass
+class TextRead:
+    """What the text reader found: metadata, the samples, declared gaps, damage, notes."""
+
+    meta: dict[str, Any]
+    batch: Batch
+    gaps: list[Gap]
+    bad_lines: list[int] = field(default_factory=list)
+    """Line numbers of data lines skipped (unreadable or out of time order)."""
+    notes: list[str] = field(default_factory=list)
+    """How the file was read, for the user (format, columns, rate, units)."""
+    inferred: bool = False
+    """True when the notes say something the user must know: a foreign format or a rate
+    not stated by the file or ``--rate``."""
+    item: str = "data line"
+    """What ``bad_lines`` number: data lines, or messages of a bag."""
+
+
+def open_text(path: Path) -> IO[str]:
+    """The file as text (gzip when it ends in ``.gz``); undecodable bytes become U+FFFD
+    so a damaged byte costs its line, not the file."""
+    if path.name.lower().endswith(".gz"):
+        return gzip.open(path, "rt", encoding="utf-8", errors="replace", newline="")
+    return open(path, encoding="utf-8", errors="replace", newline="")
+
+
+def _delimiter(line: str) -> str | None:
+    """``,``, ``;``, tab, or None (whitespace)."""
+    counts = {d: line.count(d) for d in (";", "\t", ",")}
+    best = max(counts, key=lambda d: counts[d])
+    return best if counts[best] else None
+
+
+def _split(line: str, delim: str | None) -> list[str]:
+    if delim is None:
+        return line.split()
+    fields = [f.strip() for f in line.split(delim)]
+    if delim == ";":
+        fields = [f.replace(",", ".") for f in fields]
+    return fields
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _looks_like_header(fields: list[str]) -> bool:
+    return len(fields) >= 2 and sum(not _is_number(f) for f in fields) >= len(fields) / 2
+
+
+def _number(text: str) -> float:
+    if text == "":
+        return math.nan
+    return float(text)
+
+
+@dataclass
+class _Raw:
+    meta: dict[str, Any] = field(default_factory=dict)
+    gaps: list[Gap] = field(default_factory=list)
+    header: list[str] | None = None
+    header_line: int = 0
+    delim: str | None = None
+    rows: list[list[float]] = field(default_factory=list)
+    row_lines: list[int] = field(default_factory=list)
+    row_fail: dict[int, list[int]] = field(default_factory=dict)
+    """Row -> columns that were not numbers (NaN in ``rows``): the row is damaged if a
+    column it needs is among them (a ROS export's ``frame_id`` is text, and unused)."""
+    bad_lines: list[int] = field(default_factory=list)
+    width: int = 0
+    comment_header: bool = False
+    """The header came from a ``#`` line (EuRoC): dropped if the data do not fit it."""
+
+
+def _scan(path: Path) -> _Raw:
+    raw = _Raw()
+    try:
+        fh = open_text(path)
+        with fh:
+            for lineno, line in enumerate(fh, 1):
+                _take_line(raw, line.strip(), lineno, path)
+    except (OSError, EOFError, zlib.error) as exc:  # gzip: truncated or corrupt stream
+        if not raw.rows:
+            raise RecordingError(f"{path}: cannot read: {exc}") from None
+        raw.bad_lines.append(-1)  # the rest of the compressed stream is lost
+    return raw
+
+
+def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
+    if not line:
+        return
+    if line.startswith("#") or (line.startswith("%") and raw.header is None and not raw.rows):
+        gap = GAP_LINE.match(line)
+        if gap:
+            raw.gaps.append(Gap(int(gap[1]), int(gap[2]), (gap[3] or "").strip()))
+            return
+        if raw.header is None and not raw.rows:
+            delim = _delimiter(line)
+            fields = _split(line, delim)
+            if delim is not None and ":" not in line and _looks_like_header(fields) and sum(
+                    c.channel is not None for c in map_columns(fields)) >= 2:
+                raw.header, raw.header_line, raw.delim = fields, lineno, delim
+                raw.width = len(fields)
+                raw.comment_header = True
+                return
+            if ":" in line and line.startswith("#"):
+                key, _, value = line[1:].partition(":")
+                try:
+                    raw.meta[key.strip()] = json.loads(value)
+                except json.JSONDecodeError:
+                    raw.meta[key.strip()] = value.strip()
+        return
+    if raw.comment_header and not raw.rows and not raw.bad_lines and len(
+            _split(line, raw.delim)) != raw.width:
+        raw.header, raw.comment_header, raw.width = None, False, 0  # it was a comment
+    if raw.header is None and not raw.rows:
+        raw.delim = _delimiter(line)
+        fields = _split(line, raw.delim)
+        if _looks_like_header(fields) or (len(fields) == 1 and not _is_number(fields[0])):
+            raw.header, raw.header_line, raw.width = fields, lineno, len(fields)
+            return
+        raw.width = len(fields)
+    fields = _split(line, raw.delim)
+    if len(fields) != raw.width:
+        raw.bad_lines.append(lineno)
+        return
+    row = []
+    for j, f in enumerate(fields):
+        try:
+            row.append(_number(f))
+        except ValueError:
+            row.append(math.nan)
+            raw.row_fail.setdefault(len(raw.rows), []).append(j)
+    raw.rows.append(row)
+    raw.row_lines.append(lineno)
+
+
+def _pick(cols: list[Column], spec: str, where: str) -> int:
+    """The column a ``--columns`` entry names: 1-based number or header text."""
+    if spec.isdigit():
+        k = int(spec) - 1
+        if not 0 <= k < len(cols):
+            raise RecordingError(f"{where}: --columns names column {spec}; the file has "
+                                 f"{len(cols)}")
+        return k
+    for k, c in enumerate(cols):
+        if spec in (c.text.strip(), c.name):
+            return k
+    raise RecordingError(f"{where}: --columns names {spec!r}; the columns are "
+                         f"{', '.join(c.text for c in cols)}")
+
+
+def read_text(path: str | Path, options: InputOptions) -> TextRead:
+    """Read a delimited text recording (module docstring); RecordingError (one line, with
+    the fix) when it cannot be read at all."""
+    path = Path(path)
+    where = str(path)
+    raw = _scan(path)
+    n_data = len(raw.rows) + len([b for b in raw.bad_lines if b > 0])
+    whole_bad = sum(1 for js in raw.row_fail.values() if len(js) == raw.width)
+    if not raw.rows:
+        what = "no readable data lines" if raw.header is not None or raw.bad_lines else (
+            "no data")
+        raise RecordingError(f"{where}: {what}; expected a header such as "
+                             "t,gx,gy,gz,ax,ay,az,temp and one sample per line")
+    unreadable = len(raw.bad_lines) + whole_bad
+    if unreadable > MOSTLY_BAD * n_data and unreadable > 10:
+        raise RecordingError(f"{where}: {unreadable} of {n_data} data lines cannot be read; "
+                             "not a recording")
+    table = np.asarray(raw.rows, dtype=np.float64)
+    notes: list[str] = []
+    if raw.header is not None:
+        cols = map_columns(raw.header)
+        fmt = ("ROS sensor_msgs/Imu export" if is_ros_export(raw.header)
+               else "EuRoC/TUM-VI IMU CSV" if is_euroc(raw.header)
+               else "imubench CSV" if all(c.name in OWN_NAMES for c in cols)
+               else "CSV")
+    else:
+        cols = [Column(str(k + 1), str(k + 1), None, None) for k in range(raw.width)]
+        fmt = "numeric table"
+        if raw.width == 1:
+            cols[0] = Column("1", "1", "gx", None)
+        elif raw.width == 2:
+            cols = [Column("1", "1", "t", None), Column("2", "2", "gx", None)]
+        fmt = ("one-column text (Stable32/allantools)" if raw.width == 1
+               else "two-column text (time tag, value; Stable32/allantools)"
+               if raw.width == 2 else fmt)
+    where_col: dict[str, int] = {c.channel: k for k, c in enumerate(cols) if c.channel}
+    for target, spec in options.columns.items():
+        k = _pick(cols, spec, where)
+        where_col = {ch: j for ch, j in where_col.items() if j != k and ch != target}
+        where_col[target] = k
+    if raw.header is None and raw.width > 2 and not options.columns:
+        raise RecordingError(f"{where}: {raw.width} columns without a header; name them "
+                             "with --columns t=1,gx=2,... (1-based numbers)")
+    if not any(ch in where_col for ch in (*CHANNELS, "temp")):
+        seen = ", ".join(c.text for c in cols)
+        raise RecordingError(f"{where}: no channel found among the columns {seen}; map "
+                             "them with --columns gx=NAME,...,az=NAME (and t=NAME)")
+    used = set(where_col.values())
+    failed = sorted(i for i, js in raw.row_fail.items() if used.intersection(js))
+    if failed:
+        good = np.ones(len(table), dtype=bool)
+        good[failed] = False
+        raw.bad_lines.extend(raw.row_lines[i] for i in failed)
+        table = table[good]
+        raw.row_lines = [ln for i, ln in enumerate(raw.row_lines) if good[i]]
+        if not len(table):
+            raise RecordingError(f"{where}: no readable data lines (first unreadable: line "
+                                 f"{raw.bad_lines[0]})")
+    ros, euroc = (raw.header is not None and is_ros_export(raw.header),
+                  raw.header is not None and is_euroc(raw.header))
+    values = np.full((len(table), len(CHANNELS)), np.nan)
+    used_units: dict[str, str] = {}
+    for i, ch in enumerate(CHANNELS):
+        if ch not in where_col:
+            continue
+        col = cols[where_col[ch]]
+        factor, unit = _channel_unit(ch, col, options, ros or euroc, raw.header is None,
+                                     where)
+        values[:, i] = table[:, where_col[ch]] * factor
+        used_units[ch] = unit
+    _check_gravity(values, used_units, options, where)
+    temp = table[:, where_col["temp"]] if "temp" in where_col else np.full(len(table), np.nan)
+
+    meta = dict(raw.meta)
+    t_raw = table[:, where_col["t"]] if "t" in where_col else None
+    index_col = table[:, where_col["index"]] if "index" in where_col else None
+    meta_rate = _meta_rate(meta, where)
+    rate = options.rate_hz if options.rate_hz is not None else meta_rate
+    time_note = ""
+    t_s = None
+    if t_raw is not None and rate is None and index_col is None and len(t_raw) < 3:
+        raise RecordingError(f"{where}: {len(t_raw)} row(s) are too few to infer the rate; "
+                             "give --rate HZ")
+    if t_raw is not None:
+        unit_name, scale = _time_unit(cols[where_col["t"]], options, ros, t_raw, rate, where)
+        t_s = t_raw * scale
+        time_note = f"t in {unit_name}"
+    if raw.header is None and raw.width == 2 and options.rate_hz is not None:
+        t_s = None  # evenly spaced values at the given rate: the tags are not needed
+        time_note = "time tags ignored (--rate)"
+    tb: Timebase
+    if index_col is not None:
+        if not np.all(np.isfinite(index_col)):
+            raise RecordingError(f"{where}: the index column has empty values")
+        tb = timebase_from_index(index_col, t_s, where, rate)
+    elif t_s is not None:
+        tb = timebase_from_times(t_s, where, rate)
+    else:
+        rate = rate if rate is not None else options.default_rate_hz
+        if rate is None:
+            raise RecordingError(f"{where}: no time column and no rate; give --rate HZ")
+        n = len(table)
+        tb = Timebase(rate, np.arange(n, dtype=np.int64), np.ones(n, bool),
+                      "given" if options.rate_hz is not None or meta_rate is not None
+                      else "assumed (tau in samples)")
+    keep = tb.keep
+    bad = sorted(raw.bad_lines + [raw.row_lines[i] for i in np.nonzero(~keep)[0]])
+    if t_s is None:
+        t_s = tb.index / tb.rate_hz
+    how = ("--rate" if options.rate_hz is not None
+           else "# odr_hz" if meta_rate is not None else tb.how)
+    meta["odr_hz"] = float(tb.rate_hz)
+    meta.setdefault("channels", [c for c in CHANNELS if c in where_col])
+    meta.setdefault("source_format", fmt)
+    shown = ", ".join(f"{ch}={cols[k].text.strip()}" for ch, k in where_col.items())
+    units = ", ".join(f"{ch} {u}" for ch, u in used_units.items())
+    notes.append(f"{where}: read as {fmt}: {shown}; rate {tb.rate_hz:.6g} Hz ({how})"
+                 + (f"; {time_note}" if time_note else "")
+                 + (f"; units {units}" if units else ""))
+    batch = Batch(index=tb.index, t_s=t_s[keep], values=values[keep], temp_c=temp[keep])
+    inferred = not ((fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
+                    or (raw.width == 1 and raw.header is None))  # allan's plain series
+    return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
+
+
+def _meta_rate(meta: dict[str, Any], where: str) -> float | None:
+    if "odr_hz" not in meta:
+        return None
+    try:
+        rate = float(meta["odr_hz"])
+    except (TypeError, ValueError):
+        raise RecordingError(f"{where}: metadata odr_hz {meta['odr_hz']!r} is not a "
+                             "number") from None
+    if not (math.isfinite(rate) and rate > 0):
+        raise RecordingError(f"{where}: metadata odr_hz {rate} must be a positive number")
+    return rate
+
+
+def _channel_unit(ch: str, col: Column, options: InputOptions, si_format: bool,
+                  headerless: bool, where: str) -> tuple[float, str]:
+    """(factor to dps or g, unit name) of a gyro or accelerometer column."""
+    gyro = ch.startswith("g")
+    table = GYRO_UNITS_DPS if gyro else ACCEL_UNITS_G
+    given = options.gyro_unit if gyro else options.accel_unit
+    if given is not None:
+        return table[given], given
+    if col.unit is not None:
+        if col.unit not in table:
+            raise RecordingError(f"{where}: column {col.text.strip()!r} is in {col.unit!r}, "
+                                 f"not a {'gyro' if gyro else 'accelerometer'} unit "
+                                 f"({', '.join(table)}); give --units")
+        return table[col.unit], col.unit
+    if si_format:
+        unit = "rad/s" if gyro else "m/s2"
+        return table[unit], unit
+    if col.name in OWN_NAMES or headerless:
+        unit = "dps" if gyro else "g"
+        return 1.0, unit
+    raise RecordingError(f"{where}: the unit of column {col.text.strip()!r} is not stated; "
+                         "give --units GYRO,ACCEL (e.g. --units dps,g or --units rad/s,m/s2)")
+
+
+def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOptions,
+                   where: str) -> None:
+    """A static accelerometer reads 1 g; a median |a| near 9.81 "g" is m/s^2 read as g."""
+    if options.accel_unit is not None or not all(a in units for a in ("ax", "ay", "az")):
+        return
+    norm = np.sqrt(np.nansum(values[:, 3:6] ** 2, axis=1))
+    med = float(np.nanmedian(norm)) if len(norm) else math.nan
+    if 5.0 < med < 15.0:
+        raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, which "
+                             f"is m/s^2 read as {units['ax']}; give --units "
+                             f"{units.get('gx', 'dps')},m/s2")
+
+
+def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
+               rate: float | None, where: str) -> tuple[str, float]:
+    """(unit name, seconds per unit) of the time column."""
+    if options.time_unit is not None:
+        return options.time_unit, TIME_UNITS_S[options.time_unit]
+    if col.unit in TIME_UNITS_S:
+        return f"{col.unit} (header)", TIME_UNITS_S[col.unit]
+    if ros:
+        return "ns (ROS)", 1e-9
+    try:
+        unit, scale = time_unit_from_spacing(t_raw, where)
+    except RecordingError:
+        if rate is None:
+            raise
+        step = float(np.median(np.diff(t_raw)))  # the unit that matches the given rate
+        options_s = {u: s for u, s in TIME_UNITS_S.items()}
+        unit = min(options_s, key=lambda u: abs(math.log(max(step, 1e-300) * options_s[u]
+                                                         * rate)))
+        return f"{unit} (from the rate)", options_s[unit]
+    if col.name == "t" and unit != "s" and col.text.strip() == "t":
+        # imubench's own column is in seconds: a spacing that says otherwise is refused
+        step = float(np.median(np.diff(t_raw)))
+        raise RecordingError(
+            f"{where}: column t steps by {step:.6g}: {1 / step:.6g} Hz if in seconds (as "
+            f"imubench writes it), {1 / (step * scale):.6g} Hz if in {unit}; give "
+            f"--time-unit {unit} or --time-unit s (or --rate HZ)")
+    return (f"{unit} (detected)" if unit != "d" else "days (MJD, detected)",
+            scale if unit != "d" else SECONDS_PER_DAY)

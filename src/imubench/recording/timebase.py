@@ -1,0 +1,180 @@
+"""Sample rate and sample indices of a recording that carries only time stamps.
+
+One rule for every reader (the CSV/text reader, ROS 2 bags, MCAP):
+
+1. ``--rate`` when given;
+2. else the file's own rate (``# odr_hz`` metadata, a native header);
+3. else, with a sample-index column and times, the least-squares slope of t against the
+   index; with a sample-index column alone, ``--rate`` is required;
+4. else from the times alone: a first step from the median spacing gives provisional
+   indices ``round((t - t0) / step)`` of the first 1000 rows, the least-squares slope of
+   t against them a better step, which indexes 10x as many rows, and so on to the whole
+   record: the rate is the least-squares slope over all of it. (Indexing everything with
+   the median step at once would slip a period every 1 / (relative error) samples.)
+   A median step is biased by the rounding of printed times (104 Hz printed to 6
+   decimals: median step 0.009615 s -> 104.004 Hz); the slope over N samples is not
+   (104.0000 Hz).
+
+Time stamps that go backwards or land on an earlier sample than the row before (a
+damaged row, a logger's glitch) are not trusted: the longest run of rows whose indices
+increase (longest increasing subsequence) is kept, and the other rows are reported as
+damaged, so a single bad time stamp costs one row, never the rest of the record.
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+
+import numpy as np
+
+from imubench.errors import RecordingError
+from imubench.recording.options import TIME_UNITS_S
+
+PLAUSIBLE_RATE_HZ = (7.0, 7_000.0)
+"""Sample rates (lower bound excluded) a time unit is chosen for, when the header does
+not give it: the ODRs of the LSM6DS family (12.5 Hz to 6.66 kHz) and most IMU loggers
+(10 Hz to 4 kHz); bounds away from round rates, so that printed times rounded either way
+land on the same side. The range spans a factor of 1000 with one end open, so at most
+one of s, ms, us, ns fits a given spacing."""
+MJD_RANGE = (40_000.0, 100_000.0)
+"""Modified Julian Dates (days) of 1968-2132: a time tag column in this range is MJD."""
+SECONDS_PER_DAY = 86_400.0
+FIRST_FIT_ROWS = 1000
+"""Rows indexed with the median step before the first least-squares refinement."""
+
+
+@dataclass(frozen=True)
+class Timebase:
+    """Rate, integer sample indices and the rows kept, with how the rate was found."""
+
+    rate_hz: float
+    index: np.ndarray
+    """int64 sample indices of the kept rows (increasing)."""
+    keep: np.ndarray
+    """bool mask over the input rows: False for rows dropped as damaged."""
+    how: str
+
+
+def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
+    """(unit, seconds per unit) of a time column from its spacing: the one unit in which
+    the median step gives a rate in :data:`PLAUSIBLE_RATE_HZ` (days when the values are
+    Modified Julian Dates). RecordingError (with the fix) when none does."""
+    step = _median_step(t, where)
+    finite = t[np.isfinite(t)]
+    if len(finite) and MJD_RANGE[0] <= float(np.median(finite)) <= MJD_RANGE[1] and (
+            step < 1.0):
+        return "d", SECONDS_PER_DAY
+    lo, hi = PLAUSIBLE_RATE_HZ
+    fits = [(u, s) for u, s in TIME_UNITS_S.items() if lo < 1.0 / (step * s) <= hi]
+    if len(fits) != 1:
+        raise RecordingError(
+            f"{where}: cannot tell the unit of the time column (median step {step:.6g}); "
+            "give --time-unit s|ms|us|ns or --rate HZ"
+        )
+    return fits[0]
+
+
+def _median_step(t: np.ndarray, where: str) -> float:
+    d = np.diff(t[np.isfinite(t)])
+    d = d[d > 0]
+    if not len(d):
+        raise RecordingError(f"{where}: the time column never increases; give --rate HZ")
+    return float(np.median(d))
+
+
+def increasing_rows(index: np.ndarray) -> np.ndarray:
+    """Mask of a longest strictly increasing subsequence of ``index`` (all True when it
+    increases already): the rows kept when some time stamps are damaged."""
+    n = len(index)
+    keep = np.ones(n, dtype=bool)
+    if n < 2 or bool(np.all(np.diff(index) > 0)):
+        return keep
+    tails: list[int] = []  # smallest tail value of an increasing run of each length
+    tail_at: list[int] = []
+    prev = np.full(n, -1, dtype=np.int64)
+    for i, v in enumerate(index.tolist()):
+        k = bisect.bisect_left(tails, v)
+        if k == len(tails):
+            tails.append(v)
+            tail_at.append(i)
+        else:
+            tails[k] = v
+            tail_at[k] = i
+        prev[i] = tail_at[k - 1] if k else -1
+    keep[:] = False
+    i = tail_at[-1] if tail_at else -1
+    while i >= 0:
+        keep[i] = True
+        i = int(prev[i])
+    return keep
+
+
+def _slope(x: np.ndarray, y: np.ndarray) -> float:
+    """Least-squares slope of y against x (centred, for large time stamps)."""
+    xc = x - x.mean()
+    return float(np.dot(xc, y - y.mean()) / np.dot(xc, xc))
+
+
+def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = None) -> Timebase:
+    """Rate and indices of rows with time stamps ``t_s`` (seconds, any origin).
+
+    With ``rate_hz`` (given or from metadata) the indices are ``round((t - t0) *
+    rate)``; otherwise the rate is the least-squares slope (module docstring).
+    """
+    finite = np.isfinite(t_s)
+    if not finite.all():
+        raise RecordingError(f"{where}: the time column has empty or non-numeric values "
+                             f"(first at data row {int(np.argmin(finite)) + 1})")
+    n = len(t_s)
+    if n == 0:
+        return Timebase(rate_hz or 0.0, np.zeros(0, np.int64), np.ones(0, bool),
+                        "no samples")
+    if rate_hz is None and n < 3:
+        raise RecordingError(f"{where}: {n} row(s) are too few to infer the rate; give "
+                             "--rate HZ")
+    t0 = float(np.median(t_s[: min(n, 5)]))  # robust against one bad first stamp
+    if rate_hz is not None:
+        index = np.rint((t_s - t0) * rate_hz).astype(np.int64)
+        keep = increasing_rows(index)
+        index = index[keep]
+        return Timebase(rate_hz, index - index[0], keep, "given")
+    step = _median_step(t_s, where)
+    m = min(n, FIRST_FIT_ROWS)
+    while True:  # fit a prefix, then 10x longer ones, so rounding never slips a period
+        index = np.rint((t_s[:m] - t0) / step).astype(np.int64)
+        keep = increasing_rows(index)
+        x = index[keep].astype(np.float64)
+        if len(x) < 3 or np.ptp(x) == 0:
+            raise RecordingError(f"{where}: too few distinct time stamps to infer the rate; "
+                                 "give --rate HZ")
+        step = _slope(x, t_s[:m][keep])
+        if not step > 0:
+            raise RecordingError(f"{where}: the time column does not increase; give "
+                                 "--rate HZ")
+        if m == n:
+            break
+        m = min(n, 10 * m)
+    index = np.rint((t_s - t0) / step).astype(np.int64)
+    keep = increasing_rows(index)
+    kept = index[keep]
+    return Timebase(1.0 / step, kept - kept[0], keep, "from t (least squares)")
+
+
+def timebase_from_index(index: np.ndarray, t_s: np.ndarray | None, where: str,
+                        rate_hz: float | None = None) -> Timebase:
+    """Rate of rows with a sample-index column: given, else the least-squares slope of
+    the times against the index. Rows whose index does not increase are dropped."""
+    index = np.asarray(index, dtype=np.int64)
+    keep = increasing_rows(index)
+    kept = index[keep]
+    if rate_hz is not None:
+        return Timebase(rate_hz, kept, keep, "given")
+    if t_s is None or len(kept) < 2 or np.ptp(kept) == 0:
+        raise RecordingError(f"{where}: a sample index but no times to infer the rate "
+                             "from; give --rate HZ")
+    step = _slope(kept.astype(np.float64), t_s[keep])
+    if not step > 0:
+        raise RecordingError(f"{where}: the time column does not increase with the index; "
+                             "give --rate HZ")
+    return Timebase(1.0 / step, kept, keep, "from t against the index (least squares)")

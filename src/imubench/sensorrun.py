@@ -1,0 +1,264 @@
+"""One sensor of ``imubench run``: its pipeline (source, recorder, Allan engine), its
+snapshot payload, health and status detail.
+
+The daemon (:mod:`imubench.daemon`) runs one :class:`SensorRun` per sensor (one, or
+several with ``[[sensors]]``), each with its own acquisition thread, ring buffer,
+recording, engine state and MQTT topics; they share the event loop and the broker
+connection.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import logging
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from imubench.batch import CHANNELS, UNITS
+from imubench.calibration import Calibration, recording_header
+from imubench.config import Config, SensorSpec
+from imubench.errors import ImubenchError
+from imubench.pipeline import Consumer, Pipeline
+from imubench.recorder import Recorder
+from imubench.sources.base import SourceInfo
+from imubench.sources.registry import open_source
+
+if TYPE_CHECKING:  # imported off the event loop, after the status is online (numba)
+    from imubench.allan_consumer import AllanConsumer, Snapshot
+    from imubench.stats.streaming import StreamingAllan
+
+log = logging.getLogger("imubench.daemon")
+
+
+def utc_stamp() -> str:
+    """UTC time as ``YYYYmmddTHHMMSSZ`` (the ``{start}`` of ``log.path``)."""
+    return dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+
+
+def per_channel(snap: Snapshot) -> list[Mapping[str, Any]]:
+    """A six-channel engine's snapshot: one mapping (statistic -> result) per channel."""
+    if not isinstance(snap, list):
+        raise TypeError("a six-channel engine returns one snapshot per channel")
+    return snap
+
+
+class SensorRun:
+    """Everything the daemon runs for one sensor.
+
+    ``say`` prints a line on the daemon's terminal; ``on_recorder_state`` is called from
+    the recorder's thread when the recording state changes (``not recording: ...``).
+    """
+
+    def __init__(self, cfg: Config, spec: SensorSpec, *, start: str,
+                 say: Callable[[str], None],
+                 on_recorder_state: Callable[[SensorRun, str], None]) -> None:
+        self.cfg = cfg
+        self.spec = spec
+        self.name = spec.name
+        self._say = say
+        self.calibration = (None if spec.calibration is None
+                            else Calibration.load(spec.calibration))
+        self.recorder: Recorder | None = None
+        if cfg.log.enabled:
+            path = Path(cfg.log.path.format(station=cfg.mqtt.station, sensor=spec.name,
+                                            start=start))
+            self.recorder = Recorder(
+                path,
+                {"config": cfg.public_dump(), "station": cfg.mqtt.station,
+                 "sensor": spec.name, "source": spec.uri,
+                 "calibration": recording_header(self.calibration)},
+                fsync_interval_s=cfg.log.fsync_interval_s,
+                on_state=lambda state: on_recorder_state(self, state),
+            )
+        self.engine_consumer: AllanConsumer | None = None
+        self.pipeline: Pipeline | None = None
+        self.published = 0
+        self.skipped_slots = 0
+        self.phase = "starting"
+
+    def say(self, text: str) -> None:
+        """A line on the terminal, prefixed by the sensor's name when there are several."""
+        self._say(f"{self.name}: {text}" if self.cfg.sensors else text)
+
+    @property
+    def engine(self) -> StreamingAllan | None:
+        return None if self.engine_consumer is None else self.engine_consumer.engine
+
+    # -- building (in a worker thread: imports the simulator, scipy, numba) --------------
+    def build(self) -> None:
+        """The source, the recorder and the Allan engine, prepared (kernels compiled or
+        loaded, recording opened) but not started."""
+        from imubench.allan_consumer import AllanConsumer
+
+        source = open_source(self.spec.uri)
+        info = source.info
+        self.say(f"source {info.uri}: {info.chip} at {info.odr_hz:g} Hz")
+        self.engine_consumer = AllanConsumer(self._make_engine)
+        consumers: list[Consumer] = [self.engine_consumer]
+        if self.recorder is not None:
+            consumers.insert(0, self.recorder)
+        cal = self.calibration
+        self.pipeline = Pipeline(source, consumers, capacity_s=self.cfg.buffer.capacity_s,
+                                 duration_s=self.cfg.run.duration_s,
+                                 transform=None if cal is None else cal.apply)
+        self.pipeline.prepare()
+
+    def _make_engine(self, info: SourceInfo, use_raw: bool) -> StreamingAllan:
+        from imubench.stats.streaming import StreamingAllan
+
+        a = self.cfg.allan
+        scale = None
+        if use_raw:
+            assert info.gyro_sensitivity_dps is not None
+            assert info.accel_sensitivity_g is not None
+            g, acc = info.gyro_sensitivity_dps, info.accel_sensitivity_g
+            scale = [g, g, g, acc, acc, acc]
+        state = a.state_file(self.name)
+        if state is not None and state.exists():
+            try:
+                eng = StreamingAllan.load_state(state.read_bytes())
+                if abs(eng.rate_hz - info.odr_hz) < 1e-9 and list(eng.stats) == list(a.stats):
+                    self.say(f"resumed Allan state from {state} ({eng.n_samples} samples)")
+                    return eng
+                self.say(f"ignoring {state}: it was made with other settings")
+            except (ImubenchError, OSError, ValueError, KeyError) as exc:
+                self.say(f"ignoring {state}: {exc}")
+        return StreamingAllan(info.odr_hz, taus=a.tau_spec, stats=list(a.stats),
+                              max_tau_s=a.max_tau_s, memory=a.memory, scale=scale)
+
+    def save_state(self) -> None:
+        """Write the engine state to ``allan.state_path`` (atomically), when configured."""
+        state = self.cfg.allan.state_file(self.name)
+        ec = self.engine_consumer
+        if state is None or ec is None or ec.engine is None or not ec.n_samples:
+            return
+        state.parent.mkdir(parents=True, exist_ok=True)
+        tmp = state.with_suffix(state.suffix + ".tmp")
+        tmp.write_bytes(ec.engine.save_state())
+        tmp.replace(state)
+
+    # -- payloads ------------------------------------------------------------------------
+    def health(self) -> dict[str, Any]:
+        """Acquisition health for the snapshot payload: source telemetry, what each
+        consumer received and lost (by reason), recording state and size."""
+        p = self.pipeline
+        if p is None:
+            return {}
+        tel = p.source.telemetry()
+        out: dict[str, Any] = {
+            "phase": self.phase,
+            "produced": p.produced,
+            "source": dict(tel.as_dict()),
+            "consumers": {
+                name: {"delivered": a.delivered, "lost": a.lost,
+                       "lost_by_reason": dict(a.lost_by_reason)}
+                for name, a in p.accounts().items()
+            },
+            "lag": p.lag(),
+            "temperature_c": (None if self.engine_consumer is None
+                              else self.engine_consumer.temperature_c),
+            "snapshots_skipped": self.skipped_slots,
+        }
+        if self.recorder is not None:
+            segs = self.recorder.segments
+            out["recording"] = {
+                "state": self.recorder.state,
+                "path": str(segs[-1]) if segs else None,
+                "segments": len(segs),
+                "bytes": sum(s.stat().st_size for s in segs if s.exists()),
+                "not_recorded": self.recorder.not_recorded,
+            }
+        return out
+
+    def snapshot_payload(self, snap: Snapshot | None) -> dict[str, Any]:
+        """The ``allan`` MQTT payload (docs/mqtt.md): the first configured statistic in
+        ``statistic``/``channels`` and every configured one under ``statistics``."""
+        stats = list(self.cfg.allan.stats)
+        per_stat: dict[str, dict[str, Any]] = {s: {} for s in stats}
+        if snap is not None:
+            for ch, res in zip(CHANNELS, per_channel(snap), strict=True):
+                for s in stats:
+                    r = res[s]
+                    per_stat[s][ch] = {
+                        "tau_s": r.tau_s, "dev": r.dev, "n": r.n, "ci_low": r.ci_low,
+                        "ci_high": r.ci_high, "alpha": r.alpha, "edf": r.edf,
+                        "units": UNITS[ch],
+                    }
+        info = self.pipeline.info if self.pipeline is not None else None
+        engine_account = (self.pipeline.accounts().get("engine")
+                          if self.pipeline is not None else None)
+        return {
+            "time": dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds"),
+            "station": self.cfg.mqtt.station, "sensor": self.name,
+            "chip": info.chip if info else None, "odr_hz": info.odr_hz if info else None,
+            "samples": self.engine.n_samples if self.engine is not None else 0,
+            "lost_samples": engine_account.lost if engine_account is not None else 0,
+            "statistic": stats[0], "memory": self.cfg.allan.memory,
+            "channels": per_stat[stats[0]],
+            "statistics": per_stat,
+            "health": self.health(),
+        }
+
+    def status_detail(self) -> dict[str, Any]:
+        """What the sensor's retained status carries besides its identity."""
+        detail: dict[str, Any] = {"phase": self.phase, "source": self.spec.uri}
+        if self.pipeline is not None:
+            info = self.pipeline.info
+            detail.update(chip=info.chip, odr_hz=info.odr_hz, source=info.uri)
+        if self.recorder is not None:
+            detail["recording"] = self.recorder.state
+        return detail
+
+    async def snapshot(self) -> Snapshot | None:
+        """The engine's snapshot, computed in its own thread (None before any sample)."""
+        ec = self.engine_consumer
+        if ec is None or not ec.n_samples:
+            return None
+        return await asyncio.wrap_future(ec.request_snapshot())
+
+    # -- terminal ------------------------------------------------------------------------
+    def table(self, snap: Snapshot | None) -> list[str]:
+        """Counters, then the deviation per channel at about one tau per decade."""
+        stat = next(iter(self.cfg.allan.stats))
+        p = self.pipeline
+        lines = []
+        if p is not None:
+            tel = p.source.telemetry()
+            acc = p.accounts().get("engine")
+            lost = acc.lost if acc is not None else 0
+            lines.append(f"{self.name}: {p.info.chip} {p.info.odr_hz:g} Hz  samples "
+                         f"{self.engine.n_samples if self.engine is not None else 0}  lost "
+                         f"{lost}  gaps {tel.gaps}  recording "
+                         f"{self.recorder.state if self.recorder is not None else 'off'}")
+        if snap is None:
+            return lines
+        first = per_channel(snap)[0][stat]
+        if not len(first):
+            return lines
+        decades = sorted({int(np.floor(np.log10(t))) for t in first.tau_s})
+        cols = [int(np.argmin(np.abs(np.log10(first.tau_s) - d))) for d in decades]
+        lines.append(f"{stat:>6} " + "".join(f"{first.tau_s[i]:>11.3g}s" for i in cols))
+        for ch, res in zip(CHANNELS, per_channel(snap), strict=True):
+            r = res[stat]
+            vals = "".join(f"{r.dev[i]:>12.4g}" if i < len(r) else " " * 12 for i in cols)
+            lines.append(f"{ch:>2} {UNITS[ch]:>3} {vals}")
+        return lines
+
+    def summary(self) -> str:
+        """The line printed at the end: produced, delivered and lost per consumer."""
+        p = self.pipeline
+        if p is None:
+            return f"{self.name}: stopped before the acquisition started"
+        acc = p.accounts()
+        rec = acc.get("recorder")
+        eng = acc.get("engine")
+        text = (f"stopped after {p.produced} samples produced; engine "
+                f"{eng.delivered if eng else 0} delivered, {eng.lost if eng else 0} lost")
+        if rec is not None and self.recorder is not None:
+            text += (f"; recording {rec.delivered - self.recorder.not_recorded} written, "
+                     f"{rec.lost + self.recorder.not_recorded} lost")
+        return f"{self.name}: {text}" if self.cfg.sensors else text
