@@ -329,3 +329,36 @@ def test_options_validation() -> None:
         GapOptions(effects=("wobble",))
     with pytest.raises(ImubenchError, match="too few"):
         diagnose_channel(BASE, "gx", Series(np.zeros(300), None, RATE, "tiny"))
+
+
+def test_global_chi2_is_chi_squared_under_correlated_null() -> None:
+    """z drawn with a known correlation: omnibus mean ~ m dof, smooth part mean ~ 3 dof."""
+    from imubench.gap.curves import SMOOTH_DEGREE, global_chi2
+
+    m = 12
+    tau = 2.0 ** np.arange(m)
+    idx = np.arange(m)
+    corr = 0.6 ** np.abs(idx[:, None] - idx[None, :])  # AR(1)-like correlation of octaves
+    chol = np.linalg.cholesky(corr)
+    rng = np.random.default_rng(5)
+    stats = np.array([global_chi2(chol @ rng.standard_normal(m), corr, tau)
+                      for _ in range(4000)])
+    assert abs(stats[:, 0].mean() - m) < 0.5  # sd of the mean: sqrt(2 m / 4000) = 0.08
+    assert stats[:, 1].min() == m
+    assert abs(stats[:, 2].mean() - (SMOOTH_DEGREE + 1)) < 0.2
+
+
+def test_broad_random_walk_gap_is_not_none() -> None:
+    """Issue 15: a random walk K 2e-4 over white 0.004 + flicker 0.0008 (1 h) came out
+    `none` with a systematic gap three times the scatter; the whole-curve test fires.
+
+    The random walk is added by numpy to the simulator's base record (independent of the
+    simulator's random-walk term)."""
+    base = NoiseModel.single_term("gx", white=0.004, flicker=0.0008)
+    n = int(3600 * RATE)
+    rng = np.random.default_rng(1003)
+    y = simulate(base, n, RATE, seed=780, channels=["gx"])["gx"]
+    y = y + np.cumsum(2e-4 * rng.standard_normal(n) / math.sqrt(RATE))
+    d = diagnose_channel(base, "gx", Series(y, None, RATE, "rw"), GapOptions(seed=3)).to_dict()
+    assert d["global"]["fired"]
+    assert d["verdict"] == "random_walk"

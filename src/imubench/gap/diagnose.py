@@ -42,6 +42,7 @@ from imubench.gap.curves import (
     welch_psd,
 )
 from imubench.gap.errors import GapError
+from imubench.noisefit.covariance import oavar_correlation
 from imubench.stats import oadev
 
 EFFECTS: tuple[str, ...] = (
@@ -189,6 +190,7 @@ class ChannelDiagnosis:
             "impulses_z": self.before.tail_z,
             "temperature_slope_z": self.before.temp_z,
             "trend_z": self.before.trend_z,
+            "global": self.before.global_dict(),
         }
         regions = self.before.regions
         for rd, r in zip(out["regions"], regions, strict=True):
@@ -244,10 +246,29 @@ def simulate_channel(model: NoiseModel, channel: str, series: Series, seeds: lis
     return out
 
 
+def tau_correlation(cm: ChannelModel, afs: np.ndarray, n: int, rate_hz: float) -> np.ndarray:
+    """Model correlation of the OAVAR estimates at averaging factors ``afs`` of n samples.
+
+    From the channel's stochastic terms (:func:`imubench.noisefit.covariance.
+    oavar_correlation`); the global test (:func:`imubench.gap.curves.global_chi2`) needs it.
+    """
+    amp2 = {"white": cm.white**2, "flicker": cm.flicker**2,
+            "random_walk": cm.random_walk**2, "quantization": cm.quantization**2,
+            "output_white": cm.output_white**2}
+    tau_c = 0.0
+    if cm.markov_sigma > 0 and cm.markov_tau > 0:
+        amp2["markov"] = cm.markov_sigma**2
+        tau_c = float(cm.markov_tau)
+    m = np.asarray(afs, dtype=np.int64)
+    return oavar_correlation(m, n - 2 * m, amp2, rate_hz, tau_c_s=tau_c,
+                             bandwidth_hz=float(cm.bandwidth_hz),
+                             filter_order=int(cm.filter_order))
+
+
 class _PartSetup:
     """Taus, bands and the real features of one part (fit, holdout or a replicate)."""
 
-    def __init__(self, series: Series) -> None:
+    def __init__(self, series: Series, cm: ChannelModel | None = None) -> None:
         n = len(series.y)
         if np.isfinite(series.y).sum() < 64:
             raise GapError(f"{series.name}: fewer than 64 valid samples to analyse")
@@ -263,13 +284,16 @@ class _PartSetup:
             self.ci_s = 0.5 * np.log(np.asarray(full.ci_high) / np.asarray(full.ci_low))
         self.real = features(series.y, series.rate_hz, self.afs, self.edges, self.nperseg,
                              series.temp_c)
+        self.corr = (None if cm is None
+                     else tau_correlation(cm, self.afs, n, series.rate_hz)[:len(self.tau_s),
+                                                                           :len(self.tau_s)])
 
     def sim_features(self, sims: np.ndarray) -> SimFeatures:
         return stack([features(s, self.series.rate_hz, self.afs, self.edges, self.nperseg,
                                self.series.temp_c) for s in sims])
 
     def compare(self, sims: SimFeatures) -> Comparison:
-        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges)
+        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr)
 
 
 def _additive(cm: ChannelModel, effect: str) -> bool:
@@ -377,14 +401,14 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         )
     seeds = _seeds(opt.seed, opt.realisations)
     base = simulate_channel(model, channel, series, seeds)
-    fit = _PartSetup(series.part(0, n_fit))
+    fit = _PartSetup(series.part(0, n_fit), cm)
     base_fit = fit.sim_features(base[:, :n_fit])
     before = fit.compare(base_fit)
     hold: _PartSetup | None = None
     hold_before: Comparison | None = None
     base_hold: np.ndarray | None = None
     if n_fit < n:
-        hold = _PartSetup(series.part(n_fit, n))
+        hold = _PartSetup(series.part(n_fit, n), cm)
         base_hold = base[:, n_fit:]
         hold_before = hold.compare(hold.sim_features(base_hold))
 
@@ -421,7 +445,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             c.holdout = hold.compare(hold.sim_features(held_sims[cands.index(c)]))
     diag = ChannelDiagnosis(channel, before, hold_before, ranked, verdict, ev)
     for rep in replicates or []:
-        rs = _PartSetup(rep)
+        rs = _PartSetup(rep, cm)
         rbase = simulate_channel(model, channel, rep, seeds)
         b = rs.compare(rs.sim_features(rbase))
         a = None
