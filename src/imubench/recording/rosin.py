@@ -29,7 +29,12 @@ IMU_TYPE = "sensor_msgs/msg/Imu"
 
 def is_ros2_bag(path: Path) -> bool:
     """A ROS 2 bag folder (``metadata.yaml`` inside) or its ``.db3`` storage file."""
-    return (path.is_dir() and (path / "metadata.yaml").is_file()) or path.suffix == ".db3"
+    if path.suffix == ".db3":
+        return True
+    try:
+        return path.is_dir() and (path / "metadata.yaml").is_file()
+    except OSError:  # a name too long or unreadable: not a bag
+        return False
 
 
 def _pick_topic(topics: list[str], options: InputOptions, where: str) -> str:

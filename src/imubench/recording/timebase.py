@@ -110,6 +110,25 @@ def increasing_rows(index: np.ndarray) -> np.ndarray:
     return keep
 
 
+def _indices(t_s: np.ndarray, t0: float, step_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``round((t - t0) / step)`` as int64, and a mask of the rows whose stamp is within
+    2^62 sample periods (a damaged stamp beyond is a row to drop, not an index)."""
+    with np.errstate(invalid="ignore"):
+        x = np.rint((t_s - t0) / step_s)
+        ok = np.abs(x) < 2.0**62  # False for NaN (an empty stamp) too
+    return np.where(ok, x, 0.0).astype(np.int64), ok
+
+
+def _kept(index: np.ndarray, ok: np.ndarray, where: str) -> np.ndarray:
+    """:func:`increasing_rows` over the rows that are ``ok`` only."""
+    keep = np.zeros(len(index), dtype=bool)
+    rows = np.nonzero(ok)[0]
+    keep[rows[increasing_rows(index[rows])]] = True
+    if not keep.any():
+        raise RecordingError(f"{where}: no row has a usable time stamp; give --rate HZ")
+    return keep
+
+
 def _slope(x: np.ndarray, y: np.ndarray) -> float:
     """Least-squares slope of y against x (centred, for large time stamps)."""
     xc = x - x.mean()
@@ -123,9 +142,9 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
     rate)``; otherwise the rate is the least-squares slope (module docstring).
     """
     finite = np.isfinite(t_s)
-    if not finite.all():
-        raise RecordingError(f"{where}: the time column has empty or non-numeric values "
-                             f"(first at data row {int(np.argmin(finite)) + 1})")
+    if len(t_s) and not finite.any():
+        raise RecordingError(f"{where}: the time column has no numeric value; give "
+                             "--rate HZ (and --columns without t)")
     n = len(t_s)
     if n == 0:
         return Timebase(rate_hz or 0.0, np.zeros(0, np.int64), np.ones(0, bool),
@@ -133,17 +152,17 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
     if rate_hz is None and n < 3:
         raise RecordingError(f"{where}: {n} row(s) are too few to infer the rate; give "
                              "--rate HZ")
-    t0 = float(np.median(t_s[: min(n, 5)]))  # robust against one bad first stamp
+    t0 = float(np.median(t_s[finite][:5]))  # robust against one bad first stamp
     if rate_hz is not None:
-        index = np.rint((t_s - t0) * rate_hz).astype(np.int64)
-        keep = increasing_rows(index)
+        index, ok = _indices(t_s, t0, 1.0 / rate_hz)
+        keep = _kept(index, ok, where)
         index = index[keep]
         return Timebase(rate_hz, index - index[0], keep, "given")
     step = _median_step(t_s, where)
     m = min(n, FIRST_FIT_ROWS)
     while True:  # fit a prefix, then 10x longer ones, so rounding never slips a period
-        index = np.rint((t_s[:m] - t0) / step).astype(np.int64)
-        keep = increasing_rows(index)
+        index, ok = _indices(t_s[:m], t0, step)
+        keep = _kept(index, ok, where)
         x = index[keep].astype(np.float64)
         if len(x) < 3 or np.ptp(x) == 0:
             raise RecordingError(f"{where}: too few distinct time stamps to infer the rate; "
@@ -155,8 +174,8 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
         if m == n:
             break
         m = min(n, 10 * m)
-    index = np.rint((t_s - t0) / step).astype(np.int64)
-    keep = increasing_rows(index)
+    index, ok = _indices(t_s, t0, step)
+    keep = _kept(index, ok, where)
     kept = index[keep]
     return Timebase(1.0 / step, kept - kept[0], keep, "from t (least squares)")
 
