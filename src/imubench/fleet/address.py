@@ -3,9 +3,8 @@ loopback may listen without a password (light: the configuration checks it at lo
 
 from __future__ import annotations
 
-import ipaddress
-
 from imubench.fleet import FleetError
+from imubench.netaddr import is_loopback
 
 
 def parse_listen(text: str) -> tuple[str, int]:
@@ -24,16 +23,6 @@ def parse_listen(text: str) -> tuple[str, int]:
     if not 0 <= port <= 65535:
         raise FleetError(f"--listen {text!r}: port {port} is outside 0-65535; {forms}")
     return host, port
-
-
-def is_loopback(host: str) -> bool:
-    """True for ``localhost`` and addresses in 127.0.0.0/8 or ::1."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def check_exposure(host: str, password: str | None) -> None:

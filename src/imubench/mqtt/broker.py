@@ -36,7 +36,6 @@ import concurrent.futures
 import contextlib
 import errno
 import hmac
-import ipaddress
 import itertools
 import logging
 import signal
@@ -49,18 +48,9 @@ from dataclasses import dataclass
 from imubench.mqtt import packets as pk
 from imubench.mqtt.errors import MalformedPacket, MqttError
 from imubench.mqtt.topics import is_valid_topic_filter, is_valid_topic_name, topic_matches
+from imubench.netaddr import is_loopback
 
 log = logging.getLogger(__name__)
-
-def is_loopback(host: str) -> bool:
-    """True for ``localhost`` and loopback addresses (127.0.0.0/8, ::1)."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
 
 PORT_SEARCH_SPAN = 100
 """How many consecutive ports ``find_free_port`` tries, starting at the requested one."""
