@@ -177,3 +177,16 @@ def test_model_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     bad.write_text("[channels.gx]\nwhite = -1\n")
     assert main(["model", str(bad), "--rate", "100", "--taus", "1"]) == 2
     assert "bad.toml" in capsys.readouterr().err
+
+
+def test_fit_shows_a_progress_bar_that_reaches_its_end(recording: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    """``--progress on``: the bar on stderr, one step per channel, drawn at 100 % when it
+    closes; stdout keeps the JSON alone."""
+    rc = main(["fit", str(recording), "--channels", "gx,gy", "--terms", "white",
+               "-o", str(tmp_path / "m.toml"), "--json", "-", "--progress", "on"])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert set(json.loads(captured.out)["channels"]) == {"gx", "gy"}
+    assert "fit:" in captured.err and "100%" in captured.err

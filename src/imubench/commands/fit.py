@@ -18,6 +18,7 @@ from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
 from imubench.noisefit.units import kalibr_yaml
+from imubench.progress import progress
 from imubench.recording.options import add_input_arguments, input_options
 
 
@@ -74,8 +75,10 @@ def run(args: argparse.Namespace) -> int:
         raise FitError("-o MODEL.toml is required for one recording (a directory or glob "
                        "writes into --out-dir)")
     try:
-        result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
-                               method=args.method, options=input_options(args))
+        with progress(100, "fit", unit="%") as bar:
+            result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
+                                   method=args.method, options=input_options(args),
+                                   on_channel=lambda done, total: bar.fraction(done / total))
         model = result.noise_model()
         args.output.write_text(model.to_toml(), encoding="utf-8")
         if args.json is not None:

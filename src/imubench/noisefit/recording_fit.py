@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -94,23 +94,29 @@ def parse_channels(text: str | Sequence[str] | None, available: Iterable[str]) -
 
 def fit_recording(path: str | Path, *, channels: str | Sequence[str] | None = None,
                   terms: str = "auto", method: str = "wls",
-                  options: InputOptions | None = None) -> RecordingFit:
+                  options: InputOptions | None = None,
+                  on_channel: Callable[[int, int], None] | None = None) -> RecordingFit:
     """Load a recording (any the reader takes, with ``options``) and fit the chosen
-    channels."""
+    channels (``on_channel(done, total)`` after each one: a progress bar)."""
     from imubench.recording import load_recording
 
     return fit_loaded(load_recording(path, options), str(path), channels=channels,
-                      terms=terms, method=method)
+                      terms=terms, method=method, on_channel=on_channel)
 
 
 def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | None = None,
-               terms: str = "auto", method: str = "wls") -> RecordingFit:
+               terms: str = "auto", method: str = "wls",
+               on_channel: Callable[[int, int], None] | None = None) -> RecordingFit:
     """:func:`fit_recording` on a recording already in memory (``source`` names it)."""
     chans = parse_channels(channels, rec.channels)
     if not chans:
         raise FitError(f"{source}: no gyro or accel channel with data to fit")
-    fits = {ch: fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
-                            channel=ch) for ch in chans}
+    fits = {}
+    for k, ch in enumerate(chans):
+        fits[ch] = fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
+                               channel=ch)
+        if on_channel is not None:
+            on_channel(k + 1, len(chans))
     chip = rec.metadata.get("chip")
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits)
 

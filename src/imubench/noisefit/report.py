@@ -18,6 +18,7 @@ import numpy as np
 
 from imubench.noisefit.recording_fit import RecordingFit, fit_loaded
 from imubench.noisefit.units import kalibr_yaml
+from imubench.progress import progress
 from imubench.recording.options import InputOptions
 
 SENSORS = {"gyro": (("gx", "gy", "gz"), "dps"), "accel": (("ax", "ay", "az"), "g")}
@@ -156,7 +157,9 @@ def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "au
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rec = load_recording(recording, options)
-    result = fit_loaded(rec, str(recording), terms=terms, method=method)
+    with progress(100, "report: fit", unit="%") as bar:
+        result = fit_loaded(rec, str(recording), terms=terms, method=method,
+                            on_channel=lambda done, total: bar.fraction(done / total))
     data = {ch: rec.channel(ch) for ch in result.fits}
     files: list[Path] = []
     for sensor in SENSORS:
