@@ -318,8 +318,9 @@ class Daemon:
             if self.service.watchdog_due():  # compiling is progress too
                 self.service.watchdog()
             if not warned and time.monotonic() - t0 > 3.0:
-                self.say("compiling the statistics kernels (first start on this machine; "
-                         "`python3 dev.py setup` does it ahead)")
+                self.say("still preparing the sources and the statistics kernels (a "
+                         "simulated source computes its first noise blocks; the kernels "
+                         "compile on a first start, `python3 dev.py setup` does that ahead)")
                 warned = True
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.stop_requested.wait(), 0.05)
