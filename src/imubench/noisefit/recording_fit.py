@@ -67,6 +67,14 @@ class RecordingFit:
                   for ch, f in self.fits.items()}
         return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
 
+    def _kalibr_or_reason(self) -> dict[str, Any]:
+        """:meth:`kalibr`, or ``{"not_written": why}`` when a value would have to be made
+        up (a model file without a random walk and without intervals)."""
+        try:
+            return self.kalibr()
+        except FitError as exc:
+            return {"not_written": str(exc)}
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: per channel the fit, its datasheet units; Kalibr; datasheet ratio."""
         params = {ch: f.params for ch, f in self.fits.items()}
@@ -79,7 +87,7 @@ class RecordingFit:
                 ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params)}
                 for ch, f in self.fits.items()
             },
-            "kalibr": self.kalibr(),
+            "kalibr": self._kalibr_or_reason(),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
         }
 
