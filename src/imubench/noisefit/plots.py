@@ -150,6 +150,8 @@ def sigma_tau_figure(title: str, fits: dict[str, ChannelFit], curves: dict[str, 
                      readouts: dict[str, dict[str, Readout]], sensor: str) -> Figure:
     """The sigma-tau figure of one sensor's channels (module docstring)."""
     plt = _pyplot()
+    from matplotlib.ticker import LogFormatter
+
     style = STYLES[sensor]
     chans = tuple(fits)
     fig = plt.figure(figsize=(9.0, 7.2), dpi=DPI)
@@ -213,6 +215,8 @@ def sigma_tau_figure(title: str, fits: dict[str, ChannelFit], curves: dict[str, 
     f = style.right_factor
     right = ax.secondary_yaxis("right", functions=(lambda v: v * f, lambda v: v / f))
     right.set_ylabel(f"Allan deviation ({style.right_unit})")
+    right.yaxis.set_major_formatter(LogFormatter())  # plain numbers: 60, 100, not 6x10^1
+    right.yaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
     ax.grid(True, which="both", alpha=0.25)
     ax.set_title(title, fontsize=9)
     legend = _legend(ax, chans, [
