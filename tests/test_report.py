@@ -253,6 +253,15 @@ def test_report_bad_model_file(recording: Path, tmp_path: Path,
     assert "bad.toml" in capsys.readouterr().err
 
 
+def test_report_model_with_fit_options_is_refused(recording: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "m.toml"
+    path.write_text(MODEL.to_toml())
+    assert main(["report", str(recording), "--model", str(path), "--terms", "white",
+                 "--out", str(tmp_path / "o")]) == 2
+    assert "--model" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
 def test_report_bad_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "r.txt"
     bad.write_text("x")

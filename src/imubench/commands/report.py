@@ -38,6 +38,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from imubench.noisefit.report import write_report
 
+    if args.model is not None and (args.terms != "auto" or args.method != "wls"):
+        print("imubench report: error: --terms and --method choose how to fit; --model "
+              f"{args.model} reuses a fit and fits nothing (drop one of them)",
+              file=sys.stderr)
+        return 2
     try:
         files = write_report(args.recording, args.out, terms=args.terms, method=args.method,
                              options=input_options(args), model_file=args.model)
