@@ -41,9 +41,9 @@ from imubench.noisefit.kernels import apply_filter, filter_autocorrelation, gacv
 MAX_BLOCKS: int = 2000
 """Block means per record at most: m = ceil(n / MAX_BLOCKS). 3 h at 100 Hz gives m = 540
 (5.4 s, Nyquist 0.09 Hz, far above the random walk's band, ~7e-4 Hz). The likelihood
-costs O(MAX_BLOCKS^2) per evaluation; the Cramer-Rao spread of ln K at the bench
-configuration is 0.221 at m = 200 and 0.226 at m = 400, against 0.217 for the whole
-record (docs/noise-fit.md)."""
+costs O(MAX_BLOCKS^2) per evaluation. Cramer-Rao spread of ln K at the bench
+configuration (all terms free): 0.221 at m = 200, 0.226 at m = 400, 0.230 at m = 540,
+against 0.217 for the whole record; 0.216 at m = 540 with N known (docs/noise-fit.md)."""
 
 
 def block_length(n_samples: int) -> int:

@@ -10,17 +10,19 @@ Two likelihoods, each where it is accurate, with no datum counted twice:
 2. Flicker B and random walk K are then re-estimated by the *exact* Gaussian likelihood of
    the differenced block means (:mod:`.blockmean`), with the terms of step 1 held at their
    Whittle values inside the block means' covariance. Only this likelihood speaks about B
-   and K, so nothing is counted twice; holding N fixed costs nothing measurable (N's
-   relative spread is 1e-3 and its correlation with K in the Fisher information is below
-   0.05 at the bench configuration).
+   and K, so nothing is counted twice. Holding N fixed costs nothing measurable: N's
+   relative spread is 1e-3, and in the whole record's Fisher information the correlation
+   of ln N^2 with ln K^2 is 0.06 (bench configuration); the block means alone hardly see
+   N (their Cramer-Rao spread of ln K is 0.230 with N free, 0.216 with N known).
 
 Why: the random walk is visible only in the lowest ~10 Fourier frequencies of a 3 h
 record. There the Whittle likelihood (exponential ordinates of a tapered periodogram) is
 far from its asymptotics: on the independent-generator bench its ln K spread was 0.34,
-while the Cramer-Rao bound is 0.217 (the exact likelihood's expected information equals
-the periodogram's, sum_j (d ln S_j / d ln K^2)^2 over Fourier frequencies, at the whole
-record; 0.226 for the block means used here). The exact likelihood's MLE reaches a spread
-of ~0.27 on the same records.
+while the Cramer-Rao bound is 0.217 (expected information of the whole record,
+sum_j (d ln S_j / d ln theta)^2 over the Fourier frequencies of the increments; the
+tapered, debiased Whittle information gives 0.221, the exact block-mean likelihood with N
+known 0.216 at m = 540). The price: B is estimated from the block means only (Cramer-Rao
+spread of ln B 0.045 against 0.038 for the whole record).
 
 **Estimates.** theta = (B^2, K^2) maximise the block likelihood; the search is a Newton
 iteration in phi = log theta with a finite-difference gradient and Hessian (step
