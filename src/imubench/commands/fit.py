@@ -38,7 +38,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "random_walk, ramp, quantization, markov, sine, filter")
     p.add_argument("--method", choices=METHODS, default="wls",
                    help="wls: GLS on the Allan variance with EDF weights (default); "
-                        "tangent: datasheet slope lines")
+                        "tangent: datasheet slope lines; whittle: spectral likelihood; "
+                        "exact: whittle plus the exact block-mean likelihood for flicker "
+                        "and random walk (no gaps)")
     p.add_argument("-o", "--output", type=Path, default=None, metavar="MODEL.toml",
                    help="model file to write (required for one recording)")
     p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")
