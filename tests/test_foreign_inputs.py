@@ -179,16 +179,22 @@ def write_mcap(path: Path, t_s: np.ndarray, values: np.ndarray) -> None:
         shutil.copyfile(next((Path(tmp) / "b").glob("*.mcap")), path)
 
 
-def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, InputOptions]]:
+SAME_SECONDS = 300
+"""Length of the recording written in every format (a few minutes: enough taus for fit
+and gap, a few seconds per command)."""
+
+
+def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, list[str]]]:
     """One simulated recording as .imbr, CSV with metadata, CSV without metadata with t
     rounded to 6 decimals, .csv.gz, MCAP (sensor_msgs/Imu) and Stable32 one-column text
-    of gx."""
+    of gx; each with the command-line options it needs."""
     from imubench.recording import convert
 
     src = tmp / "sim.imbr"
     subprocess.run([sys.executable, "-m", "imubench", "sim", "--chip", "lsm6dsl",
-                    "--odr-hz", "104", "--duration-s", "600", "--model", "datasheet:lsm6dsl",
-                    "--seed", "5", "--out", str(src)], check=True, capture_output=True)
+                    "--odr-hz", "104", "--duration-s", str(SAME_SECONDS), "--model",
+                    "datasheet:lsm6dsl", "--seed", "5", "--out", str(src)],
+                   check=True, capture_output=True)
     rec = load_recording(src)
     convert(src, tmp / "meta.csv")
     convert(src, tmp / "meta.csv.gz")
@@ -198,36 +204,54 @@ def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, InputOpti
     (tmp / "plain.csv").write_text("\n".join(lines) + "\n")
     (tmp / "gx.txt").write_text("".join(f"{v:.17g}\n" for v in rec.channel("gx")))
     write_mcap(tmp / "rec.mcap", rec.index / rec.rate_hz, rec.values)
-    return {"imbr": (src, InputOptions()), "csv": (tmp / "meta.csv", InputOptions()),
-            "mcap": (tmp / "rec.mcap", InputOptions()),
-            "csv.gz": (tmp / "meta.csv.gz", InputOptions()),
-            "plain": (tmp / "plain.csv", InputOptions()),
-            "stable32": (tmp / "gx.txt", InputOptions(rate_hz=104.0))}
+    return {"imbr": (src, []), "csv": (tmp / "meta.csv", []),
+            "plain": (tmp / "plain.csv", []), "csv.gz": (tmp / "meta.csv.gz", []),
+            "mcap": (tmp / "rec.mcap", []), "stable32": (tmp / "gx.txt", ["--rate", "104"])}
+
+
+def _command_json(argv: list[str], out: Path) -> dict:
+    """Run ``imubench ARGV --json OUT`` in this process; its JSON."""
+    from imubench.cli import main
+
+    assert main([*argv, "--progress", "off", "--json", str(out)]) == 0, argv
+    return json.loads(out.read_text())
 
 
 def test_one_recording_in_every_format_gives_the_same_results(tmp_path: Path) -> None:
-    from imubench.commands.allan import load_input
-    from imubench.stats import compute
-
+    """Acceptance 2: the same rate (1e-6 relative), ADEV, fitted parameters and gap
+    verdict from each format. The CSVs print values to 9 significant digits, so numbers
+    agree to ~1e-8 relative, not exactly; tolerances say how far."""
     files = same_recording_in_every_format(tmp_path)
-    dev = {}
-    for kind, (path, options) in files.items():
-        data, rate = load_input(path, "gx", options)
-        assert rate == pytest.approx(104.0, rel=1e-7), kind
-        dev[kind] = compute("oadev", data, rate, "freq", "octave").dev
-    for kind in files:  # values printed to 9 digits: equal to ~1e-8 relative
-        np.testing.assert_allclose(dev[kind], dev["imbr"], rtol=1e-6, err_msg=kind)
-    fits = {}
-    for kind, (path, _) in files.items():
-        if kind == "stable32":
-            continue
-        out = tmp_path / f"{kind}.json"
-        p = subprocess.run([sys.executable, "-m", "imubench", "fit", str(path), "-o",
-                            str(tmp_path / f"{kind}.toml"), "--channels", "gx",
-                            "--terms", "white,flicker", "--json", str(out)],
-                           capture_output=True, text=True, timeout=300)
-        assert p.returncode == 0, p.stderr
-        fits[kind] = json.loads(out.read_text())["channels"]["gx"]["params"]
-    for kind, params in fits.items():
-        for key, value in params.items():
-            assert value == pytest.approx(fits["imbr"][key], rel=1e-5), (kind, key)
+    got: dict[str, dict[str, dict]] = {}
+    for kind, (path, opts) in files.items():
+        rec = load_recording(path, InputOptions(rate_hz=104.0) if opts else InputOptions())
+        assert rec.rate_hz == pytest.approx(104.0, rel=1e-6), kind
+        assert len(rec) == SAME_SECONDS * 104 and rec.lost_samples == 0, kind
+        d = tmp_path / kind.replace(".", "_")
+        d.mkdir()
+        got[kind] = {
+            "allan": _command_json(["allan", str(path), "--stat", "oadev", "--column", "gx",
+                                    *opts], d / "allan.json"),
+            "fit": _command_json(["fit", str(path), "-o", str(d / "model.toml"),
+                                  "--channels", "gx", "--terms", "white,flicker,random_walk",
+                                  *opts], d / "fit.json"),
+            "gap": _command_json(["gap", str(path), "--model", "datasheet:lsm6dsl",
+                                  "--channels", "gx", "--realisations", "4",
+                                  "--effects", "flicker,random_walk,quantization", *opts],
+                                 d / "gap.json"),
+        }
+    ref = got["imbr"]
+    for kind, res in got.items():
+        a, r = res["allan"], ref["allan"]
+        assert a["rate_hz"] == pytest.approx(104.0, rel=1e-6), kind
+        np.testing.assert_allclose(a["tau_s"], r["tau_s"], rtol=1e-6, err_msg=kind)
+        np.testing.assert_allclose(a["dev"], r["dev"], rtol=1e-6, err_msg=kind)
+        f, fr = res["fit"]["channels"]["gx"], ref["fit"]["channels"]["gx"]
+        assert f["present"] == fr["present"], kind
+        for key, value in f["params"].items():
+            assert value == pytest.approx(fr["params"][key], rel=1e-5, abs=1e-12), (kind, key)
+        g, gr = res["gap"]["channels"]["gx"], ref["gap"]["channels"]["gx"]
+        assert g["verdict"] == gr["verdict"], kind
+        assert [e["effect"] for e in g["effects"]] == [e["effect"] for e in gr["effects"]]
+        for key in ("gap_before", "gap_after"):
+            assert g[key] == pytest.approx(gr[key], rel=1e-5), (kind, key)
