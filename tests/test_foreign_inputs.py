@@ -23,7 +23,15 @@ from imubench.recording import InputOptions, load_recording
 CORPUS = Path(__file__).parent / "data" / "foreign"
 sys.path.insert(0, str(CORPUS))
 import make_corpus  # noqa: E402
-from recording_damage import fuzz  # noqa: E402
+from recording_damage import (  # noqa: E402
+    CHEAP_COMMANDS,
+    COMMANDS,
+    check_command,
+    cli_flags,
+    command_argv,
+    fuzz,
+    run_command,
+)
 
 TRUTH = make_corpus.truth()
 ALL6 = ("gx", "gy", "gz", "ax", "ay", "az")
@@ -101,31 +109,126 @@ def test_refusals_are_one_line_naming_the_file_and_the_fix(name: str) -> None:
     assert REFUSED[name] in text
 
 
-def test_commands_name_the_file_and_never_print_a_traceback() -> None:
-    for name in ("logger_no_units.csv", "binary_junk.csv", "imubench_rounded_t.csv"):
-        for cmd in (["allan", "--stat", "oadev", "--column", "gx"],
-                    ["fit", "-o", "/dev/null", "--channels", "gx", "--terms", "white"]):
-            p = subprocess.run([sys.executable, "-m", "imubench", cmd[0],
-                                str(CORPUS / name), *cmd[1:]], capture_output=True,
-                               text=True, timeout=300)
-            assert "Traceback" not in p.stderr, p.stderr
-            if name != "imubench_rounded_t.csv":
-                assert p.returncode == 2 and f"{CORPUS / name}:" in p.stderr
-            else:
-                assert p.returncode == 0, p.stderr
-                assert "rate 104 Hz (from t (least squares))" in p.stderr
+NO_ACCEL = {"stable32_one_column.txt", "stable32_mjd_value.txt",
+            "headerless_three_columns.txt", "whitespace_aligned.dat"}
+"""Corpus files without accelerometer channels: ``tilt`` refuses them, naming the file."""
+REPORT_SAMPLE = ("imubench_native.imbr", "euroc_imu0_data.csv", "stable32_mjd_value.txt",
+                 "ros2_bag")
+"""``report`` draws plots (seconds per file): these by default, every file with -m slow."""
 
 
-def test_fuzzed_corpus_never_raises_anything_but_a_named_error(tmp_path: Path) -> None:
-    counts = fuzz(READ, 60, tmp_path)
-    assert sum(counts.values()) == 60 * len(READ)
-    assert counts["refused"] and counts["damage reported"] and counts["read"]
+def _command_on_corpus(command: str, names: tuple[str, ...] | list[str], tmp: Path) -> None:
+    """``command`` on each named corpus file (with its options) gives the file's rate and
+    channels, or refuses it with an error naming it; on each refused file (without
+    options), an error naming the file and the fix."""
+    for name in names:
+        options, rate, channels, _ = READ[name]
+        out = tmp / f"ok-{name}"
+        out.mkdir()
+        path = CORPUS / name
+        status = check_command(command_argv(command, path, out) + cli_flags(options), path)
+        if command == "gap" or (command == "tilt" and name in NO_ACCEL):
+            assert status == 2, (command, name)  # gap: 2 s are too few to compare ADEVs
+            continue
+        assert status == 0, (command, name)
+        if command == "convert":
+            rec = load_recording(out / "converted.imbr")
+            assert rec.rate_hz == pytest.approx(rate, rel=1e-6)
+            assert tuple(rec.channels) == channels and len(rec) == make_corpus.N
+        elif command == "report":
+            assert (out / "report" / "index.html").is_file()
+        else:
+            doc = json.loads((out / f"{command}.json").read_text())
+            got = doc["odr_hz" if command == "tilt" else "rate_hz"]
+            assert got == pytest.approx(rate, rel=1e-6), (command, name)
+            if command == "fit":
+                assert list(doc["channels"]) == ["gx"]
+            if command == "tilt":
+                assert len(doc["t_s"]) == make_corpus.N // 16
+    for name, fix in REFUSED.items():
+        if command == "report" and name not in (*REPORT_SAMPLE, "binary_junk.csv"):
+            continue
+        out = tmp / f"refused-{name}"
+        out.mkdir()
+        path = CORPUS / name
+        status, _, err = run_command(command_argv(command, path, out))
+        if command == "allan" and name == "stable32_one_column.txt":
+            assert status == 0  # as Stable32: no rate, tau in samples (1 Hz)
+            assert json.loads((out / "allan.json").read_text())["rate_hz"] == 1.0
+            continue
+        errors = [line for line in err.splitlines() if "error:" in line]
+        assert status == 2 and "Traceback" not in err, err
+        assert len(errors) == 1, err
+        assert errors[0].startswith(f"imubench {command}: error: {path}") and fix in errors[0]
+
+
+@pytest.mark.parametrize("command", [*CHEAP_COMMANDS, "report"])
+def test_every_command_reads_every_corpus_file_or_names_it_and_the_fix(
+        command: str, tmp_path: Path) -> None:
+    names = REPORT_SAMPLE if command == "report" else sorted(READ)
+    _command_on_corpus(command, names, tmp_path)
 
 
 @pytest.mark.slow
-def test_fuzzed_corpus_1000_each(tmp_path: Path) -> None:
-    counts = fuzz(READ, 1000, tmp_path)
-    assert sum(counts.values()) == 1000 * len(READ)
+def test_report_reads_every_corpus_file(tmp_path: Path) -> None:
+    _command_on_corpus("report", sorted(READ), tmp_path)
+
+
+def test_a_folder_of_foreign_recordings_runs_as_a_batch(tmp_path: Path) -> None:
+    """A directory with a ROS 2 bag folder, an MCAP file, imubench's and EuRoC's files and
+    junk: each recording is one row (the bag folder too, not a directory to descend
+    into); the junk is a failed row naming it."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    for name in ("ros2_bag", "ros2_imu.mcap", "imubench_native.imbr", "euroc_imu0_data.csv",
+                 "binary_junk.csv"):
+        src = CORPUS / name
+        if src.is_dir():
+            shutil.copytree(src, folder / name)
+        else:
+            shutil.copy(src, folder)
+    status, _, err = run_command(["fit", str(folder), "--channels", "gx", "--terms", "white",
+                                  "--out-dir", str(tmp_path / "out")])
+    assert "Traceback" not in err and status == 2, err  # 2: one recording failed
+    assert f"imubench fit: error: {folder / 'binary_junk.csv'}: 14 of 14" in err
+    table = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert table["failed"] == 1
+    rows = {Path(r["recording"]).name: r for r in table["rows"]}
+    assert set(rows) == {"ros2_bag", "ros2_imu.mcap", "imubench_native.imbr",
+                         "euroc_imu0_data.csv", "binary_junk.csv"}
+    for name, row in rows.items():
+        if name == "binary_junk.csv":
+            assert "not a recording" in row["error"]
+        else:
+            assert row["rate_hz"] == pytest.approx(104.0, rel=1e-6) and not row.get("error")
+    status, _, err = run_command(["allan", str(CORPUS / "ros2_bag"), "--stat", "oadev",
+                                  "--column", "gx", "--json", str(tmp_path / "bag.json")])
+    assert status == 0, err  # one bag folder is one recording, not a batch
+
+
+def test_fuzzed_corpus_never_raises_anything_but_a_named_error(
+        tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """60 damaged copies of each file through the reader, every 10th also through a
+    command; nothing printed outside the log (the MCAP decoder's own prints become one
+    warning on ``imubench.recording``)."""
+    counts = fuzz(READ, 60, tmp_path, command_every=10)
+    reads = counts["read"] + counts["damage reported"] + counts["refused"]
+    assert reads == 60 * len(READ)
+    assert counts["command ok"] + counts["command refused"] == 60 * len(READ) // 10
+    assert counts["refused"] and counts["damage reported"] and counts["read"]
+    assert counts["command ok"] and counts["command refused"]
+    assert capfd.readouterr() == ("", "")
+
+
+@pytest.mark.slow
+def test_fuzzed_corpus_1000_each(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """Acceptance 1's count: 1000 damaged copies of each file through the reader, every
+    25th through a command (report included)."""
+    counts = fuzz(READ, 1000, tmp_path, command_every=25, commands=COMMANDS)
+    reads = counts["read"] + counts["damage reported"] + counts["refused"]
+    assert reads == 1000 * len(READ)
+    assert counts["command ok"] + counts["command refused"] == 1000 * len(READ) // 25
+    assert capfd.readouterr() == ("", "")
 
 
 def test_a_flipped_bit_in_a_native_record_loses_that_record_only(tmp_path: Path) -> None:

@@ -96,6 +96,8 @@ def _finish(label: str, outcomes: list[Outcome], rows: list[dict[str, Any]], out
           f"failed; table {csv_path} and {json_path}")
     for rec, ch, msg in failed:
         where = f"{rec}" + (f" {ch}" if ch else "")
+        if not ch and msg.startswith(f"{Path(rec).resolve()}:"):
+            where, msg = str(rec), msg[len(str(Path(rec).resolve())) + 2:]  # named once
         print(f"imubench {label}: error: {where}: {msg}", file=sys.stderr)
     return 2 if failed else 0
 

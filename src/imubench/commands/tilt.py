@@ -131,6 +131,9 @@ def run(args: argparse.Namespace) -> int:
     if args.source is None:
         raise TiltError("give SOURCE (a recording or a URI) or --budget FILE")
     batch, odr, meta = _read_source(args.source, args.duration_s, input_options(args))
+    if np.all(np.isnan(batch.values[:, 3:6])):
+        raise TiltError(f"{args.source}: no accelerometer samples (ax, ay, az); tilt "
+                        "needs them (name their columns with --columns ax=...,ay=...,az=...)")
     calibration = None
     if args.calibration is not None:
         from imubench.calibration import Calibration

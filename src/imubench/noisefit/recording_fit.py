@@ -108,13 +108,19 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
                terms: str = "auto", method: str = "wls",
                on_channel: Callable[[int, int], None] | None = None) -> RecordingFit:
     """:func:`fit_recording` on a recording already in memory (``source`` names it)."""
-    chans = parse_channels(channels, rec.channels)
+    try:  # errors name the recording (a batch fits many)
+        chans = parse_channels(channels, rec.channels)
+    except FitError as exc:
+        raise FitError(f"{source}: {exc}") from None
     if not chans:
         raise FitError(f"{source}: no gyro or accel channel with data to fit")
     fits = {}
     for k, ch in enumerate(chans):
-        fits[ch] = fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
-                               channel=ch)
+        try:
+            fits[ch] = fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
+                                   channel=ch)
+        except FitError as exc:
+            raise FitError(f"{source}: {exc}") from None
         if on_channel is not None:
             on_channel(k + 1, len(chans))
     chip = rec.metadata.get("chip")
