@@ -57,8 +57,10 @@ READ: dict[str, tuple[InputOptions, float, tuple[str, ...], float]] = {
                                      104.0, ("gx", "gy"), 1e-6),
     "ros2_bag": (InputOptions(), 104.0, ALL6, 1e-12),
     "ros2_imu.mcap": (InputOptions(topic="/imu/data"), 104.0, ALL6, 1e-12),
+    "imubench_hdf5.h5": (InputOptions(), 104.0, (*ALL6, "temp"), 1e-12),
+    "imubench_stable32_export.dat": (InputOptions(), 104.0, ("gx",), 1e-16),
 }
-BINARY = ("imubench_native.imbr", "ros2_bag", "ros2_imu.mcap")
+BINARY = ("imubench_native.imbr", "ros2_bag", "ros2_imu.mcap", "imubench_hdf5.h5")
 """Compared by content with what the script writes now (they hold write times)."""
 REFUSED: dict[str, str] = {
     # file (read without options): the fix the one-line error must name
@@ -110,7 +112,8 @@ def test_refusals_are_one_line_naming_the_file_and_the_fix(name: str) -> None:
 
 
 NO_ACCEL = {"stable32_one_column.txt", "stable32_mjd_value.txt",
-            "headerless_three_columns.txt", "whitespace_aligned.dat"}
+            "headerless_three_columns.txt", "whitespace_aligned.dat",
+            "imubench_stable32_export.dat"}
 """Corpus files without accelerometer channels: ``tilt`` refuses them, naming the file."""
 REPORT_SAMPLE = ("imubench_native.imbr", "euroc_imu0_data.csv", "stable32_mjd_value.txt",
                  "ros2_bag")

@@ -24,7 +24,7 @@ from imubench.errors import USER_ERRORS, ImubenchError
 from imubench.progress import progress
 from imubench.recording.rosin import is_ros2_bag
 
-RECORDING_SUFFIXES: tuple[str, ...] = (".imbr", ".csv", ".csv.gz", ".mcap")
+RECORDING_SUFFIXES: tuple[str, ...] = (".imbr", ".csv", ".csv.gz", ".mcap", ".h5", ".hdf5")
 """What a directory or glob of recordings picks up (besides ROS 2 bag folders); other
 text tables (``.txt``, ``.dat``) are read one at a time, as a folder may hold notes."""
 _GLOB_CHARS = set("*?[")
@@ -71,8 +71,8 @@ def _is_recording(path: Path) -> bool:
 
 
 def expand_inputs(spec: str | Path) -> list[Path]:
-    """The recordings named by a file, a directory (its ``.imbr``/``.csv``/``.csv.gz``/
-    ``.mcap`` files and ROS 2 bag folders) or a glob (``**`` recurses), sorted.
+    """The recordings named by a file, a directory (its :data:`RECORDING_SUFFIXES` files
+    and ROS 2 bag folders) or a glob (``**`` recurses), sorted.
     BatchError when there are none, a glob matches something else, or two would write
     reports of the same name."""
     text = str(spec)

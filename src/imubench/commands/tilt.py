@@ -144,7 +144,10 @@ def run(args: argparse.Namespace) -> int:
                             f" {already.get('path')!r} was applied already; drop --calibration")
         calibration = Calibration.load(args.calibration)
         batch = calibration.apply(batch)
-    data = angles(batch, odr, args.form, args.axis, args.ref, args.average)
+    try:
+        data = angles(batch, odr, args.form, args.axis, args.ref, args.average)
+    except TiltError as exc:  # e.g. fewer samples than --average: name the source
+        raise TiltError(f"{args.source}: {exc}") from None
     data["source"] = args.source
     data["calibration"] = None if calibration is None else calibration.describe()
     if str(args.json) != "-":

@@ -1,12 +1,14 @@
-"""Recordings: the native ``.imbr`` format, CSV and other text tables, chosen by suffix.
+"""Recordings: the native ``.imbr`` format, CSV and other text tables, ROS 2 bags and
+MCAP, HDF5, chosen by suffix.
 
 * :func:`load_recording` reads a whole recording into a :class:`Recording`: the one
   reader of every command, with :class:`~imubench.recording.options.InputOptions` for
   files from elsewhere (docs/recordings.md). What it had to infer (rate, time unit) and
   any damage it read around (how much was kept) is logged as a warning on
   ``imubench.recording``, the same for every command.
-* :func:`open_writer` opens a writer (native or CSV) for a new file.
-* :func:`convert` converts between them.
+* :func:`open_writer` opens a writer (native, CSV or HDF5) for a new file.
+* :func:`convert` converts between them, or exports one channel to a Stable32 data file
+  (:mod:`imubench.recording.stable32`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from imubench.batch import CHANNELS, Batch, Gap
 from imubench.errors import RecordingError
 from imubench.recording.csvio import CsvWriter
+from imubench.recording.hdf5 import Hdf5Writer, read_hdf5
 from imubench.recording.native import (
     STORAGE_FLOAT,
     STORAGE_RAW,
@@ -29,31 +32,37 @@ from imubench.recording.native import (
 )
 from imubench.recording.options import InputOptions
 from imubench.recording.rosin import is_ros2_bag, read_ros
+from imubench.recording.stable32 import write_stable32
 from imubench.recording.textin import read_text
 
 __all__ = [
-    "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "InputOptions", "NativeReader",
-    "NativeWriter", "Recording", "convert", "load_recording", "open_writer",
-    "recording_kind",
+    "STABLE32_SUFFIX", "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "Hdf5Writer",
+    "InputOptions", "NativeReader", "NativeWriter", "Recording", "convert", "load_recording",
+    "open_writer", "recording_kind",
 ]
 
 log = logging.getLogger(__name__)
 TEXT_SUFFIXES = (".csv", ".txt", ".dat", ".tsv")
 """Text tables (each also as ``.gz``)."""
 
-Writer = NativeWriter | CsvWriter
+Writer = NativeWriter | CsvWriter | Hdf5Writer
+HDF5_SUFFIXES = (".h5", ".hdf5")
+STABLE32_SUFFIX = ".dat"
+"""What ``convert`` writes as a Stable32 data file (one channel)."""
 CONVERT_BLOCK = 65536
 """Samples per data record when converting."""
 
 
 def recording_kind(path: str | Path) -> str:
     """``native`` (``.imbr``), ``csv`` (``.csv``, ``.csv.gz``: imubench writes these),
-    ``text`` (other text tables: ``.txt``, ``.dat``, ``.tsv``, each also ``.gz``) or
-    ``ros`` (``.mcap``, a ROS 2 bag folder or its ``.db3``) from the name;
-    RecordingError otherwise."""
+    ``hdf5`` (``.h5``, ``.hdf5``), ``text`` (other text tables: ``.txt``, ``.dat``,
+    ``.tsv``, each also ``.gz``) or ``ros`` (``.mcap``, a ROS 2 bag folder or its
+    ``.db3``) from the name; RecordingError otherwise."""
     name = Path(path).name.lower()
     if name.endswith(".imbr"):
         return "native"
+    if name.endswith(HDF5_SUFFIXES):
+        return "hdf5"
     if name.endswith(".mcap") or is_ros2_bag(Path(path)):
         return "ros"
     if name.endswith((".csv", ".csv.gz")):
@@ -61,8 +70,8 @@ def recording_kind(path: str | Path) -> str:
     if name.endswith(TEXT_SUFFIXES + tuple(s + ".gz" for s in TEXT_SUFFIXES)):
         return "text"
     raise RecordingError(
-        f"{path}: unknown recording suffix; use .imbr (native), .csv / .csv.gz, a text "
-        "table .txt / .dat / .tsv (also .gz), .mcap or a ROS 2 bag"
+        f"{path}: unknown recording suffix; use .imbr (native), .csv / .csv.gz, .h5, a "
+        "text table .txt / .dat / .tsv (also .gz), .mcap or a ROS 2 bag"
     )
 
 
@@ -147,6 +156,16 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
     path = Path(path)
     opts = options or InputOptions()
     kind = recording_kind(path)
+    if kind == "hdf5":
+        meta, b, gaps, complete = read_hdf5(path)
+        if opts.rate_hz is not None:
+            meta["odr_hz"] = opts.rate_hz
+        rec = Recording(path, meta, b.index, b.t_s, b.values, b.temp_c, b.raw, gaps, None,
+                        complete)
+        if not complete:
+            log.warning("%s: the writer did not close this file (interrupted?); read %d "
+                        "samples", path, len(rec))
+        return rec
     if kind != "native":
         read = read_ros(path, opts) if kind == "ros" else read_text(path, opts)
         b = read.batch
@@ -198,18 +217,33 @@ def _load_native(path: Path, opts: InputOptions) -> Recording:
 
 
 def open_writer(path: str | Path, metadata: dict[str, Any], **kwargs: Any) -> Writer:
-    """Writer for a new recording, native or CSV by suffix."""
+    """Writer for a new recording, native, CSV or HDF5 by suffix."""
     kind = recording_kind(path)
     if kind == "csv":
         return CsvWriter(path, metadata, **kwargs)
+    if kind == "hdf5":
+        return Hdf5Writer(path, metadata, **kwargs)
     if kind in ("text", "ros"):
-        raise RecordingError(f"{path}: imubench writes .imbr or .csv / .csv.gz recordings")
+        raise RecordingError(f"{path}: imubench writes .imbr, .csv / .csv.gz or .h5 "
+                             "recordings (and one channel to a Stable32 .dat with convert "
+                             "--channel)")
     return NativeWriter(path, metadata, **kwargs)
 
 
-def convert(src: str | Path, dst: str | Path,
-            options: InputOptions | None = None) -> Recording:
-    """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts."""
+def convert(src: str | Path, dst: str | Path, options: InputOptions | None = None,
+            channel: str | None = None) -> Recording:
+    """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts; a
+    ``.dat`` destination is a Stable32 data file of ``channel``."""
+    if Path(dst).name.lower().endswith(STABLE32_SUFFIX):
+        if channel is None:
+            raise RecordingError(f"{dst}: a Stable32 .dat file holds one channel; give "
+                                 "--channel gx (or gy, gz, ax, ay, az, temp)")
+        rec = load_recording(src, options)
+        log.info("%s", write_stable32(rec, channel, dst))
+        return rec
+    if channel is not None:
+        raise RecordingError(f"{dst}: --channel is for a Stable32 .dat export; other "
+                             "formats keep every channel")
     rec = load_recording(src, options)
     meta = dict(rec.metadata)
     meta["converted_from"] = str(src)
