@@ -147,3 +147,102 @@ def test_a_damaged_or_foreign_hdf5_file_is_refused_naming_it(tmp_path: Path) -> 
     bad.write_bytes(bytes(flipped))
     with pytest.raises(RecordingError, match=f"^{bad}: cannot read"):
         load_recording(bad)
+
+
+def _calibration_file(path: Path) -> Path:
+    """A gyro calibration: offset (0.1, -0.2, 0.3) dps, x scale +2 %."""
+    from imubench.calibration import Calibration, SensorCalibration
+
+    gyro = SensorCalibration(unit="dps", method="test", temp_ref_c=25.0,
+                             offset=np.array([0.1, -0.2, 0.3]),
+                             matrix=np.diag([1.02, 1.0, 1.0]))
+    prov = {"serial": "B7", "date_utc": "2026-11-20T10:00:00Z", "station": "bench-1"}
+    Calibration(prov, gyro=gyro).save(path)
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".imbr", ".csv", ".h5"])
+def test_convert_with_a_calibration_file_corrects_values_and_keeps_raw_counts(
+        tmp_path: Path, suffix: str) -> None:
+    src = load_recording(_recording(tmp_path / "r.imbr", holes=True, raw=True))
+    cal = _calibration_file(tmp_path / "cal.toml")
+    out = tmp_path / f"c{suffix}"
+    convert(src.path, out, calibration=cal)
+    back = load_recording(out)
+    want_g = (src.values[:, :3] - [0.1, -0.2, 0.3]) / [1.02, 1.0, 1.0]
+    rtol = 1e-8 if suffix == ".csv" else 1e-15  # CSV prints 9 significant digits
+    np.testing.assert_allclose(back.values[:, :3], want_g, rtol=rtol)
+    np.testing.assert_allclose(back.values[:, 3:], src.values[:, 3:], rtol=rtol)
+    header = back.metadata["calibration"]
+    assert header["applied"] and header["path"] == str(cal)
+    assert header["provenance"]["serial"] == "B7"
+    if suffix != ".csv":  # CSV holds no raw counts
+        assert back.raw is not None and src.raw is not None
+        np.testing.assert_array_equal(back.raw, src.raw)
+    with pytest.raises(RecordingError, match="applied already; drop --calibration"):
+        convert(out, tmp_path / f"twice{suffix}", calibration=cal)
+
+
+def test_convert_drops_secrets_of_an_old_header_and_says_so(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A header as the first daemon wrote it: the whole configuration, the MQTT password
+    in clear (and one in a broker URL); a current header's mask is kept."""
+    secret = "pw-Zq8v1K-never-echo"
+    meta = {"odr_hz": RATE_HZ, "storage": "float64",
+            "config": {"mqtt": {"host": "127.0.0.1", "username": "imu", "password": secret},
+                       "web": {"password": "**********"},
+                       "sensors": [{"uri": f"mqtt://imu:{secret}@broker:1883/x"}]}}
+    src = tmp_path / "old.imbr"
+    with NativeWriter(src, meta) as w:
+        w.write(Batch(np.arange(10), np.arange(10) / RATE_HZ, np.ones((10, 6)),
+                      np.full(10, 25.0)))
+    for suffix in (".csv", ".imbr", ".h5"):
+        out = tmp_path / f"new{suffix}"
+        with caplog.at_level("WARNING", logger="imubench.recording"):
+            convert(src, out)
+        assert secret.encode() not in out.read_bytes()
+        cfg = load_recording(out).metadata["config"]
+        assert "password" not in cfg["mqtt"] and cfg["mqtt"]["username"] == "imu"
+        assert cfg["web"]["password"] == "**********"
+        assert cfg["sensors"][0]["uri"] == "mqtt://imu@broker:1883/x"
+    said = [r.getMessage() for r in caplog.records if "secret" in r.getMessage()]
+    assert len(said) == 3 and "config.mqtt.password" in said[0]
+    assert secret not in " ".join(said)
+
+
+def test_every_secret_field_of_the_configuration_is_a_secret_key() -> None:
+    """The rule :mod:`imubench.recording.secrets` applies to old headers covers every
+    field the configuration keeps secret."""
+    from pydantic import BaseModel, SecretStr
+
+    from imubench.config import Config
+    from imubench.recording.secrets import is_secret_key
+
+    def secret_fields(model: type[BaseModel], where: str) -> list[str]:
+        out = []
+        for name, f in model.model_fields.items():
+            ann = f.annotation
+            args = getattr(ann, "__args__", (ann,))
+            if SecretStr in args:
+                out.append(f"{where}{name}")
+            for a in args:
+                if isinstance(a, type) and issubclass(a, BaseModel):
+                    out += secret_fields(a, f"{where}{name}.")
+        return out
+
+    found = secret_fields(Config, "")
+    assert "mqtt.password" in found and "web.password" in found
+    assert all(is_secret_key(path.rsplit(".", 1)[-1]) for path in found), found
+
+
+def test_convert_command_shows_progress_and_says_what_it_wrote(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    src = _recording(tmp_path / "r.imbr", holes=False)
+    p = subprocess.run([sys.executable, "-m", "imubench", "convert", str(src),
+                        str(tmp_path / "gy.dat"), "--channel", "gy", "--progress", "on"],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "Stable32 data file of gy in dps, 2000 values, tau0 0.00961538 s" in p.stdout
+    assert "convert" in p.stderr and "100%" in p.stderr  # the bar, on stderr only

@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
+from imubench.progress import progress
 from imubench.recording import STABLE32_SUFFIX, convert
 from imubench.recording.options import add_input_arguments, input_options
 from imubench.recording.stable32 import UNITS
@@ -28,13 +30,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "never overwritten")
     p.add_argument("--channel", choices=tuple(UNITS), default=None,
                    help="the channel a Stable32 .dat file holds (values in dps, g or degC)")
+    p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+                   help="apply this calibration file to the values (docs/calibration.md); "
+                   "raw counts stay as recorded, the header says which file")
     add_input_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = convert(args.input, args.output, input_options(args), channel=args.channel)
+    with progress(100, "convert", unit="%") as bar:
+        rec = convert(args.input, args.output, input_options(args), channel=args.channel,
+                      calibration=args.calibration,
+                      on_progress=lambda done, total: bar.fraction(done / max(total, 1)))
     note = f"; input was damaged: {rec.damage}" if rec.damage else ""
+    if args.calibration is not None:
+        note += f"; calibration {args.calibration} applied (raw counts unchanged)"
     what = (f"Stable32 data file of {args.channel} in {UNITS[args.channel]}, "
             f"{len(rec)} values, tau0 {1.0 / rec.rate_hz:.6g} s"
             if args.output.lower().endswith(STABLE32_SUFFIX)

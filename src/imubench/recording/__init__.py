@@ -14,6 +14,7 @@ MCAP, HDF5, chosen by suffix.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ from imubench.recording.native import (
 )
 from imubench.recording.options import InputOptions
 from imubench.recording.rosin import is_ros2_bag, read_ros
+from imubench.recording.secrets import drop_secrets
 from imubench.recording.stable32 import write_stable32
 from imubench.recording.textin import read_text
 
@@ -231,21 +233,37 @@ def open_writer(path: str | Path, metadata: dict[str, Any], **kwargs: Any) -> Wr
 
 
 def convert(src: str | Path, dst: str | Path, options: InputOptions | None = None,
-            channel: str | None = None) -> Recording:
+            channel: str | None = None, calibration: str | Path | None = None,
+            on_progress: Callable[[int, int], None] | None = None) -> Recording:
     """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts; a
-    ``.dat`` destination is a Stable32 data file of ``channel``."""
-    if Path(dst).name.lower().endswith(STABLE32_SUFFIX):
-        if channel is None:
-            raise RecordingError(f"{dst}: a Stable32 .dat file holds one channel; give "
-                                 "--channel gx (or gy, gz, ax, ay, az, temp)")
-        rec = load_recording(src, options)
-        log.info("%s", write_stable32(rec, channel, dst))
-        return rec
-    if channel is not None:
+    ``.dat`` destination is a Stable32 data file of ``channel``.
+
+    ``calibration``: a calibration file applied to the values (raw counts stay as they
+    are; the header states it, as ``acquire --calibration`` does); refused when the
+    header says a calibration was applied already. Secrets of an old header (an MQTT
+    password: :mod:`imubench.recording.secrets`) are dropped, with a warning naming them.
+    ``on_progress(done, total)`` after each block of samples written (a progress bar).
+    """
+    is_dat = Path(dst).name.lower().endswith(STABLE32_SUFFIX)
+    if is_dat and channel is None:
+        raise RecordingError(f"{dst}: a Stable32 .dat file holds one channel; give "
+                             "--channel gx (or gy, gz, ax, ay, az, temp)")
+    if not is_dat and channel is not None:
         raise RecordingError(f"{dst}: --channel is for a Stable32 .dat export; other "
                              "formats keep every channel")
     rec = load_recording(src, options)
-    meta = dict(rec.metadata)
+    if calibration is not None:
+        rec = _calibrated(rec, calibration)
+    if is_dat:
+        assert channel is not None
+        log.info("%s", write_stable32(rec, channel, dst))
+        if on_progress is not None:
+            on_progress(len(rec), len(rec))
+        return rec
+    meta, dropped = drop_secrets(dict(rec.metadata))
+    if dropped:
+        log.warning("%s: dropped %d secret(s) from the header: %s (not copied to %s)", src,
+                    len(dropped), ", ".join(dropped), dst)
     meta["converted_from"] = str(src)
     if recording_kind(dst) == "native":
         meta["storage"] = STORAGE_RAW if rec.raw is not None else STORAGE_FLOAT
@@ -265,6 +283,26 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
                 Batch(rec.index[part], rec.t_s[part], rec.values[part], rec.temp_c[part],
                       None if rec.raw is None else rec.raw[part], tuple(mine)),
             )
+            if on_progress is not None:
+                on_progress(min(start + CONVERT_BLOCK, len(rec)), len(rec))
         if j < len(gaps):  # the recording ended in a gap
             writer.write(Batch.empty(with_raw=rec.raw is not None, gaps=gaps[j:]))
     return rec
+
+
+def _calibrated(rec: Recording, path: str | Path) -> Recording:
+    """``rec`` with the calibration file ``path`` applied to its values (raw counts
+    unchanged) and stated in its header."""
+    import dataclasses
+
+    from imubench.calibration import Calibration
+
+    already = rec.metadata.get("calibration")
+    if isinstance(already, dict) and already.get("applied"):
+        raise RecordingError(f"{rec.path}: its header says calibration "
+                             f"{already.get('path')!r} was applied already; drop "
+                             "--calibration")
+    cal = Calibration.load(path)
+    values = cal.apply(rec.batch()).values
+    meta = {**rec.metadata, "calibration": cal.describe()}
+    return dataclasses.replace(rec, values=values, metadata=meta)
