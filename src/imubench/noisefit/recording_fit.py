@@ -10,13 +10,15 @@ from typing import TYPE_CHECKING, Any
 
 from lsm6ds_sim.model import ChannelModel, NoiseModel
 
-from imubench.batch import CHANNELS
+from imubench.batch import CHANNELS, UNITS
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import ChannelFit, fit_channel
 from imubench.noisefit.units import (
+    KALIBR_UNITS,
     datasheet_comparison,
     datasheet_units,
     kalibr_imu,
+    param_units,
 )
 
 if TYPE_CHECKING:
@@ -60,7 +62,9 @@ class RecordingFit:
         return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: per channel the fit, its datasheet units; Kalibr; datasheet ratio."""
+        """JSON-ready: per channel the fit, its datasheet units and the ``units`` of its
+        numbers (``params``, ``ci95``, ``bias``, ``points``); Kalibr with its units;
+        datasheet ratio."""
         params = {ch: f.params for ch, f in self.fits.items()}
         return {
             "recording": str(self.source),
@@ -68,10 +72,13 @@ class RecordingFit:
             "chip": self.chip,
             "method": self.method,
             "channels": {
-                ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params)}
+                ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params),
+                     "units": {**param_units(ch), "tau_s": "s",
+                               "avar": f"{UNITS[ch]}^2", "edf": "1"}}
                 for ch, f in self.fits.items()
             },
             "kalibr": self.kalibr(),
+            "kalibr_units": dict(KALIBR_UNITS),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
         }
 

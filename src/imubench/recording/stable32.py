@@ -29,6 +29,7 @@ from typing import IO, TYPE_CHECKING
 
 import numpy as np
 
+from imubench.batch import UNITS
 from imubench.errors import RecordingError
 from imubench.recording.timebase import SECONDS_PER_DAY
 
@@ -39,9 +40,6 @@ MJD_EPOCH = _dt.datetime(1858, 11, 17, tzinfo=_dt.UTC)
 """MJD 0."""
 FALLBACK_MJD = 51544.0
 """2000-01-01 00:00 UTC: the first tag of a recording that states no start time."""
-UNITS = {"gx": "dps", "gy": "dps", "gz": "dps", "ax": "g", "ay": "g", "az": "g",
-         "temp": "degC"}
-"""The unit of each channel's values in the file (imubench's own units)."""
 
 
 def _start_mjd(start_utc: object) -> float | None:
