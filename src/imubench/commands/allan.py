@@ -20,7 +20,7 @@ import numpy as np
 from imubench.batch import UNITS
 from imubench.batchrun import add_batch_options, is_batch
 from imubench.commands import write_json
-from imubench.errors import RecordingError
+from imubench.errors import RecordingError, StatsError
 from imubench.progress import progress
 from imubench.recording.options import InputOptions, add_input_arguments, input_options
 from imubench.stats import STATISTICS, compute
@@ -172,7 +172,10 @@ def run(args: argparse.Namespace) -> int:
         return run_allan_batch(args)
     data, rec_rate, channel = load_channel(args.input, args.column, input_options(args))
     with progress(100, args.stat, unit="%") as bar:
-        res = analyse(args, data, rec_rate, bar.fraction)
+        try:
+            res = analyse(args, data, rec_rate, bar.fraction)
+        except StatsError as exc:  # e.g. too few samples left: name the file
+            raise StatsError(f"{args.input} {channel}: {exc}") from None
     if args.json is None:
         print(format_table(res, dev_unit(channel)))
     else:
