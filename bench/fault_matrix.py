@@ -223,7 +223,9 @@ def disk_full(repeats: int) -> Row:
             row.lost += lost
             row.unaccounted += produced - got - lost
             row.duplicated += len(idx) - len(np.unique(idx))
-            row.note = f"{len(segs)} segments in the last run"
+            damaged = sum(r.damage is not None for r in recs)
+            row.note = (f"{len(segs)} segments in the last run; "
+                        f"{damaged} segment(s) with a partial record")
         finally:
             subprocess.run(["umount", "-l", str(disk)], capture_output=True)
             shutil.rmtree(tmp, ignore_errors=True)

@@ -221,6 +221,7 @@ def test_disk_full_keeps_acquiring_and_resumes_in_a_new_segment(tmp_path: Path) 
                          if segment_path(base, k).exists()]
         assert len(segs) >= 2, out
         recs = [load_recording(p) for p in segs]
+        assert [r.damage for r in recs] == [None] * len(recs)  # no partial record on disk
         total = sum(len(r) for r in recs)
         lost = sum(g.lost for r in recs for g in r.gaps)
         reasons = {g.reason for r in recs for g in r.gaps}

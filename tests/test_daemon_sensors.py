@@ -133,3 +133,34 @@ def test_one_daemon_several_sensors(private_mosquitto: Any, tmp_path: Path) -> N
         assert len(rec) == written and rec.lost_samples == rec_lost, name
         assert rec.metadata["sensor"] == name
     assert states(url) == {k: "offline" for k in keys}
+
+
+def test_sigint_while_the_sensors_are_prepared_ends_cleanly(tmp_path: Path) -> None:
+    """SIGINT after the first sensor is built, while the others are still prepared in
+    the worker thread: exit 0 within the stop bound, no C++ abort ("terminate called")
+    from a thread left inside native code at interpreter exit, no traceback, and every
+    recording already opened is readable."""
+    import signal
+
+    sensors = tuple((f"imu{k}", f"sim://{chip}?odr_hz=1660&seed={k}&clock=wall"
+                     f"&model=datasheet:{chip}")
+                    for k, chip in enumerate(("lsm6dsl", "lsm6dsm", "lsm6ds3h")))
+    sensors += (("imu3", "sensortile-sim://?seed=4&clock=wall"),)
+    rec = tmp_path / "rec"
+    daemon = start_daemon(config(tmp_path / "c.toml", "embedded", rec, sensors=sensors),
+                          tmp_path)
+    try:
+        daemon.wait_for(r"imu0: source ", 90)
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        daemon.signal(signal.SIGINT)
+        code = daemon.proc.wait(30)
+        took = time.monotonic() - t0
+    finally:
+        daemon.kill()
+    out = daemon.output()
+    assert code == 0, out
+    assert took < 10.0, out
+    assert "terminate called" not in out and "Traceback" not in out, out
+    for path in rec.glob("*.imbr"):
+        load_recording(path)

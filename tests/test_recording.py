@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -183,3 +184,39 @@ def test_lost_samples_count_gaps_before_first_and_after_last_sample(
     assert rec.lost_samples == 5 + 7 + 30
     assert len(rec) + rec.lost_samples == 1042  # every index below the end accounted for
     assert sum(g.lost for g in rec.gaps) == rec.lost_samples
+
+
+@pytest.mark.parametrize("suffix", [".imbr", ".csv"])
+def test_full_disk_cuts_the_failed_batch_off_and_keeps_whole_ones(tmp_path: Path,
+                                                                  suffix: str) -> None:
+    """A batch that hits a full disk is taken back whole: the file reads without damage,
+    holds exactly the batches the writer reported written, and every sample is either
+    in the file or in the batch that failed."""
+    import shutil
+    import subprocess
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None or subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
+            capture_output=True).returncode:
+        pytest.skip("cannot mount a small tmpfs here (needs root and mount)")
+    try:
+        path = disk / f"r{suffix}"
+        batches = make_batches(n=20000, hole_at=5000, lost=9)
+        written = 0
+        w = open_writer(path, meta(storage="raw_int16"), fsync_interval_s=0.0)
+        with pytest.raises(OSError):
+            for b in batches:
+                w.write(b)
+                written += len(b)
+        assert w.samples == written
+        with pytest.raises(RecordingError, match="closed"):
+            w.write(batches[-1])
+        w.close()
+        rec = load_recording(path)
+        assert rec.damage is None
+        assert len(rec.index) == written
+        np.testing.assert_array_equal(rec.index, Batch.concat(batches).index[:written])
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)

@@ -32,6 +32,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import signal
 import sys
 import threading
@@ -46,6 +47,8 @@ log = logging.getLogger("imubench.daemon")
 
 STOP_GRACE_S = 1.5
 """Longest wait for the pipeline to drain after a stop request, s."""
+PREPARE_JOIN_S = 1.0
+"""Longest wait, after a stop request, for the sensor being prepared to finish, s."""
 SNAPSHOT_LEAD = 0.25
 """A snapshot is asked for this share of the publish interval before it is sent."""
 
@@ -66,6 +69,8 @@ class Daemon:
         self._publisher: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.service = ServiceNotifier()
+        self.abandoned: threading.Thread | None = None
+        """The preparing thread, when a stop came and it did not finish in time."""
         """sd_notify to systemd (a no-op outside a ``Type=notify`` unit)."""
 
     # -- helpers --------------------------------------------------------------------
@@ -297,11 +302,14 @@ class Daemon:
         open the recordings) in a worker thread while the loop stays responsive, then
         start them; False when a stop came first."""
         done = threading.Event()
+        cancel = threading.Event()
         failure: list[BaseException] = []
 
         def prepare() -> None:
             try:
                 for unit in self.sensors:
+                    if cancel.is_set():
+                        break
                     unit.build()
             except BaseException as exc:
                 failure.append(exc)
@@ -314,6 +322,12 @@ class Daemon:
         warned = False
         while not done.is_set():
             if self.stop_requested.is_set():
+                # let the sensor being built finish (a thread stopped inside native code,
+                # e.g. a kernel compiling, aborts the interpreter at exit), bounded
+                cancel.set()
+                await asyncio.to_thread(worker.join, PREPARE_JOIN_S)
+                if worker.is_alive():
+                    self.abandoned = worker
                 return False
             if self.service.watchdog_due():  # compiling is progress too
                 self.service.watchdog()
@@ -387,4 +401,15 @@ class Daemon:
 
 
 def run_daemon(config: Config, config_path: str | None = None) -> int:
-    return asyncio.run(Daemon(config, config_path).run())
+    daemon = Daemon(config, config_path)
+    code = asyncio.run(daemon.run())
+    if daemon.abandoned is not None and daemon.abandoned.is_alive():
+        # stopped while a source was still being prepared: end the process without the
+        # interpreter's finalisation, which a thread inside native code can abort
+        log.warning("stopped while a sensor was still being prepared; exiting without "
+                    "waiting for it")
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code

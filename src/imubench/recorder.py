@@ -6,14 +6,15 @@ reasons the pipeline explained (FIFO overrun, chip reset, ``consumer overrun: re
 when the disk was too slow, ...).
 
 Disk full (or any other write error: a quota, an I/O error): the recorder stops writing
-cleanly (the file keeps everything written before; its tail record may be cut, which
-readers tolerate), reports the state (:attr:`Recorder.state`, the ``on_state`` callback:
-the daemon raises it on the retained MQTT status), keeps taking the stream's samples and
-counting them as ``not recorded``, and every ``retry_s`` tries to open the next
-*segment*: ``NAME.part2.imbr``, ``NAME.part3.imbr``, ... (same header, plus
-``segment`` and ``previous_segment``). The new segment starts with gap records that say
-exactly what is missing and why (``disk full: not recorded`` for the samples taken while
-the disk was full, the stream's own gaps of that time with their reasons).
+cleanly (the file keeps every whole batch written before and ends there: the writer cuts
+off the batch that failed, :mod:`imubench.recording.commit`), reports the state
+(:attr:`Recorder.state`, the ``on_state`` callback: the daemon raises it on the retained
+MQTT status), keeps taking the stream's samples and counting them as ``not recorded``,
+and every ``retry_s`` tries to open the next *segment*: ``NAME.part2.imbr``,
+``NAME.part3.imbr``, ... (same header, plus ``segment`` and ``previous_segment``). The
+new segment starts with gap records that say exactly what is missing and why (``disk
+full: not recorded`` for the samples taken while the disk was full, the stream's own
+gaps of that time with their reasons).
 """
 
 from __future__ import annotations

@@ -1,9 +1,14 @@
-"""``imubench report REC --out DIR``: sigma-tau and PSD plots, the fit, one HTML page.
+"""``imubench report REC [--model MODEL.toml] --out DIR``: plots, fit, HTML per sensor.
 
-Writes into DIR: ``sigma_tau_gyro.png/.svg`` and ``sigma_tau_accel.png/.svg`` (OADEV with
-95 % error bars, MDEV, the fitted model and each term's line, local slopes labelled),
-``psd_gyro/accel.png/.svg`` (Welch), ``model.toml`` (loads in the simulator), ``fit.json``,
-``imu.yaml`` (Kalibr) and ``index.html`` (one-page summary). See docs/noise-fit.md.
+Writes into DIR, per sensor (gyro, accel): ``sigma_tau_<sensor>.png/.svg`` (OADEV with 95 %
+error bars, the model and each term's line clipped to the data, IEEE 952 readouts N at
+1 s, B at the minimum, K at 3 s in datasheet units, a deg/h or ug right axis),
+``psd_<sensor>.png/.svg`` (amplitude spectral density in mdps/sqrt(Hz) or ug/sqrt(Hz),
+log-band averaged, with the model's terms) and ``<sensor>.html`` (one-page summary with the
+datasheet comparison); and ``model.toml``, ``fit.json``, ``imu.yaml`` (Kalibr),
+``index.html``. With ``--model`` the noise values are those of the model file (written by
+``imubench fit -o``): nothing is refitted and, as such a file has no intervals, the pages
+say so. See docs/reports.md.
 """
 
 from __future__ import annotations
@@ -22,6 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recording", type=Path, help="recording (.imbr or .csv)")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--model", type=Path, default=None, metavar="MODEL.toml",
+                   help="use this model file (imubench fit -o output) instead of fitting")
     p.add_argument("--terms", default="auto", help="as for imubench fit")
     p.add_argument("--method", choices=METHODS, default="wls", help="as for imubench fit")
     add_input_arguments(p)
@@ -31,9 +38,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from imubench.noisefit.report import write_report
 
+    if args.model is not None and (args.terms != "auto" or args.method != "wls"):
+        print("imubench report: error: --terms and --method choose how to fit; --model "
+              f"{args.model} reuses a fit and fits nothing (drop one of them)",
+              file=sys.stderr)
+        return 2
     try:
         files = write_report(args.recording, args.out, terms=args.terms, method=args.method,
-                             options=input_options(args))
+                             options=input_options(args), model_file=args.model)
     except OSError as exc:
         print(f"imubench report: error: {exc}", file=sys.stderr)
         return 2

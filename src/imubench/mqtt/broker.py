@@ -792,10 +792,13 @@ def main(argv: list[str] | None = None) -> int:
 
     async def serve() -> None:
         host, port = await broker.start()
-        print(f"imubench embedded MQTT broker on mqtt://{host}:{port} (Ctrl-C to stop)", flush=True)
         stop = asyncio.Event()
         with contextlib.suppress(NotImplementedError):
-            asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, stop.set)
+            # SIGINT too: a shell starts background jobs with SIGINT ignored, and
+            # asyncio.run then leaves it ignored; installed before the address is printed
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                asyncio.get_running_loop().add_signal_handler(signum, stop.set)
+        print(f"imubench embedded MQTT broker on mqtt://{host}:{port} (Ctrl-C to stop)", flush=True)
         try:
             await stop.wait()
         finally:

@@ -62,7 +62,7 @@ FILTER_MIN_FRACTION: float = 0.02
 DELTA_LEVEL: float = 0.99
 """Quantile of chi2(n - p) the GLS chi2 must exceed before a discrepancy floor is added."""
 Z95: float = 1.959964
-METHODS: tuple[str, ...] = ("wls", "tangent")
+METHODS: tuple[str, ...] = ("wls", "tangent", "whittle")
 PARAM_KEYS: tuple[str, ...] = (
     "white", "flicker", "random_walk", "ramp", "quantization", "markov_sigma",
     "markov_tau", "sine_amplitude", "sine_freq", "bandwidth_hz", "filter_order",
@@ -780,7 +780,8 @@ def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
         rate_hz: sample rate (Hz).
         terms: "auto" (model selection) or a list / comma string of term names among
             white flicker random_walk ramp quantization markov sine filter.
-        method: "wls" (GLS on the OAVAR curve) or "tangent" (datasheet practice).
+        method: "wls" (GLS on the OAVAR curve), "tangent" (datasheet practice) or
+            "whittle" (spectral likelihood, :mod:`.whittle`).
         channel: label for messages and the result (gx gy gz ax ay az).
         taus: tau values (s) for the AVAR points; default octave averaging factors.
 
@@ -794,6 +795,11 @@ def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
         from imubench.noisefit.tangent import fit_tangent
 
         return fit_tangent(np.asarray(y, dtype=float), rate_hz, channel=channel, taus=taus)
+    if method == "whittle":
+        from imubench.noisefit.whittle import fit_whittle
+
+        return fit_whittle(np.asarray(y, dtype=float), rate_hz, terms=terms, channel=channel,
+                           taus=taus)
     raise FitError(f"fit {channel}: unknown method {method!r}; use one of "
                    + ", ".join(METHODS))
 

@@ -8,11 +8,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel
 
 from imubench.batch import CHANNELS, UNITS
 from imubench.noisefit.errors import FitError
-from imubench.noisefit.fit import ChannelFit, fit_channel
+from imubench.noisefit.fit import (
+    PARAM_KEYS,
+    ChannelFit,
+    avar_points,
+    check_series,
+    fit_channel,
+)
+from imubench.noisefit.kernels import AMPLITUDE_KEY
 from imubench.noisefit.units import (
     KALIBR_UNITS,
     datasheet_comparison,
@@ -61,6 +69,14 @@ class RecordingFit:
                   for ch, f in self.fits.items()}
         return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
 
+    def _kalibr_or_reason(self) -> dict[str, Any]:
+        """:meth:`kalibr`, or ``{"not_written": why}`` when a value would have to be made
+        up (a model file without a random walk and without intervals)."""
+        try:
+            return self.kalibr()
+        except FitError as exc:
+            return {"not_written": str(exc)}
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: per channel the fit, its datasheet units and the ``units`` of its
         numbers (``params``, ``ci95``, ``bias``, ``points``); Kalibr with its units;
@@ -77,7 +93,7 @@ class RecordingFit:
                                "avar": f"{UNITS[ch]}^2", "edf": "1"}}
                 for ch, f in self.fits.items()
             },
-            "kalibr": self.kalibr(),
+            "kalibr": self._kalibr_or_reason(),
             "kalibr_units": dict(KALIBR_UNITS),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
         }
@@ -134,4 +150,54 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits)
 
 
-__all__ = ["RecordingFit", "fit_loaded", "fit_recording", "parse_channels"]
+MODEL_FILE_METHOD: str = "model file"
+"""``method`` of a :class:`ChannelFit` read from a model file instead of fitted."""
+_COMPANION = {"markov_sigma": ("markov_tau",), "sine_amplitude": ("sine_freq",)}
+
+
+def channel_from_model(cm: ChannelModel, y: np.ndarray, rate_hz: float, channel: str
+                       ) -> ChannelFit:
+    """A :class:`ChannelFit` holding a model file's values for ``channel`` (no fit).
+
+    ``params`` are the file's noise keys, ``present`` those that are non-zero, ``ci`` is
+    empty (a model file carries no intervals), and ``tau_s/avar/edf`` are the recording's
+    octave OAVAR points (``y`` at ``rate_hz``) that the model is shown against.
+    """
+    arr = check_series(y, rate_hz, channel)
+    pts = avar_points(arr, rate_hz, None, channel)
+    params: dict[str, float] = {k: float(getattr(cm, k)) for k in PARAM_KEYS}
+    present: list[str] = []
+    for key in AMPLITUDE_KEY.values():
+        if params.get(key, 0.0) != 0.0:
+            present += [key, *_COMPANION.get(key, ())]
+    if params["bandwidth_hz"] > 0:
+        present += ["bandwidth_hz", "filter_order"]
+    return ChannelFit(channel, float(rate_hz), MODEL_FILE_METHOD, params, {}, tuple(present),
+                      pts.tau_s, pts.avar, pts.edf, float(np.nanmean(arr)),
+                      notes=("values from the model file: no fit, no intervals",))
+
+
+def model_file_fit(model: NoiseModel, rec: Recording, source: str, *,
+                   channels: str | Sequence[str] | None = None) -> RecordingFit:
+    """A :class:`RecordingFit` built from a model file (``imubench fit -o`` output, read by
+    :func:`lsm6ds_sim.model.load_model`) for the recording ``rec``: every requested channel
+    of the recording that the model gives noise to (default: the model's
+    ``meta.fitted_channels`` when present, else every channel with a noise term)."""
+    chans = parse_channels(channels, rec.channels)
+    fitted = model.meta.get("fitted_channels")
+    if channels is None and isinstance(fitted, str):
+        chans = [ch for ch in chans if ch in fitted.replace(",", " ").split()]
+    keys = set(AMPLITUDE_KEY.values())
+    chans = [ch for ch in chans if any(float(getattr(model[ch], k)) != 0.0 for k in keys)]
+    if not chans:
+        raise FitError(f"{model.source}: gives no noise term to any channel of {source} "
+                       f"(recording channels {list(rec.channels)})")
+    fits = {ch: channel_from_model(model[ch], rec.channel(ch), rec.rate_hz, ch)
+            for ch in chans}
+    chip = rec.metadata.get("chip") or model.meta.get("chip")
+    return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, MODEL_FILE_METHOD,
+                        fits)
+
+
+__all__ = ["MODEL_FILE_METHOD", "RecordingFit", "channel_from_model", "fit_loaded",
+           "fit_recording", "model_file_fit", "parse_channels"]

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from imubench.noisefit.errors import FitError
@@ -39,28 +40,57 @@ GYRO = ("gx", "gy", "gz")
 ACCEL = ("ax", "ay", "az")
 
 
+@dataclass(frozen=True)
+class Quantity:
+    """A datasheet quantity: ``factor`` times the model-file value of ``term`` (dps or g
+    based), shown as ``label`` in ``unit``; ``key`` names it in ``fit.json``."""
+
+    key: str
+    label: str
+    unit: str
+    term: str
+    factor: float
+
+
+_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)  # ADEV of flicker B is 0.664 B (IEEE 952 C.3)
+
+GYRO_QUANTITIES: tuple[Quantity, ...] = (
+    Quantity("noise_density_mdps_per_sqrt_hz", "rate noise density", "mdps/√Hz", "white",
+             1000.0),
+    Quantity("arw_deg_per_sqrt_h", "angle random walk", "°/√h", "white", 60.0),
+    Quantity("bias_instability_deg_per_h", "bias instability", "°/h", "flicker", 3600.0),
+    Quantity("adev_floor_deg_per_h", "Allan deviation floor (0.664 B)", "°/h", "flicker",
+             3600.0 * _FLOOR),
+    Quantity("rrw_deg_per_h_per_sqrt_h", "rate random walk", "°/h/√h", "random_walk",
+             3600.0 * 60.0),
+)
+"""Gyro quantities (model unit dps); the table of the module docstring."""
+
+ACCEL_QUANTITIES: tuple[Quantity, ...] = (
+    Quantity("noise_density_ug_per_sqrt_hz", "acceleration noise density", "µg/√Hz",
+             "white", 1e6),
+    Quantity("vrw_m_per_s_per_sqrt_h", "velocity random walk", "m/s/√h", "white", G0 * 60.0),
+    Quantity("bias_instability_ug", "bias instability", "µg", "flicker", 1e6),
+    Quantity("adev_floor_ug", "Allan deviation floor (0.664 B)", "µg", "flicker",
+             1e6 * _FLOOR),
+    Quantity("random_walk_ug_per_sqrt_s", "acceleration random walk", "µg/√s",
+             "random_walk", 1e6),
+)
+"""Accel quantities (model unit g); the table of the module docstring."""
+
+
+def quantities(channel: str) -> tuple[Quantity, ...]:
+    """The datasheet quantities of ``channel`` (gx gy gz: gyro, ax ay az: accel)."""
+    if channel in GYRO:
+        return GYRO_QUANTITIES
+    if channel in ACCEL:
+        return ACCEL_QUANTITIES
+    raise FitError(f"units: unknown channel {channel!r}; channels are gx gy gz ax ay az")
+
+
 def datasheet_units(channel: str, params: Mapping[str, float]) -> dict[str, float]:
     """The fitted N, B, K of one channel in datasheet units (names carry the unit)."""
-    n = float(params.get("white", 0.0))
-    b = float(params.get("flicker", 0.0))
-    k = float(params.get("random_walk", 0.0))
-    if channel in GYRO:
-        return {
-            "arw_deg_per_sqrt_h": n * 60.0,
-            "noise_density_mdps_per_sqrt_hz": n * 1000.0,
-            "bias_instability_deg_per_h": b * 3600.0,
-            "adev_floor_deg_per_h": b * 3600.0 * math.sqrt(2.0 * math.log(2.0) / math.pi),
-            "rrw_deg_per_h_per_sqrt_h": k * 3600.0 * 60.0,
-        }
-    if channel in ACCEL:
-        return {
-            "noise_density_ug_per_sqrt_hz": n * 1e6,
-            "vrw_m_per_s_per_sqrt_h": n * G0 * 60.0,
-            "bias_instability_ug": b * 1e6,
-            "adev_floor_ug": b * 1e6 * math.sqrt(2.0 * math.log(2.0) / math.pi),
-            "random_walk_ug_per_sqrt_s": k * 1e6,
-        }
-    raise FitError(f"units: unknown channel {channel!r}; channels are gx gy gz ax ay az")
+    return {q.key: float(params.get(q.term, 0.0)) * q.factor for q in quantities(channel)}
 
 
 def param_units(channel: str) -> dict[str, str]:
@@ -202,11 +232,15 @@ def datasheet_comparison(chip: str | None,
 
 
 __all__ = [
+    "ACCEL_QUANTITIES",
     "G0",
+    "GYRO_QUANTITIES",
     "KALIBR_UNITS",
+    "Quantity",
     "datasheet_comparison",
     "datasheet_units",
     "kalibr_imu",
     "kalibr_yaml",
     "param_units",
+    "quantities",
 ]

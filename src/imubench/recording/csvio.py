@@ -12,10 +12,13 @@ in ``.gz`` are gzip-compressed. Reading (of these files and of CSV from elsewher
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import io
 import json
 import math
+import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -23,6 +26,7 @@ import numpy as np
 
 from imubench.batch import CHANNELS, UNITS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
+from imubench.recording.commit import cut_back
 
 COLUMNS: tuple[str, ...] = ("t", *CHANNELS, "temp")
 COLUMN_UNITS: dict[str, str] = {"t": "s", **UNITS, "index": "samples"}
@@ -56,10 +60,32 @@ class CsvWriter:
         for key in sorted(self.metadata):
             self._fh.write(f"# {key}: {json.dumps(self.metadata[key], default=str)}\n")
         self._fh.write(",".join((*COLUMNS, INDEX_COLUMN)) + "\n")
+        self._fh.flush()
+        self._committed = os.fstat(self._fh.fileno()).st_size
 
     def write(self, batch: Batch) -> None:
         """Append rows; every hole gets ``# gap`` lines (one per declared reason, see
-        :func:`~imubench.batch.explain_holes`) before the sample after it."""
+        :func:`~imubench.batch.explain_holes`) before the sample after it. A batch that
+        cannot be written whole is taken back (:func:`~imubench.recording.commit.cut_back`;
+        in a ``.gz`` file the cut leaves a stream without its end, which readers report)."""
+        with self._all_or_nothing():
+            self._write(batch)
+
+    @contextlib.contextmanager
+    def _all_or_nothing(self) -> Iterator[None]:
+        """Commit what the block writes, or take it all back (counters and bytes)."""
+        if self._fh.closed:
+            raise RecordingError(f"{self.path}: writer is closed")
+        counts = (self.samples, self.gaps, self.lost_samples, self._last_index)
+        try:
+            yield
+        except OSError:
+            self.samples, self.gaps, self.lost_samples, self._last_index = counts
+            cut_back(self.path, self._fh, self._committed)
+            raise
+        self._committed = os.fstat(self._fh.fileno()).st_size
+
+    def _write(self, batch: Batch) -> None:
         holes: dict[int, list[Gap]] = {}
         for gap in explain_holes(batch, self._last_index):
             holes.setdefault(gap.at, []).append(gap)
@@ -92,7 +118,9 @@ class CsvWriter:
         self.lost_samples += lost
 
     def write_gap(self, at_index: int, lost: int, reason: str) -> None:
-        self._gap_line(self._fh, at_index, lost, reason)
+        with self._all_or_nothing():
+            self._gap_line(self._fh, at_index, lost, reason)
+            self._fh.flush()
 
     def close(self) -> None:
         if not self._fh.closed:

@@ -26,16 +26,21 @@ The header's JSON metadata holds: ``format``, ``version``, ``chip``, ``odr_hz``,
 configuration) and any extra keys the writer was given.
 
 Crash safety: records are written whole with one ``write`` call and flushed; ``fsync``
-runs at least every ``fsync_interval_s``. A reader never returns data from a damaged
-record: a record that fails its CRC (or whose length or sample count is impossible) is
-skipped, and reading resumes at the next byte offset where a whole record with a valid
-CRC starts (a false match has probability 2^-32 per candidate), so a flipped bit loses
-that one record; a truncated tail ends the reading. Each is reported
+runs at least every ``fsync_interval_s``. A batch that cannot be written whole (disk
+full, I/O error) is taken back: the file is cut to the end of the last whole batch
+(:func:`imubench.recording.commit.cut_back`) and the error raised, so the file never ends
+in a partial record and the caller counts exactly that batch as not recorded.
+A reader never returns data from a damaged record: a record that fails its CRC (or whose
+length or sample count is impossible) is skipped, and reading resumes at the next byte
+offset where a whole record with a valid CRC starts (a false match has probability 2^-32
+per candidate), so a flipped bit loses that one record; a truncated tail ends the
+reading. Each is reported
 (:attr:`NativeReader.damage`, :attr:`NativeReader.damaged`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import json
 import os
@@ -50,6 +55,7 @@ import numpy as np
 
 from imubench.batch import CHANNELS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
+from imubench.recording.commit import cut_back
 
 MAGIC = b"IMBR"
 VERSION = 1
@@ -109,6 +115,7 @@ class NativeWriter:
             + struct.pack("<I", zlib.crc32(header))
         )
         self._sync(force=True)
+        self._committed = os.fstat(self._fh.fileno()).st_size
 
     @property
     def storage(self) -> str:
@@ -139,8 +146,12 @@ class NativeWriter:
                 f"{self.path}: sample index {int(batch.index[0])} does not follow "
                 f"{self._last_index}"
             )
+        with self._all_or_nothing():
+            self._write(batch, n)
+
+    def _write(self, batch: Batch, n: int) -> None:
         for gap in explain_holes(batch, self._last_index):
-            self.write_gap(gap.at, gap.lost, gap.reason)
+            self._gap(gap.at, gap.lost, gap.reason)
         if n == 0:
             return
         if self.storage == STORAGE_RAW:
@@ -162,9 +173,28 @@ class NativeWriter:
 
     def write_gap(self, at_index: int, lost: int, reason: str) -> None:
         """Record ``lost`` samples missing before ``at_index`` (explicit gap)."""
+        with self._all_or_nothing():
+            self._gap(at_index, lost, reason)
+
+    def _gap(self, at_index: int, lost: int, reason: str) -> None:
         self._record(b"G", struct.pack("<qq", at_index, lost) + reason.encode())
         self.gaps += 1
         self.lost_samples += lost
+
+    @contextlib.contextmanager
+    def _all_or_nothing(self) -> Iterator[None]:
+        """Commit what the block writes, or take it all back (counters and bytes)."""
+        if self._fh is None:
+            raise RecordingError(f"{self.path}: writer is closed")
+        counts = (self.samples, self.gaps, self.lost_samples, self._last_index)
+        try:
+            yield
+        except OSError:
+            fh, self._fh = self._fh, None
+            self.samples, self.gaps, self.lost_samples, self._last_index = counts
+            cut_back(self.path, fh, self._committed)
+            raise
+        self._committed = os.fstat(self._fh.fileno()).st_size
 
     def close(self) -> None:
         if self._fh is None:
@@ -173,12 +203,11 @@ class NativeWriter:
             "samples": self.samples, "gaps": self.gaps, "lost_samples": self.lost_samples,
             "stopped_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }
-        fh = self._fh
-        try:
+        with self._all_or_nothing():
             self._record(b"E", json.dumps(end).encode())
             self._sync(force=True)
-        finally:
-            self._fh = None
+        fh, self._fh = self._fh, None
+        if fh is not None:
             fh.close()
 
     def __enter__(self) -> NativeWriter:

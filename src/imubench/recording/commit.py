@@ -1,0 +1,41 @@
+"""Taking back a write that failed half-way, so a recording never ends in a partial record.
+
+A full disk (ENOSPC, EDQUOT) or an I/O error can hit in the middle of a record: the
+bytes before it are on disk, the rest in the writer's buffer. The writers remember the
+file's size after each whole batch; on an error they call :func:`cut_back`, which drops
+the buffer and cuts the file to that size (shrinking a file needs no free space), so
+the file holds whole batches only and the caller counts the failed batch, and nothing
+else, as not recorded.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from pathlib import Path
+from typing import IO, Any
+
+log = logging.getLogger(__name__)
+
+
+def cut_back(path: Path, fh: IO[Any], size: int) -> None:
+    """Close ``fh`` without writing its buffer further, and cut ``path`` to ``size`` bytes.
+
+    A close that flushes into a disk whose space the cut freed could append the partial
+    record again, so the file is closed first (its flush may fail: ignored) and cut after.
+    """
+    with contextlib.suppress(OSError):
+        fh.close()
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except OSError as exc:
+        log.error("%s: cannot reopen to cut the partial record off: %s", path, exc)
+        return
+    try:
+        os.ftruncate(fd, size)
+        os.fsync(fd)
+    except OSError as exc:
+        log.error("%s: cannot cut the partial record off at byte %d: %s", path, size, exc)
+    finally:
+        os.close(fd)
