@@ -23,7 +23,15 @@ from imubench.recording import InputOptions, load_recording
 CORPUS = Path(__file__).parent / "data" / "foreign"
 sys.path.insert(0, str(CORPUS))
 import make_corpus  # noqa: E402
-from recording_damage import fuzz  # noqa: E402
+from recording_damage import (  # noqa: E402
+    CHEAP_COMMANDS,
+    COMMANDS,
+    check_command,
+    cli_flags,
+    command_argv,
+    fuzz,
+    run_command,
+)
 
 TRUTH = make_corpus.truth()
 ALL6 = ("gx", "gy", "gz", "ax", "ay", "az")
@@ -49,8 +57,10 @@ READ: dict[str, tuple[InputOptions, float, tuple[str, ...], float]] = {
                                      104.0, ("gx", "gy"), 1e-6),
     "ros2_bag": (InputOptions(), 104.0, ALL6, 1e-12),
     "ros2_imu.mcap": (InputOptions(topic="/imu/data"), 104.0, ALL6, 1e-12),
+    "imubench_hdf5.h5": (InputOptions(), 104.0, (*ALL6, "temp"), 1e-12),
+    "imubench_stable32_export.dat": (InputOptions(), 104.0, ("gx",), 1e-16),
 }
-BINARY = ("imubench_native.imbr", "ros2_bag", "ros2_imu.mcap")
+BINARY = ("imubench_native.imbr", "ros2_bag", "ros2_imu.mcap", "imubench_hdf5.h5")
 """Compared by content with what the script writes now (they hold write times)."""
 REFUSED: dict[str, str] = {
     # file (read without options): the fix the one-line error must name
@@ -101,31 +111,128 @@ def test_refusals_are_one_line_naming_the_file_and_the_fix(name: str) -> None:
     assert REFUSED[name] in text
 
 
-def test_commands_name_the_file_and_never_print_a_traceback() -> None:
-    for name in ("logger_no_units.csv", "binary_junk.csv", "imubench_rounded_t.csv"):
-        for cmd in (["allan", "--stat", "oadev", "--column", "gx"],
-                    ["fit", "-o", "/dev/null", "--channels", "gx", "--terms", "white"]):
-            p = subprocess.run([sys.executable, "-m", "imubench", cmd[0],
-                                str(CORPUS / name), *cmd[1:]], capture_output=True,
-                               text=True, timeout=300)
-            assert "Traceback" not in p.stderr, p.stderr
-            if name != "imubench_rounded_t.csv":
-                assert p.returncode == 2 and f"{CORPUS / name}:" in p.stderr
-            else:
-                assert p.returncode == 0, p.stderr
-                assert "rate 104 Hz (from t (least squares))" in p.stderr
+NO_ACCEL = {"stable32_one_column.txt", "stable32_mjd_value.txt",
+            "headerless_three_columns.txt", "whitespace_aligned.dat",
+            "imubench_stable32_export.dat"}
+"""Corpus files without accelerometer channels: ``tilt`` refuses them, naming the file."""
+REPORT_SAMPLE = ("imubench_native.imbr", "euroc_imu0_data.csv", "stable32_mjd_value.txt",
+                 "ros2_bag")
+"""``report`` draws plots (seconds per file): these by default, every file with -m slow."""
 
 
-def test_fuzzed_corpus_never_raises_anything_but_a_named_error(tmp_path: Path) -> None:
-    counts = fuzz(READ, 60, tmp_path)
-    assert sum(counts.values()) == 60 * len(READ)
-    assert counts["refused"] and counts["damage reported"] and counts["read"]
+def _command_on_corpus(command: str, names: tuple[str, ...] | list[str], tmp: Path) -> None:
+    """``command`` on each named corpus file (with its options) gives the file's rate and
+    channels, or refuses it with an error naming it; on each refused file (without
+    options), an error naming the file and the fix."""
+    for name in names:
+        options, rate, channels, _ = READ[name]
+        out = tmp / f"ok-{name}"
+        out.mkdir()
+        path = CORPUS / name
+        status = check_command(command_argv(command, path, out) + cli_flags(options), path)
+        if command == "gap" or (command == "tilt" and name in NO_ACCEL):
+            assert status == 2, (command, name)  # gap: 2 s are too few to compare ADEVs
+            continue
+        assert status == 0, (command, name)
+        if command == "convert":
+            rec = load_recording(out / "converted.imbr")
+            assert rec.rate_hz == pytest.approx(rate, rel=1e-6)
+            assert tuple(rec.channels) == channels and len(rec) == make_corpus.N
+        elif command == "report":
+            assert (out / "report" / "index.html").is_file()
+        else:
+            doc = json.loads((out / f"{command}.json").read_text())
+            got = doc["odr_hz" if command == "tilt" else "rate_hz"]
+            assert got == pytest.approx(rate, rel=1e-6), (command, name)
+            if command == "fit":
+                assert list(doc["channels"]) == ["gx"]
+            if command == "tilt":
+                assert len(doc["t_s"]) == make_corpus.N // 16
+    for name, fix in REFUSED.items():
+        if command == "report" and name not in (*REPORT_SAMPLE, "binary_junk.csv"):
+            continue
+        out = tmp / f"refused-{name}"
+        out.mkdir()
+        path = CORPUS / name
+        status, _, err = run_command(command_argv(command, path, out))
+        if command == "allan" and name == "stable32_one_column.txt":
+            assert status == 0  # as Stable32: no rate, tau in samples (1 Hz)
+            assert json.loads((out / "allan.json").read_text())["rate_hz"] == 1.0
+            continue
+        errors = [line for line in err.splitlines() if "error:" in line]
+        assert status == 2 and "Traceback" not in err, err
+        assert len(errors) == 1, err
+        assert errors[0].startswith(f"imubench {command}: error: {path}") and fix in errors[0]
+
+
+@pytest.mark.parametrize("command", [*CHEAP_COMMANDS, "report"])
+def test_every_command_reads_every_corpus_file_or_names_it_and_the_fix(
+        command: str, tmp_path: Path) -> None:
+    names = REPORT_SAMPLE if command == "report" else sorted(READ)
+    _command_on_corpus(command, names, tmp_path)
 
 
 @pytest.mark.slow
-def test_fuzzed_corpus_1000_each(tmp_path: Path) -> None:
-    counts = fuzz(READ, 1000, tmp_path)
-    assert sum(counts.values()) == 1000 * len(READ)
+def test_report_reads_every_corpus_file(tmp_path: Path) -> None:
+    _command_on_corpus("report", sorted(READ), tmp_path)
+
+
+def test_a_folder_of_foreign_recordings_runs_as_a_batch(tmp_path: Path) -> None:
+    """A directory with a ROS 2 bag folder, an MCAP file, imubench's and EuRoC's files and
+    junk: each recording is one row (the bag folder too, not a directory to descend
+    into); the junk is a failed row naming it."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    for name in ("ros2_bag", "ros2_imu.mcap", "imubench_native.imbr", "euroc_imu0_data.csv",
+                 "binary_junk.csv"):
+        src = CORPUS / name
+        if src.is_dir():
+            shutil.copytree(src, folder / name)
+        else:
+            shutil.copy(src, folder)
+    status, _, err = run_command(["fit", str(folder), "--channels", "gx", "--terms", "white",
+                                  "--out-dir", str(tmp_path / "out")])
+    assert "Traceback" not in err and status == 2, err  # 2: one recording failed
+    assert f"imubench fit: error: {folder / 'binary_junk.csv'}: 14 of 14" in err
+    table = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert table["failed"] == 1
+    rows = {Path(r["recording"]).name: r for r in table["rows"]}
+    assert set(rows) == {"ros2_bag", "ros2_imu.mcap", "imubench_native.imbr",
+                         "euroc_imu0_data.csv", "binary_junk.csv"}
+    for name, row in rows.items():
+        if name == "binary_junk.csv":
+            assert "not a recording" in row["error"]
+        else:
+            assert row["rate_hz"] == pytest.approx(104.0, rel=1e-6) and not row.get("error")
+    status, _, err = run_command(["allan", str(CORPUS / "ros2_bag"), "--stat", "oadev",
+                                  "--column", "gx", "--json", str(tmp_path / "bag.json")])
+    assert status == 0, err  # one bag folder is one recording, not a batch
+
+
+def test_fuzzed_corpus_never_raises_anything_but_a_named_error(
+        tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """60 damaged copies of each file through the reader, every 10th also through a
+    command; nothing printed outside the log (the MCAP decoder's own prints become one
+    warning on ``imubench.recording``)."""
+    counts = fuzz(READ, 60, tmp_path, command_every=10)
+    reads = counts["read"] + counts["damage reported"] + counts["refused"]
+    assert reads == 60 * len(READ)
+    assert counts["command ok"] + counts["command refused"] == 60 * len(READ) // 10
+    assert counts["refused"] and counts["damage reported"] and counts["read"]
+    assert counts["command ok"] and counts["command refused"]
+    assert capfd.readouterr() == ("", "")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(2400)
+def test_fuzzed_corpus_1000_each(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """Acceptance 1's count: 1000 damaged copies of each file through the reader, every
+    50th through a command (``report`` included; 380 commands)."""
+    counts = fuzz(READ, 1000, tmp_path, command_every=50, commands=COMMANDS)
+    reads = counts["read"] + counts["damage reported"] + counts["refused"]
+    assert reads == 1000 * len(READ)
+    assert counts["command ok"] + counts["command refused"] == 1000 * len(READ) // 50
+    assert capfd.readouterr() == ("", "")
 
 
 def test_a_flipped_bit_in_a_native_record_loses_that_record_only(tmp_path: Path) -> None:
@@ -179,16 +286,22 @@ def write_mcap(path: Path, t_s: np.ndarray, values: np.ndarray) -> None:
         shutil.copyfile(next((Path(tmp) / "b").glob("*.mcap")), path)
 
 
-def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, InputOptions]]:
+SAME_SECONDS = 300
+"""Length of the recording written in every format (a few minutes: enough taus for fit
+and gap, a few seconds per command)."""
+
+
+def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, list[str]]]:
     """One simulated recording as .imbr, CSV with metadata, CSV without metadata with t
     rounded to 6 decimals, .csv.gz, MCAP (sensor_msgs/Imu) and Stable32 one-column text
-    of gx."""
+    of gx; each with the command-line options it needs."""
     from imubench.recording import convert
 
     src = tmp / "sim.imbr"
     subprocess.run([sys.executable, "-m", "imubench", "sim", "--chip", "lsm6dsl",
-                    "--odr-hz", "104", "--duration-s", "600", "--model", "datasheet:lsm6dsl",
-                    "--seed", "5", "--out", str(src)], check=True, capture_output=True)
+                    "--odr-hz", "104", "--duration-s", str(SAME_SECONDS), "--model",
+                    "datasheet:lsm6dsl", "--seed", "5", "--out", str(src)],
+                   check=True, capture_output=True)
     rec = load_recording(src)
     convert(src, tmp / "meta.csv")
     convert(src, tmp / "meta.csv.gz")
@@ -198,36 +311,54 @@ def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, InputOpti
     (tmp / "plain.csv").write_text("\n".join(lines) + "\n")
     (tmp / "gx.txt").write_text("".join(f"{v:.17g}\n" for v in rec.channel("gx")))
     write_mcap(tmp / "rec.mcap", rec.index / rec.rate_hz, rec.values)
-    return {"imbr": (src, InputOptions()), "csv": (tmp / "meta.csv", InputOptions()),
-            "mcap": (tmp / "rec.mcap", InputOptions()),
-            "csv.gz": (tmp / "meta.csv.gz", InputOptions()),
-            "plain": (tmp / "plain.csv", InputOptions()),
-            "stable32": (tmp / "gx.txt", InputOptions(rate_hz=104.0))}
+    return {"imbr": (src, []), "csv": (tmp / "meta.csv", []),
+            "plain": (tmp / "plain.csv", []), "csv.gz": (tmp / "meta.csv.gz", []),
+            "mcap": (tmp / "rec.mcap", []), "stable32": (tmp / "gx.txt", ["--rate", "104"])}
+
+
+def _command_json(argv: list[str], out: Path) -> dict:
+    """Run ``imubench ARGV --json OUT`` in this process; its JSON."""
+    from imubench.cli import main
+
+    assert main([*argv, "--progress", "off", "--json", str(out)]) == 0, argv
+    return json.loads(out.read_text())
 
 
 def test_one_recording_in_every_format_gives_the_same_results(tmp_path: Path) -> None:
-    from imubench.commands.allan import load_input
-    from imubench.stats import compute
-
+    """Acceptance 2: the same rate (1e-6 relative), ADEV, fitted parameters and gap
+    verdict from each format. The CSVs print values to 9 significant digits, so numbers
+    agree to ~1e-8 relative, not exactly; tolerances say how far."""
     files = same_recording_in_every_format(tmp_path)
-    dev = {}
-    for kind, (path, options) in files.items():
-        data, rate = load_input(path, "gx", options)
-        assert rate == pytest.approx(104.0, rel=1e-7), kind
-        dev[kind] = compute("oadev", data, rate, "freq", "octave").dev
-    for kind in files:  # values printed to 9 digits: equal to ~1e-8 relative
-        np.testing.assert_allclose(dev[kind], dev["imbr"], rtol=1e-6, err_msg=kind)
-    fits = {}
-    for kind, (path, _) in files.items():
-        if kind == "stable32":
-            continue
-        out = tmp_path / f"{kind}.json"
-        p = subprocess.run([sys.executable, "-m", "imubench", "fit", str(path), "-o",
-                            str(tmp_path / f"{kind}.toml"), "--channels", "gx",
-                            "--terms", "white,flicker", "--json", str(out)],
-                           capture_output=True, text=True, timeout=300)
-        assert p.returncode == 0, p.stderr
-        fits[kind] = json.loads(out.read_text())["channels"]["gx"]["params"]
-    for kind, params in fits.items():
-        for key, value in params.items():
-            assert value == pytest.approx(fits["imbr"][key], rel=1e-5), (kind, key)
+    got: dict[str, dict[str, dict]] = {}
+    for kind, (path, opts) in files.items():
+        rec = load_recording(path, InputOptions(rate_hz=104.0) if opts else InputOptions())
+        assert rec.rate_hz == pytest.approx(104.0, rel=1e-6), kind
+        assert len(rec) == SAME_SECONDS * 104 and rec.lost_samples == 0, kind
+        d = tmp_path / kind.replace(".", "_")
+        d.mkdir()
+        got[kind] = {
+            "allan": _command_json(["allan", str(path), "--stat", "oadev", "--column", "gx",
+                                    *opts], d / "allan.json"),
+            "fit": _command_json(["fit", str(path), "-o", str(d / "model.toml"),
+                                  "--channels", "gx", "--terms", "white,flicker,random_walk",
+                                  *opts], d / "fit.json"),
+            "gap": _command_json(["gap", str(path), "--model", "datasheet:lsm6dsl",
+                                  "--channels", "gx", "--realisations", "4",
+                                  "--effects", "flicker,random_walk,quantization", *opts],
+                                 d / "gap.json"),
+        }
+    ref = got["imbr"]
+    for kind, res in got.items():
+        a, r = res["allan"], ref["allan"]
+        assert a["rate_hz"] == pytest.approx(104.0, rel=1e-6), kind
+        np.testing.assert_allclose(a["tau_s"], r["tau_s"], rtol=1e-6, err_msg=kind)
+        np.testing.assert_allclose(a["dev"], r["dev"], rtol=1e-6, err_msg=kind)
+        f, fr = res["fit"]["channels"]["gx"], ref["fit"]["channels"]["gx"]
+        assert f["present"] == fr["present"], kind
+        for key, value in f["params"].items():
+            assert value == pytest.approx(fr["params"][key], rel=1e-5, abs=1e-12), (kind, key)
+        g, gr = res["gap"]["channels"]["gx"], ref["gap"]["channels"]["gx"]
+        assert g["verdict"] == gr["verdict"], kind
+        assert [e["effect"] for e in g["effects"]] == [e["effect"] for e in gr["effects"]]
+        for key in ("gap_before", "gap_after"):
+            assert g[key] == pytest.approx(gr[key], rel=1e-5), (kind, key)

@@ -28,6 +28,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from imubench.batch import UNITS
 from imubench.batchrun.runner import (
     BatchError,
     Outcome,
@@ -82,20 +83,48 @@ def write_table(rows: list[dict[str, Any]], out_dir: Path, name: str,
     return csv_path, json_path
 
 
+def _with_unit(row: dict[str, Any]) -> dict[str, Any]:
+    """``row`` with the unit of its channel's values after ``channel`` (``unit``)."""
+    if row.get("channel") not in UNITS:
+        return row
+    out: dict[str, Any] = {}
+    for k, v in row.items():
+        out[k] = v
+        if k == "channel":
+            out["unit"] = UNITS[v]
+    return out
+
+
+def _table_units(label: str, channels: list[str]) -> dict[str, Any]:
+    """The units of a table's numbers: per channel for the fitted parameters (``fit``,
+    ``gap``), the deviations in the row's ``unit`` (``allan``)."""
+    from imubench.noisefit.units import param_units
+
+    common = {"rate_hz": "Hz", "tau_s": "s", "unit": "the unit of the row's channel"}
+    if label == "allan":
+        return {**common, "dev": "unit", "ci_low": "unit", "ci_high": "unit"}
+    return {**common, **{ch: param_units(ch) for ch in channels if ch != "temp"}}
+
+
 def _finish(label: str, outcomes: list[Outcome], rows: list[dict[str, Any]], out_dir: Path,
             args: argparse.Namespace) -> int:
     """Table, summary, errors; exit status 0 when every task succeeded, else 2."""
     failed = [(o.recording, ch, msg) for o in outcomes for ch, msg in o.errors.items()]
+    channels = sorted({r["channel"] for r in rows if r.get("channel") in UNITS})
+    rows = [_with_unit(r) for r in rows]
     for rec, ch, msg in failed:
         rows.append({"recording": str(rec), "channel": ch or None, "error": msg})
     meta = {"command": label, "recordings": [str(o.recording) for o in outcomes],
             "tasks": sum(len(o.results) + len(o.errors) for o in outcomes),
-            "workers": args.workers, "scheduler": args.scheduler, "failed": len(failed)}
+            "workers": args.workers, "scheduler": args.scheduler, "failed": len(failed),
+            "units": _table_units(label, channels)}
     csv_path, json_path = write_table(rows, out_dir, label, meta)
     print(f"{label}: {len(outcomes)} recording(s), {meta['tasks']} task(s), {len(failed)} "
           f"failed; table {csv_path} and {json_path}")
     for rec, ch, msg in failed:
         where = f"{rec}" + (f" {ch}" if ch else "")
+        if not ch and msg.startswith(f"{Path(rec).resolve()}:"):
+            where, msg = str(rec), msg[len(str(Path(rec).resolve())) + 2:]  # named once
         print(f"imubench {label}: error: {where}: {msg}", file=sys.stderr)
     return 2 if failed else 0
 
@@ -125,10 +154,10 @@ def allan_plan(column: str | None, options: InputOptions, path: Path, name: str
 def allan_work(args: argparse.Namespace, path: Path, name: str, channel: str
                ) -> dict[str, Any]:
     """``imubench allan PATH --column CHANNEL --json``'s document."""
-    from imubench.commands.allan import analyse, load_input
+    from imubench.commands.allan import analyse, load_input, with_units
 
     data, rate = load_input(path, channel, input_options(args))
-    return dict(analyse(args, data, rate).to_dict())
+    return with_units(dict(analyse(args, data, rate).to_dict()), channel, args.data_type)
 
 
 def allan_rows(rec: Path, channel: str, doc: dict[str, Any]) -> Iterable[dict[str, Any]]:
@@ -250,6 +279,8 @@ def gap_rows(rec: Path, doc: dict[str, Any]) -> Iterable[dict[str, Any]]:
 
 
 def run_gap_batch(args: argparse.Namespace) -> int:
+    from imubench.commands.gap import gap_units
+
     out_dir = _check_options(args, (("json", "--json"), ("holdout", "--holdout")))
     outcomes = _run("gap", args, args.real,
                     functools.partial(gap_plan, args.channels, input_options(args)),
@@ -261,6 +292,7 @@ def run_gap_batch(args: argparse.Namespace) -> int:
             continue
         doc = json.loads(json.dumps(o.results[done[0]][0]))  # a copy to merge into
         doc["channels"] = {ch: o.results[ch][0]["channels"][ch] for ch in done}
+        doc["units"] = gap_units(done)
         stem = report_stem(o.recording)
         if args.report is not None:
             from imubench.gap.report import write_report

@@ -22,8 +22,11 @@ from typing import Any
 
 from imubench.errors import USER_ERRORS, ImubenchError
 from imubench.progress import progress
+from imubench.recording.rosin import is_ros2_bag
 
-RECORDING_SUFFIXES: tuple[str, ...] = (".imbr", ".csv", ".csv.gz")
+RECORDING_SUFFIXES: tuple[str, ...] = (".imbr", ".csv", ".csv.gz", ".mcap", ".h5", ".hdf5")
+"""What a directory or glob of recordings picks up (besides ROS 2 bag folders); other
+text tables (``.txt``, ``.dat``) are read one at a time, as a folder may hold notes."""
 _GLOB_CHARS = set("*?[")
 
 
@@ -58,7 +61,8 @@ def is_batch(spec: Path, args: argparse.Namespace) -> bool:
     """True when INPUT is a directory or a glob, or a cluster or ``--out-dir`` was asked
     for (one recording then runs as a batch of one)."""
     text = str(spec)
-    return (has_glob(text) or Path(text).is_dir() or args.workers is not None
+    folder = Path(text).is_dir() and not is_ros2_bag(Path(text))
+    return (has_glob(text) or folder or args.workers is not None
             or args.scheduler is not None or args.out_dir is not None)
 
 
@@ -67,9 +71,10 @@ def _is_recording(path: Path) -> bool:
 
 
 def expand_inputs(spec: str | Path) -> list[Path]:
-    """The recordings named by a file, a directory (its ``.imbr``/``.csv``/``.csv.gz``
-    files) or a glob (``**`` recurses), sorted. BatchError when there are none, a glob
-    matches something else, or two would write reports of the same name."""
+    """The recordings named by a file, a directory (its :data:`RECORDING_SUFFIXES` files
+    and ROS 2 bag folders) or a glob (``**`` recurses), sorted.
+    BatchError when there are none, a glob matches something else, or two would write
+    reports of the same name."""
     text = str(spec)
     if has_glob(text):
         paths = sorted(Path(p) for p in glob.glob(text, recursive=True) if Path(p).is_file())
@@ -78,7 +83,8 @@ def expand_inputs(spec: str | Path) -> list[Path]:
             raise BatchError(f"{text}: {other[0]} is not a recording; recordings end in "
                              + ", ".join(RECORDING_SUFFIXES))
     elif Path(text).is_dir():
-        paths = sorted(p for p in Path(text).iterdir() if p.is_file() and _is_recording(p))
+        paths = sorted(p for p in Path(text).iterdir()
+                       if (p.is_file() and _is_recording(p)) or is_ros2_bag(p))
     else:
         paths = [Path(text)]
     if not paths:

@@ -17,9 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from imubench.batch import UNITS
 from imubench.batchrun import add_batch_options, is_batch
 from imubench.commands import write_json
-from imubench.errors import RecordingError
+from imubench.errors import RecordingError, StatsError
 from imubench.progress import progress
 from imubench.recording.options import InputOptions, add_input_arguments, input_options
 from imubench.stats import STATISTICS, compute
@@ -81,11 +82,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def load_input(path: Path, column: str | None, options: InputOptions
-               ) -> tuple[np.ndarray, float]:
-    """(data, rate_hz) of one channel of a recording or a text table (the one reader,
-    :func:`imubench.recording.load_recording`; a file that states no rate and has no time
-    column is read at 1 Hz, tau in samples, as Stable32 and allantools do)."""
+def load_channel(path: Path, column: str | None, options: InputOptions
+                 ) -> tuple[np.ndarray, float, str]:
+    """(data, rate_hz, channel) of one channel of a recording or a text table (the one
+    reader, :func:`imubench.recording.load_recording`; a file that states no rate and has
+    no time column is read at 1 Hz, tau in samples, as Stable32 and allantools do)."""
     from imubench.recording import load_recording
 
     rec = load_recording(path, dataclasses.replace(options, default_rate_hz=1.0))
@@ -96,14 +97,42 @@ def load_input(path: Path, column: str | None, options: InputOptions
         column = chans[0]
     if column not in chans:
         raise RecordingError(f"{path}: no channel {column!r}; channels are {chans}")
-    return np.asarray(rec.channel(column), dtype=np.float64), float(rec.rate_hz)
+    return np.asarray(rec.channel(column), dtype=np.float64), float(rec.rate_hz), column
 
 
-def format_table(res: Any) -> str:
+def load_input(path: Path, column: str | None, options: InputOptions
+               ) -> tuple[np.ndarray, float]:
+    """(data, rate_hz) of :func:`load_channel`."""
+    data, rate, _ = load_channel(path, column, options)
+    return data, rate
+
+
+def dev_unit(channel: str) -> str:
+    """The unit of the deviations of ``channel``: its own (dps, g). Frequency data are
+    rates in that unit; phase data are their integral (deg, g*s), whose differences over
+    tau give the same unit."""
+    return UNITS.get(channel, "input unit")
+
+
+def with_units(doc: dict[str, Any], channel: str, data_type: str) -> dict[str, Any]:
+    """An ``allan`` JSON document with its ``channel``, the unit of the data analysed
+    (``data_unit``) and the ``units`` of its numbers."""
+    u = dev_unit(channel)
+    units = {"rate_hz": "Hz", "tau_s": "s", "m": "samples", "n": "terms", "dev": u,
+             "ci_low": u, "ci_high": u, "var": f"{u}^2", "drift": f"{u}/s", "edf": "1",
+             "alpha": "1 (S(f) ~ f^alpha)", "gaps": "samples", "bias_factor": "1",
+             "confidence": "1 (probability of the interval)"}
+    return {**doc, "channel": channel,
+            "data_unit": u if data_type == "freq" else f"{u}*s", "units": units}
+
+
+def format_table(res: Any, unit: str = "input unit") -> str:
+    """The result as a table; ``unit``: that of ``dev`` and its interval."""
     lines = [
         f"# {res.stat}  data_type={res.data_type}  rate={res.rate_hz:g} Hz  "
-        f"confidence={res.confidence:g}  bias_corrected={res.bias_corrected}"
-        + (f"  drift={res.drift:.6g}/s" if res.drift is not None else ""),
+        f"confidence={res.confidence:g}  bias_corrected={res.bias_corrected}  "
+        f"dev in {unit}"
+        + (f"  drift={res.drift:.6g} {unit}/s" if res.drift is not None else ""),
         f"{'AF':>8} {'tau_s':>12} {'n':>10} {'alpha':>5} {'ci_low':>12} {'dev':>12} "
         f"{'ci_high':>12} {'edf':>9} {'gaps':>6}",
     ]
@@ -141,11 +170,14 @@ def run(args: argparse.Namespace) -> int:
         from imubench.batchrun.jobs import run_allan_batch
 
         return run_allan_batch(args)
-    data, rec_rate = load_input(args.input, args.column, input_options(args))
+    data, rec_rate, channel = load_channel(args.input, args.column, input_options(args))
     with progress(100, args.stat, unit="%") as bar:
-        res = analyse(args, data, rec_rate, bar.fraction)
+        try:
+            res = analyse(args, data, rec_rate, bar.fraction)
+        except StatsError as exc:  # e.g. too few samples left: name the file
+            raise StatsError(f"{args.input} {channel}: {exc}") from None
     if args.json is None:
-        print(format_table(res))
+        print(format_table(res, dev_unit(channel)))
     else:
-        write_json(res.to_dict(), args.json)
+        write_json(with_units(res.to_dict(), channel, args.data_type), args.json)
     return 0

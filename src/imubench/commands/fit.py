@@ -17,7 +17,7 @@ from imubench.commands import write_json
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
-from imubench.noisefit.units import kalibr_yaml
+from imubench.noisefit.units import kalibr_yaml, param_units
 from imubench.progress import progress
 from imubench.recording.options import add_input_arguments, input_options
 
@@ -63,7 +63,8 @@ def format_summary(result: RecordingFit) -> str:
             if key == "filter_order":
                 continue
             lo, hi = f.ci.get(key, (float("nan"), float("nan")))
-            parts.append(f"{key}={f.params[key]:.4g} [{lo:.3g}, {hi:.3g}]")
+            unit = param_units(ch)[key]
+            parts.append(f"{key}={f.params[key]:.4g} {unit} [{lo:.3g}, {hi:.3g}]")
         lines.append(f"{ch}: " + ("  ".join(parts) if parts else "(no term found)"))
     return "\n".join(lines)
 

@@ -77,6 +77,20 @@ def gap_options(args: argparse.Namespace) -> GapOptions:
                       holdout_fraction=args.holdout_fraction, effects=effects)
 
 
+def gap_units(channels: list[str]) -> dict[str, object]:
+    """The units of a ``gap`` JSON document's numbers: the gaps are dimensionless (RMS
+    over the taus of ln(ADEV_real / ADEV_sim)); each channel's effect parameters are in
+    the noise model's units of that channel (docs/noise-model.md)."""
+    from imubench.noisefit.units import param_units
+
+    ln = "1 (RMS over taus of ln(ADEV_real/ADEV_sim))"
+    return {"rate_hz": "Hz", "samples": "samples", "holdout_fraction": "1",
+            **{k: ln for k in ("gap_before", "gap_after", "gap_null", "gap_excess_before",
+                               "gap_excess_after", "holdout_gap_after",
+                               "holdout_gap_excess_after")},
+            "params": {ch: param_units(ch) for ch in channels if ch != "temp"}}
+
+
 def run(args: argparse.Namespace) -> int:
     if is_batch(args.real, args):
         from imubench.batchrun.jobs import run_gap_batch
@@ -96,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
         out, diags = diagnose_recording(rec, model, args.channels, options, reps,
                                         effects_requested=args.effects is not None,
                                         progress=lambda ch: bar.update(1))
+    out["units"] = gap_units(list(out["channels"]))
     if args.report is not None:
         from imubench.gap.report import write_report  # matplotlib only when asked
 

@@ -131,6 +131,9 @@ def run(args: argparse.Namespace) -> int:
     if args.source is None:
         raise TiltError("give SOURCE (a recording or a URI) or --budget FILE")
     batch, odr, meta = _read_source(args.source, args.duration_s, input_options(args))
+    if np.all(np.isnan(batch.values[:, 3:6])):
+        raise TiltError(f"{args.source}: no accelerometer samples (ax, ay, az); tilt "
+                        "needs them (name their columns with --columns ax=...,ay=...,az=...)")
     calibration = None
     if args.calibration is not None:
         from imubench.calibration import Calibration
@@ -141,7 +144,10 @@ def run(args: argparse.Namespace) -> int:
                             f" {already.get('path')!r} was applied already; drop --calibration")
         calibration = Calibration.load(args.calibration)
         batch = calibration.apply(batch)
-    data = angles(batch, odr, args.form, args.axis, args.ref, args.average)
+    try:
+        data = angles(batch, odr, args.form, args.axis, args.ref, args.average)
+    except TiltError as exc:  # e.g. fewer samples than --average: name the source
+        raise TiltError(f"{args.source}: {exc}") from None
     data["source"] = args.source
     data["calibration"] = None if calibration is None else calibration.describe()
     if str(args.json) != "-":

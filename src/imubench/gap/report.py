@@ -19,6 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from imubench.batch import UNITS
 from imubench.gap.curves import Comparison
 from imubench.gap.diagnose import ChannelDiagnosis
 from imubench.gap.errors import GapError
@@ -26,7 +27,7 @@ from imubench.gap.explain import explain_channel
 
 
 def _adev_panel(ax: Any, title: str, before: Comparison, after: Comparison | None,
-                label: str) -> None:
+                label: str, unit: str) -> None:
     t = before.tau_s
     ax.fill_between(t, before.adev_sim_lo, before.adev_sim_hi, color="tab:blue", alpha=0.2,
                     label="model 5-95 %")
@@ -44,12 +45,13 @@ def _adev_panel(ax: Any, title: str, before: Comparison, after: Comparison | Non
     ax.set_title(f"{title}: gap {before.gap:.3f}"
                  + (f" -> {after.gap:.3f}" if after is not None else ""))
     ax.set_xlabel("tau (s)")
-    ax.set_ylabel("Allan deviation")
+    ax.set_ylabel(f"Allan deviation ({unit})")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
 
 
 def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
+    unit = UNITS.get(d.channel, "unit of the data")
     ev = d.evidence
     eff = d.verdict
     if eff == "temperature" and "temperature" in ev:
@@ -62,9 +64,9 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         yy = ref + p["temp_coeff"] * (tt - tf.block_temp_c.mean()) + p.get("temp_coeff2", 0.0) * (
             (tt - tf.block_temp_c.mean()) ** 2 - np.mean((tf.block_temp_c
                                                           - tf.block_temp_c.mean()) ** 2))
-        ax.plot(tt, yy, "r-", label=f"fit: {p['temp_coeff']:.3g}/degC")
+        ax.plot(tt, yy, "r-", label=f"fit: {p['temp_coeff']:.3g} {unit}/degC")
         ax.set_xlabel("temperature (degC)")
-        ax.set_ylabel("rate (block mean)")
+        ax.set_ylabel(f"{d.channel} block mean ({unit})")
         ax.legend(fontsize=7)
         return "temperature scatter (fit part)"
     if eff == "outliers" and "outliers" in ev:
@@ -75,7 +77,7 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         ax.set_xlabel("impulse residual (robust sigmas)")
         ax.set_ylabel("count")
         return (f"impulses beyond the threshold: rate {of.outlier_rate:.3g}/s, amplitude "
-                f"{of.outlier_amplitude:.3g}")
+                f"{of.outlier_amplitude:.3g} {unit}")
     if eff == "sine" or d.before.bands:
         f, real, sim = ev["psd"]
         ax.loglog(f[1:], real[1:], "k-", lw=0.7, label="real")
@@ -84,7 +86,7 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
             ax.axvline(d.candidates[0].params["sine_freq"], color="r", ls="--",
                        label=f"line {d.candidates[0].params['sine_freq']:.4g} Hz")
         ax.set_xlabel("frequency (Hz)")
-        ax.set_ylabel("PSD (unit^2/Hz)")
+        ax.set_ylabel(f"PSD ({unit}^2/Hz)")
         ax.legend(fontsize=7)
         return "Welch spectrum (fit part)"
     ax.semilogx(d.before.tau_s, d.before.z, "o-", label="model")
@@ -114,11 +116,12 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
         best = w if w is not None else (d.candidates[0] if d.candidates else None)
         n_pan = 2 if d.holdout_before is not None else 1
         fig, axes = plt.subplots(1, n_pan, figsize=(6 * n_pan, 4.5), squeeze=False)
+        unit = UNITS.get(ch, "unit of the data")
         _adev_panel(axes[0][0], f"{ch} fit part", d.before,
-                    best.fit if best is not None else None, label)
+                    best.fit if best is not None else None, label, unit)
         if d.holdout_before is not None:
             _adev_panel(axes[0][1], f"{ch} held out", d.holdout_before,
-                        best.holdout if best is not None else None, label)
+                        best.holdout if best is not None else None, label, unit)
         fig.suptitle(f"{ch}: verdict {d.verdict}")
         fig.tight_layout()
         for ext in ("png", "svg"):

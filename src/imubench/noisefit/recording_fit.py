@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel
 
-from imubench.batch import CHANNELS
+from imubench.batch import CHANNELS, UNITS
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import (
     PARAM_KEYS,
@@ -22,9 +22,11 @@ from imubench.noisefit.fit import (
 )
 from imubench.noisefit.kernels import AMPLITUDE_KEY
 from imubench.noisefit.units import (
+    KALIBR_UNITS,
     datasheet_comparison,
     datasheet_units,
     kalibr_imu,
+    param_units,
 )
 
 if TYPE_CHECKING:
@@ -76,7 +78,9 @@ class RecordingFit:
             return {"not_written": str(exc)}
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: per channel the fit, its datasheet units; Kalibr; datasheet ratio."""
+        """JSON-ready: per channel the fit, its datasheet units and the ``units`` of its
+        numbers (``params``, ``ci95``, ``bias``, ``points``); Kalibr with its units;
+        datasheet ratio."""
         params = {ch: f.params for ch, f in self.fits.items()}
         return {
             "recording": str(self.source),
@@ -84,10 +88,13 @@ class RecordingFit:
             "chip": self.chip,
             "method": self.method,
             "channels": {
-                ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params)}
+                ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params),
+                     "units": {**param_units(ch), "tau_s": "s",
+                               "avar": f"{UNITS[ch]}^2", "edf": "1"}}
                 for ch, f in self.fits.items()
             },
             "kalibr": self._kalibr_or_reason(),
+            "kalibr_units": dict(KALIBR_UNITS),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
         }
 
@@ -124,13 +131,19 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
                terms: str = "auto", method: str = "wls",
                on_channel: Callable[[int, int], None] | None = None) -> RecordingFit:
     """:func:`fit_recording` on a recording already in memory (``source`` names it)."""
-    chans = parse_channels(channels, rec.channels)
+    try:  # errors name the recording (a batch fits many)
+        chans = parse_channels(channels, rec.channels)
+    except FitError as exc:
+        raise FitError(f"{source}: {exc}") from None
     if not chans:
         raise FitError(f"{source}: no gyro or accel channel with data to fit")
     fits = {}
     for k, ch in enumerate(chans):
-        fits[ch] = fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
-                               channel=ch)
+        try:
+            fits[ch] = fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
+                                   channel=ch)
+        except FitError as exc:
+            raise FitError(f"{source}: {exc}") from None
         if on_channel is not None:
             on_channel(k + 1, len(chans))
     chip = rec.metadata.get("chip")

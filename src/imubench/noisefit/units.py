@@ -93,6 +93,33 @@ def datasheet_units(channel: str, params: Mapping[str, float]) -> dict[str, floa
     return {q.key: float(params.get(q.term, 0.0)) * q.factor for q in quantities(channel)}
 
 
+def param_units(channel: str) -> dict[str, str]:
+    """The unit of every noise-model parameter of ``channel`` (gx..az; docs/noise-model.md),
+    for the JSON outputs: ``u`` is the channel's unit (dps or g)."""
+    from imubench.batch import UNITS
+
+    if channel not in (*GYRO, *ACCEL):
+        raise FitError(f"units: unknown channel {channel!r}; channels are gx gy gz ax ay az")
+    u = UNITS[channel]
+    return {
+        "white": f"{u}/sqrt(Hz)", "flicker": u, "random_walk": f"{u}/sqrt(s)",
+        "ramp": f"{u}/s", "quantization": f"{u}*s", "markov_sigma": u, "markov_tau": "s",
+        "sine_amplitude": u, "sine_freq": "Hz", "bandwidth_hz": "Hz", "filter_order": "1",
+        "output_white": f"{u}/sqrt(Hz)", "temp_coeff": f"{u}/degC",
+        "temp_coeff2": f"{u}/degC^2", "outlier_rate": "1/s", "outlier_amplitude": u,
+        "bias": u,
+    }
+
+
+KALIBR_UNITS: dict[str, str] = {
+    "update_rate": "Hz", "gyroscope_noise_density": "rad/s/sqrt(Hz)",
+    "gyroscope_random_walk": "rad/s^2/sqrt(Hz)",
+    "accelerometer_noise_density": "m/s^2/sqrt(Hz)",
+    "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
+}
+"""The units of Kalibr's ``imu.yaml`` values (SI, continuous-time densities)."""
+
+
 KALIBR_TERMS: dict[str, tuple[str, str]] = {
     "gyroscope_noise_density": ("gyro", "white"),
     "gyroscope_random_walk": ("gyro", "random_walk"),
@@ -181,10 +208,11 @@ def kalibr_yaml(values: Mapping[str, Any]) -> str:
 
 def datasheet_comparison(chip: str | None,
                          params_by_channel: Mapping[str, Mapping[str, float]]
-                         ) -> dict[str, dict[str, float]]:
+                         ) -> dict[str, dict[str, Any]]:
     """Fitted white density vs the chip's datasheet-typical one (``datasheet:<chip>``).
 
-    Returns ``{channel: {"fitted": N, "typical": N_typ, "ratio": N / N_typ}}``; empty when
+    Returns ``{channel: {"fitted": N, "typical": N_typ, "ratio": N / N_typ, "unit": the
+    unit of N and N_typ}}``; empty when
     the chip is unknown or has no shipped model. The typicals are those of the shipped
     files (marked unverified there).
     """
@@ -193,12 +221,13 @@ def datasheet_comparison(chip: str | None,
     if not chip or chip.lower() not in datasheet_chips():
         return {}
     typical = load_model(DATASHEET_PREFIX + chip)
-    out: dict[str, dict[str, float]] = {}
+    out: dict[str, dict[str, Any]] = {}
     for ch, p in params_by_channel.items():
         n_typ = float(typical[ch].white)
         n = float(p.get("white", 0.0))
         if n_typ > 0:
-            out[ch] = {"fitted": n, "typical": n_typ, "ratio": n / n_typ}
+            out[ch] = {"fitted": n, "typical": n_typ, "ratio": n / n_typ,
+                       "unit": param_units(ch)["white"]}
     return out
 
 
@@ -206,10 +235,12 @@ __all__ = [
     "ACCEL_QUANTITIES",
     "G0",
     "GYRO_QUANTITIES",
+    "KALIBR_UNITS",
     "Quantity",
     "datasheet_comparison",
     "datasheet_units",
     "kalibr_imu",
     "kalibr_yaml",
+    "param_units",
     "quantities",
 ]

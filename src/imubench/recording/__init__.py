@@ -1,17 +1,20 @@
-"""Recordings: the native ``.imbr`` format, CSV and other text tables, chosen by suffix.
+"""Recordings: the native ``.imbr`` format, CSV and other text tables, ROS 2 bags and
+MCAP, HDF5, chosen by suffix.
 
 * :func:`load_recording` reads a whole recording into a :class:`Recording`: the one
   reader of every command, with :class:`~imubench.recording.options.InputOptions` for
   files from elsewhere (docs/recordings.md). What it had to infer (rate, time unit) and
   any damage it read around (how much was kept) is logged as a warning on
   ``imubench.recording``, the same for every command.
-* :func:`open_writer` opens a writer (native or CSV) for a new file.
-* :func:`convert` converts between them.
+* :func:`open_writer` opens a writer (native, CSV or HDF5) for a new file.
+* :func:`convert` converts between them, or exports one channel to a Stable32 data file
+  (:mod:`imubench.recording.stable32`).
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +24,7 @@ import numpy as np
 from imubench.batch import CHANNELS, Batch, Gap
 from imubench.errors import RecordingError
 from imubench.recording.csvio import CsvWriter
+from imubench.recording.hdf5 import Hdf5Writer, read_hdf5
 from imubench.recording.native import (
     STORAGE_FLOAT,
     STORAGE_RAW,
@@ -29,31 +33,38 @@ from imubench.recording.native import (
 )
 from imubench.recording.options import InputOptions
 from imubench.recording.rosin import is_ros2_bag, read_ros
+from imubench.recording.secrets import drop_secrets
+from imubench.recording.stable32 import write_stable32
 from imubench.recording.textin import read_text
 
 __all__ = [
-    "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "InputOptions", "NativeReader",
-    "NativeWriter", "Recording", "convert", "load_recording", "open_writer",
-    "recording_kind",
+    "STABLE32_SUFFIX", "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "Hdf5Writer",
+    "InputOptions", "NativeReader", "NativeWriter", "Recording", "convert", "load_recording",
+    "open_writer", "recording_kind",
 ]
 
 log = logging.getLogger(__name__)
 TEXT_SUFFIXES = (".csv", ".txt", ".dat", ".tsv")
 """Text tables (each also as ``.gz``)."""
 
-Writer = NativeWriter | CsvWriter
+Writer = NativeWriter | CsvWriter | Hdf5Writer
+HDF5_SUFFIXES = (".h5", ".hdf5")
+STABLE32_SUFFIX = ".dat"
+"""What ``convert`` writes as a Stable32 data file (one channel)."""
 CONVERT_BLOCK = 65536
 """Samples per data record when converting."""
 
 
 def recording_kind(path: str | Path) -> str:
     """``native`` (``.imbr``), ``csv`` (``.csv``, ``.csv.gz``: imubench writes these),
-    ``text`` (other text tables: ``.txt``, ``.dat``, ``.tsv``, each also ``.gz``) or
-    ``ros`` (``.mcap``, a ROS 2 bag folder or its ``.db3``) from the name;
-    RecordingError otherwise."""
+    ``hdf5`` (``.h5``, ``.hdf5``), ``text`` (other text tables: ``.txt``, ``.dat``,
+    ``.tsv``, each also ``.gz``) or ``ros`` (``.mcap``, a ROS 2 bag folder or its
+    ``.db3``) from the name; RecordingError otherwise."""
     name = Path(path).name.lower()
     if name.endswith(".imbr"):
         return "native"
+    if name.endswith(HDF5_SUFFIXES):
+        return "hdf5"
     if name.endswith(".mcap") or is_ros2_bag(Path(path)):
         return "ros"
     if name.endswith((".csv", ".csv.gz")):
@@ -61,8 +72,8 @@ def recording_kind(path: str | Path) -> str:
     if name.endswith(TEXT_SUFFIXES + tuple(s + ".gz" for s in TEXT_SUFFIXES)):
         return "text"
     raise RecordingError(
-        f"{path}: unknown recording suffix; use .imbr (native), .csv / .csv.gz, a text "
-        "table .txt / .dat / .tsv (also .gz), .mcap or a ROS 2 bag"
+        f"{path}: unknown recording suffix; use .imbr (native), .csv / .csv.gz, .h5, a "
+        "text table .txt / .dat / .tsv (also .gz), .mcap or a ROS 2 bag"
     )
 
 
@@ -147,6 +158,16 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
     path = Path(path)
     opts = options or InputOptions()
     kind = recording_kind(path)
+    if kind == "hdf5":
+        meta, b, gaps, complete = read_hdf5(path)
+        if opts.rate_hz is not None:
+            meta["odr_hz"] = opts.rate_hz
+        rec = Recording(path, meta, b.index, b.t_s, b.values, b.temp_c, b.raw, gaps, None,
+                        complete)
+        if not complete:
+            log.warning("%s: the writer did not close this file (interrupted?); read %d "
+                        "samples", path, len(rec))
+        return rec
     if kind != "native":
         read = read_ros(path, opts) if kind == "ros" else read_text(path, opts)
         b = read.batch
@@ -198,20 +219,51 @@ def _load_native(path: Path, opts: InputOptions) -> Recording:
 
 
 def open_writer(path: str | Path, metadata: dict[str, Any], **kwargs: Any) -> Writer:
-    """Writer for a new recording, native or CSV by suffix."""
+    """Writer for a new recording, native, CSV or HDF5 by suffix."""
     kind = recording_kind(path)
     if kind == "csv":
         return CsvWriter(path, metadata, **kwargs)
+    if kind == "hdf5":
+        return Hdf5Writer(path, metadata, **kwargs)
     if kind in ("text", "ros"):
-        raise RecordingError(f"{path}: imubench writes .imbr or .csv / .csv.gz recordings")
+        raise RecordingError(f"{path}: imubench writes .imbr, .csv / .csv.gz or .h5 "
+                             "recordings (and one channel to a Stable32 .dat with convert "
+                             "--channel)")
     return NativeWriter(path, metadata, **kwargs)
 
 
-def convert(src: str | Path, dst: str | Path,
-            options: InputOptions | None = None) -> Recording:
-    """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts."""
+def convert(src: str | Path, dst: str | Path, options: InputOptions | None = None,
+            channel: str | None = None, calibration: str | Path | None = None,
+            on_progress: Callable[[int, int], None] | None = None) -> Recording:
+    """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts; a
+    ``.dat`` destination is a Stable32 data file of ``channel``.
+
+    ``calibration``: a calibration file applied to the values (raw counts stay as they
+    are; the header states it, as ``acquire --calibration`` does); refused when the
+    header says a calibration was applied already. Secrets of an old header (an MQTT
+    password: :mod:`imubench.recording.secrets`) are dropped, with a warning naming them.
+    ``on_progress(done, total)`` after each block of samples written (a progress bar).
+    """
+    is_dat = Path(dst).name.lower().endswith(STABLE32_SUFFIX)
+    if is_dat and channel is None:
+        raise RecordingError(f"{dst}: a Stable32 .dat file holds one channel; give "
+                             "--channel gx (or gy, gz, ax, ay, az, temp)")
+    if not is_dat and channel is not None:
+        raise RecordingError(f"{dst}: --channel is for a Stable32 .dat export; other "
+                             "formats keep every channel")
     rec = load_recording(src, options)
-    meta = dict(rec.metadata)
+    if calibration is not None:
+        rec = _calibrated(rec, calibration)
+    if is_dat:
+        assert channel is not None
+        log.info("%s", write_stable32(rec, channel, dst))
+        if on_progress is not None:
+            on_progress(len(rec), len(rec))
+        return rec
+    meta, dropped = drop_secrets(dict(rec.metadata))
+    if dropped:
+        log.warning("%s: dropped %d secret(s) from the header: %s (not copied to %s)", src,
+                    len(dropped), ", ".join(dropped), dst)
     meta["converted_from"] = str(src)
     if recording_kind(dst) == "native":
         meta["storage"] = STORAGE_RAW if rec.raw is not None else STORAGE_FLOAT
@@ -231,6 +283,26 @@ def convert(src: str | Path, dst: str | Path,
                 Batch(rec.index[part], rec.t_s[part], rec.values[part], rec.temp_c[part],
                       None if rec.raw is None else rec.raw[part], tuple(mine)),
             )
+            if on_progress is not None:
+                on_progress(min(start + CONVERT_BLOCK, len(rec)), len(rec))
         if j < len(gaps):  # the recording ended in a gap
             writer.write(Batch.empty(with_raw=rec.raw is not None, gaps=gaps[j:]))
     return rec
+
+
+def _calibrated(rec: Recording, path: str | Path) -> Recording:
+    """``rec`` with the calibration file ``path`` applied to its values (raw counts
+    unchanged) and stated in its header."""
+    import dataclasses
+
+    from imubench.calibration import Calibration
+
+    already = rec.metadata.get("calibration")
+    if isinstance(already, dict) and already.get("applied"):
+        raise RecordingError(f"{rec.path}: its header says calibration "
+                             f"{already.get('path')!r} was applied already; drop "
+                             "--calibration")
+    cal = Calibration.load(path)
+    values = cal.apply(rec.batch()).values
+    meta = {**rec.metadata, "calibration": cal.describe()}
+    return dataclasses.replace(rec, values=values, metadata=meta)

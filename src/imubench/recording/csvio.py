@@ -3,8 +3,9 @@
 Units: ``t`` seconds since the start, ``gx gy gz`` dps, ``ax ay az`` g, ``temp`` degC,
 ``index`` the sample index (ODR periods since the start). Lines starting with ``#``
 before the header carry metadata as ``# key: <JSON value>`` (``odr_hz``, ``chip``, ... as
-in the native header). Lines ``# gap at_index=N lost=M reason=TEXT`` record a declared
-gap before the sample after them. An empty field is a missing value (NaN). Files ending
+in the native header; ``# units:`` the columns' units, :data:`COLUMN_UNITS`). Lines
+``# gap at_index=N lost=M reason=TEXT`` record a declared gap before the sample after
+them. An empty field is a missing value (NaN). Files ending
 in ``.gz`` are gzip-compressed. Reading (of these files and of CSV from elsewhere):
 :mod:`imubench.recording.textin`.
 """
@@ -23,11 +24,13 @@ from typing import IO, Any
 
 import numpy as np
 
-from imubench.batch import CHANNELS, Batch, Gap, explain_holes
+from imubench.batch import CHANNELS, UNITS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
 from imubench.recording.commit import cut_back
 
 COLUMNS: tuple[str, ...] = ("t", *CHANNELS, "temp")
+COLUMN_UNITS: dict[str, str] = {"t": "s", **UNITS, "index": "samples"}
+"""The ``# units:`` metadata line of every CSV imubench writes."""
 INDEX_COLUMN = "index"
 """Optional extra column: the sample index (ODR periods since start). imubench writes it
 because a real sensor's clock runs off nominal, so ``t * odr_hz`` drifts from the index."""
@@ -48,6 +51,7 @@ class CsvWriter:
         if self.path.exists():
             raise RecordingError(f"{self.path}: exists already; recordings are never overwritten")
         self.metadata = dict(metadata)
+        self.metadata["units"] = COLUMN_UNITS  # the header says what the columns are in
         self.samples = 0
         self.gaps = 0
         self.lost_samples = 0

@@ -13,6 +13,11 @@ topics, ``--topic`` picks one (refused otherwise, listing them). Rate and indice
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +30,26 @@ from imubench.recording.textin import TextRead
 from imubench.recording.timebase import timebase_from_times
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
+log = logging.getLogger("imubench.recording")
+
+
+@contextlib.contextmanager
+def _decoder_output_as_warning(where: str) -> Iterator[None]:
+    """What the ROS message decoders print on stderr or warn about (``mcap_ros2``'s vendored
+    rosidl parser prints ``Error with: ...`` on a damaged schema) becomes one warning on
+    ``imubench.recording``, with how many lines it was: the project's one format."""
+    err = io.StringIO()
+    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stderr(err):
+        warnings.simplefilter("always")
+        try:
+            yield
+        finally:
+            said = [line for line in err.getvalue().splitlines() if line.strip()]
+            said += [str(w.message) for w in caught]
+            if said:
+                first = said[0].encode("ascii", "backslashreplace").decode()[:120]
+                log.warning("%s: the ROS message decoder reported %d line(s) (damaged "
+                            "schema or message?), first: %s", where, len(said), first)
 
 
 def is_ros2_bag(path: Path) -> bool:
@@ -66,7 +91,8 @@ def _read_bag(path: Path, options: InputOptions, where: str) -> tuple[str, list[
 
     bag = path.parent if path.suffix == ".db3" else path
     try:
-        with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as r:
+        store = get_typestore(Stores.ROS2_HUMBLE)
+        with _decoder_output_as_warning(where), AnyReader([bag], default_typestore=store) as r:
             conns = [c for c in r.connections if c.msgtype == IMU_TYPE]
             topic = _pick_topic(sorted({c.topic for c in conns}), options, where)
             mine = [c for c in conns if c.topic == topic]
@@ -83,7 +109,7 @@ def _read_mcap(path: Path, options: InputOptions, where: str) -> tuple[str, list
     from mcap_ros2.decoder import DecoderFactory
 
     try:
-        with open(path, "rb") as fh:
+        with _decoder_output_as_warning(where), open(path, "rb") as fh:
             reader = make_reader(fh, decoder_factories=[DecoderFactory()])
             summary = reader.get_summary()
             if summary is None:

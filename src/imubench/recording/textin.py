@@ -8,7 +8,9 @@ exports, Stable32 / allantools one- and two-column files (``.gz`` for all).
   metadata (imubench writes ``# odr_hz: 104``), ``# gap at_index=N lost=M reason=TEXT``
   lines anywhere are declared gaps. Columns: :mod:`imubench.recording.columns`.
 * No header (all numbers): one column is the values; two columns are (time tag, value),
-  as Stable32 and allantools write them; more need ``--columns`` by number.
+  as Stable32 and allantools write them; more need ``--columns`` by number. The values
+  are channel ``gx``, or the channel a ``# channel: "ax"`` line names (imubench's
+  Stable32 export, :mod:`imubench.recording.stable32`, writes it).
 * Rate and indices: :mod:`imubench.recording.timebase`; units:
   :mod:`imubench.recording.options`.
 * A data line that cannot be read (wrong number of fields, not a number: a truncated
@@ -236,10 +238,12 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     else:
         cols = [Column(str(k + 1), str(k + 1), None, None) for k in range(raw.width)]
         fmt = "numeric table"
+        value = raw.meta.get("channel")  # imubench's Stable32 export says which
+        value = value if value in (*CHANNELS, "temp") else "gx"
         if raw.width == 1:
-            cols[0] = Column("1", "1", "gx", None)
+            cols[0] = Column("1", "1", value, None)
         elif raw.width == 2:
-            cols = [Column("1", "1", "t", None), Column("2", "2", "gx", None)]
+            cols = [Column("1", "1", "t", None), Column("2", "2", value, None)]
         fmt = ("one-column text (Stable32/allantools)" if raw.width == 1
                else "two-column text (time tag, value; Stable32/allantools)"
                if raw.width == 2 else fmt)

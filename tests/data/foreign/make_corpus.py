@@ -26,13 +26,15 @@ content). Where each layout comes from:
 - ROS 2: a bag (``ros2 bag record``'s folder: ``metadata.yaml`` + SQLite ``.db3``) and a
   standalone MCAP file of ``sensor_msgs/msg/Imu`` on ``/imu/data`` (CDR, header.stamp in
   s + ns, REP 103 units), written with ``rosbags`` as ``ros2 bag`` would.
-- A gzip-compressed CSV (``.csv.gz``), imubench's native ``.imbr``.
+- A gzip-compressed CSV (``.csv.gz``), imubench's native ``.imbr``, and imubench's
+  exports of it: HDF5 (``.h5``) and gx as a Stable32 data file (``convert --channel``).
 - Files that must be refused: ``t`` in milliseconds under imubench's own header, a
   logger CSV without units, a headerless three-column table, binary junk.
 """
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import sys
 from pathlib import Path
@@ -172,6 +174,14 @@ def main() -> None:
             "channels": list((*GYRO, *ACCEL)), "start_utc": "2026-11-24T00:00:00+00:00"}
     with NativeWriter(path, meta) as w:
         w.write(Batch(k.astype(np.int64), t, values, tr["temp"]))
+    # imubench's own exports of it: HDF5, and gx as a Stable32 data file
+    from imubench.recording import convert
+
+    with contextlib.chdir(HERE):  # the exports name their source as given: relative
+        for name, channel in (("imubench_hdf5.h5", None),
+                              ("imubench_stable32_export.dat", "gx")):
+            Path(name).unlink(missing_ok=True)
+            convert(path.name, name, channel=channel)
 
 
 def ros2(t: np.ndarray, rad: dict[str, np.ndarray], ms2: dict[str, np.ndarray]) -> None:
