@@ -218,3 +218,19 @@ def test_lost_samples_at_the_end_are_in_the_recording(tmp_path: Path) -> None:
     assert rec.gaps[-1].at - rec.gaps[-1].lost > rec.index[-1]  # after the last sample
     assert rec.lost_samples == stats["lost_samples"]
     assert len(rec) + rec.lost_samples == 104 * 20
+
+
+@pytest.mark.parametrize("command", [["acquire", "sim://lsm6dsl?odr_hz=104&duration_s=1"],
+                                     ["sim", "--chip", "lsm6dsl", "--duration-s", "1"]])
+def test_live_recording_refuses_hdf5(tmp_path: Path, command: list[str],
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A live recording is written batch by batch and must read after a crash: HDF5 (a
+    damaged file is refused whole) is refused with the fix, before anything starts."""
+    from imubench.cli import main
+
+    out = tmp_path / "rec.h5"
+    extra = ["--duration-s", "1"] if command[0] == "acquire" else []
+    assert main([*command, *extra, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out}: a live recording must be .imbr" in err and "imubench convert" in err
+    assert not out.exists()

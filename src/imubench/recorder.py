@@ -28,8 +28,15 @@ from pathlib import Path
 from typing import Any
 
 from imubench.batch import Batch, Gap
+from imubench.errors import RecordingError
 from imubench.pipeline import Consumer
-from imubench.recording import STORAGE_FLOAT, STORAGE_RAW, Writer, open_writer
+from imubench.recording import (
+    STORAGE_FLOAT,
+    STORAGE_RAW,
+    Writer,
+    open_writer,
+    recording_kind,
+)
 from imubench.sources.base import SourceInfo
 
 log = logging.getLogger(__name__)
@@ -37,6 +44,9 @@ log = logging.getLogger(__name__)
 NOT_RECORDED = "disk full: not recorded"
 """Gap reason of the samples taken while no segment could be written."""
 SUFFIXES = (".csv.gz", ".imbr", ".csv")
+LIVE_KINDS = ("native", "csv")
+"""Recording kinds a live acquisition writes: crash-safe, batch by batch (an HDF5 file
+cut by a crash is refused whole, so HDF5 is for ``convert`` only)."""
 
 
 def segment_path(path: Path, segment: int) -> Path:
@@ -68,6 +78,10 @@ class Recorder(Consumer):
     def __init__(self, path: Path, metadata: dict[str, Any], *, fsync_interval_s: float = 1.0,
                  retry_s: float = 5.0,
                  on_state: Callable[[str], None] | None = None) -> None:
+        if recording_kind(path) not in LIVE_KINDS:
+            raise RecordingError(
+                f"{path}: a live recording must be .imbr, .csv or .csv.gz (written batch by "
+                "batch, readable after a crash); record to .imbr and `imubench convert` it")
         self.path = Path(path)
         self.extra = dict(metadata)
         self.fsync_interval_s = fsync_interval_s
