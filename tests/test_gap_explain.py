@@ -63,8 +63,9 @@ def test_none_names_the_closest_statistic() -> None:
     thr = t_threshold(Z_SLOPE, 9)
     c = _entry("none", trend_z=-4.0, holdout=None, gap_after=0.5)
     lines = explain_channel(c, 10)
-    assert lines[0].startswith("Nothing on the fit part exceeds its threshold")
-    assert f"closest to its threshold is trend (t 4.0 against {thr:.1f})" in lines[0]
+    assert lines[0].startswith("No unmodelled effect: the model explains the recording")
+    assert lines[1].startswith("Nothing on the fit part exceeds its threshold")
+    assert f"closest to its threshold is trend (t 4.0 against {thr:.1f})" in lines[1]
     assert any(s.startswith("Verdict none") for s in lines)
     assert not any(s.startswith("Held-out") for s in lines)
 

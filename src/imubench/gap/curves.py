@@ -118,6 +118,8 @@ class SimFeatures:
     trend_corr: np.ndarray
     line_ln: np.ndarray
     level_corr: np.ndarray
+    trend_slope: np.ndarray
+    """Least-squares slopes of the block means against time (unit/s)."""
 
     @property
     def k(self) -> int:
@@ -572,6 +574,7 @@ def stack(feats: list[Features]) -> SimFeatures:
         np.array([f.trend_corr for f in feats]),
         np.array([f.line_ln for f in feats]),
         np.array([f.level_corr for f in feats]),
+        np.array([f.trend_slope for f in feats]),
     )
 
 
@@ -626,7 +629,7 @@ def line_peak(psd: np.ndarray) -> tuple[int, float]:
     return ib, float(r[ib])
 
 
-def _z_against(value: float, sims: np.ndarray) -> float:
+def z_against(value: float, sims: np.ndarray) -> float:
     """t = (value - mean) / (std sqrt(1 + 1/K)) over the realisations (NaN if undefined)."""
     ok = np.isfinite(sims)
     if not math.isfinite(value) or ok.sum() < 3:
@@ -700,9 +703,9 @@ def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.
         adev_sim_hi=np.exp(np.quantile(ln_sim, 0.95, axis=0)),
         d=d, z=z, sigma=s, band_f_hz=np.sqrt(edges[:-1] * edges[1:]), band_z=band_z,
         line_z=line_z, line_f_hz=real.line_f_hz, tail_z=tail_z,
-        temp_z=_z_against(real.temp_corr, sims.temp_corr),
-        trend_z=_z_against(real.trend_corr, sims.trend_corr),
-        level_z=_z_against(real.level_corr, sims.level_corr), realisations=k,
+        temp_z=z_against(real.temp_corr, sims.temp_corr),
+        trend_z=z_against(real.trend_corr, sims.trend_corr),
+        level_z=z_against(real.level_corr, sims.level_corr), realisations=k,
     )
     if corr is not None:
         with np.errstate(divide="ignore", invalid="ignore"):
