@@ -170,8 +170,9 @@ def run_case(case: Case, series: Series, model: NoiseModel, channel: str, seed: 
             case.holdout_closed = 1.0 - h["region_gap_after"] / h["region_gap_before"]
         else:
             case.holdout_closed = h["chi2_closed"]
-    if case.verdict == case.truth and case.truth != "none" and truth_value:
-        case.param_error = main_param_error(case.truth, d.winner.params, truth_value) if d.winner else math.nan
+    w = d.winner
+    if case.verdict == case.truth and case.truth != "none" and truth_value and w is not None:
+        case.param_error = main_param_error(case.truth, w.params, truth_value)
     return case
 
 
