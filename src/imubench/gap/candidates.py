@@ -70,6 +70,8 @@ class Candidate:
     """Share of the significant excess chi-squared removed (the verdict's criterion)."""
     step_z: float = float("nan")
     """Whole-record bias-step statistic of the real record against these realisations."""
+    drift_t: float = float("nan")
+    """Whole-record drift t after removing this effect's deterministic part."""
     shape_z: float = float("nan")
     """Smoothed-kurtosis statistic (telegraph against Markov), NaN for other effects."""
     holdout_dchi2: float = float("nan")
@@ -130,6 +132,22 @@ def candidate_sims(model: NoiseModel, channel: str, effect: str, params: dict[st
         return current + simulate_channel(inc_model, channel, series, seeds)
     return simulate_channel(model.with_channel(channel, **params), channel, series,
                             seeds) + local_sum
+
+
+def deterministic(effect: str, params: dict[str, float], cm: ChannelModel, series: Series
+                  ) -> np.ndarray | None:
+    """The deterministic part the effect ADDS to the record (ramp, bias step, temperature
+    response), for the whole-record drift test; None for stochastic effects."""
+    n = len(series.y)
+    if effect == "ramp":
+        return (params["ramp"] - cm.ramp) * np.arange(n) / series.rate_hz
+    if effect == "bias_step":
+        return extras.increment(effect, params, n, series.rate_hz, 0)
+    if effect == "temperature" and series.temp_c is not None:
+        dt = np.nan_to_num(series.temp_c - cm.temp_ref, nan=0.0)
+        return ((params["temp_coeff"] - cm.temp_coeff) * dt
+                + (params["temp_coeff2"] - cm.temp_coeff2) * dt * dt)
+    return None
 
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,

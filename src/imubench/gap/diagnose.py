@@ -42,6 +42,7 @@ from imubench.gap.candidates import (
     MAIN_PARAM,
     Candidate,
     candidate_sims,
+    deterministic,
     fit_candidates,
 )
 from imubench.gap.curves import Comparison, stat_fired, z_against
@@ -61,9 +62,13 @@ HOLDOUT_ALPHA = 0.05
 ``chi2.isf(HOLDOUT_ALPHA, n_params)``."""
 MAX_EFFECTS = 3
 """Most effects kept by the forward selection."""
-Z_STEP = 3.5
-"""Normal-equivalent threshold (one-sided, as Student t with K - 1 dof) of the
-whole-record bias-step statistic against the realisations'."""
+STEP_SIGMAS = 5.0
+"""Largest normalised jump of block means that flags a bias step (it must also exceed
+every realisation's). About 510 increments are tested (lags 1 and 2 of 256 blocks);
+Gaussian increments exceed 5 robust sigmas somewhere with probability ~3e-4 (Bonferroni,
+``1020 Q(5)``)."""
+Z_DRIFT = 3.5
+"""Normal-equivalent threshold of the whole-record drift t (two-sided, as Student t)."""
 
 
 @dataclass(frozen=True)
@@ -125,6 +130,8 @@ class ChannelDiagnosis:
     reason: str = ""
     step_z: float = float("nan")
     """Whole-record bias-step statistic against the base realisations."""
+    drift_t: float = float("nan")
+    """Whole-record drift t (:func:`imubench.gap.evidence.drift_statistic`)."""
     residual_significant: bool = False
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
@@ -168,6 +175,7 @@ class ChannelDiagnosis:
             "temperature_slope_z": self.before.temp_z,
             "trend_z": self.before.trend_z,
             "bias_step_z": self.step_z,
+            "drift_t": self.drift_t,
             "global": self.before.global_dict(),
             "background": self.background,
         }
@@ -213,49 +221,67 @@ def step_stats(sims: np.ndarray, rate_hz: float) -> np.ndarray:
     return np.array([evidence.step_statistic(s, rate_hz)[0] for s in sims])
 
 
-def _step_excess(z: float) -> float:
-    return max(z, 0.0) ** 2 - 1.0
-
-
 class _Step:
-    """One step of the forward selection: the current realisations against the record."""
+    """One step of the forward selection: the current realisations against the record.
+
+    Besides the fit part's comparison, two whole-record tests: the bias step (the largest
+    normalised jump of block means, :func:`imubench.gap.evidence.step_statistic`, fired
+    when it exceeds STEP_SIGMAS and every realisation's; scored as its t against the
+    realisations) and the drift (:func:`imubench.gap.evidence.drift_statistic` of the
+    record minus the deterministic parts of the kept effects, self-normalised Student t).
+    """
 
     def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
-                 step_real: float, rate_hz: float) -> None:
+                 series: Series, det_sum: np.ndarray | float) -> None:
         n_fit = len(fit.series.y)
+        rate = series.rate_hz
         self.feats = fit.sim_features(sims[:, :n_fit])
         self.before = fit.compare(self.feats)
         self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
                      if hold is not None else None)
-        self.step_z = z_against(step_real, step_stats(sims, rate_hz))
-        dof = self.before.realisations - 1
-        self.step_fired = stat_fired(self.step_z, Z_STEP, True, dof)
+        self.step_real, _ = evidence.step_statistic(series.y, rate)
+        sim_steps = step_stats(sims, rate)
+        self.step_z = z_against(self.step_real, sim_steps)
+        self.step_fired = bool(self.step_real > STEP_SIGMAS
+                               and self.step_real > float(np.max(sim_steps)))
+        self.drift_t, self.drift_dof = evidence.drift_statistic(series.y - det_sum, rate)
+        self.drift_fired = stat_fired(self.drift_t, Z_DRIFT, False, self.drift_dof)
 
     @property
     def significant(self) -> bool:
-        return self.before.significant or self.step_fired
+        return self.before.significant or self.step_fired or self.drift_fired
+
+    def _record_excess(self, step_z: float, drift_t: float) -> float:
+        e = 0.0
+        if self.step_fired and math.isfinite(step_z):
+            e += max(max(step_z, 0.0) ** 2 - 1.0, 0.0)
+        if self.drift_fired and math.isfinite(drift_t):
+            e += max(drift_t**2 - 1.0, 0.0)
+        return e
 
     def evidence_closed(self, c: Candidate) -> float:
-        """Share of the significant excess (fit part, and the record's step test) removed."""
+        """Share of the significant excess (fit part and whole-record tests) removed."""
         assert c.fit is not None
         zb = self.before._fired_z(self.before)
         za = c.fit._fired_z(self.before)
         e0 = float(np.sum(np.maximum(zb * zb - 1.0, 0.0)))
         e1 = float(np.sum(np.maximum(za * za - 1.0, 0.0)))
-        if self.step_fired:
-            e0 += _step_excess(self.step_z)
-            e1 += max(_step_excess(c.step_z), 0.0) if math.isfinite(c.step_z) else 0.0
+        e0 += self._record_excess(self.step_z, self.drift_t)
+        e1 += self._record_excess(c.step_z, c.drift_t)
         return 1.0 - e1 / e0 if e0 > 0 else float("nan")
 
     def chi2(self) -> float:
-        return self.before.chi2 + (max(self.step_z, 0.0) ** 2 if math.isfinite(self.step_z)
-                                   else 0.0)
+        return self.before.chi2 + _record_chi2(self.step_z, self.drift_t)
+
+
+def _record_chi2(step_z: float, drift_t: float) -> float:
+    return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
+            + (drift_t**2 if math.isfinite(drift_t) else 0.0))
 
 
 def _cand_chi2(c: Candidate) -> float:
     assert c.fit is not None
-    extra = max(c.step_z, 0.0) ** 2 if math.isfinite(c.step_z) else 0.0
-    return c.fit.chi2 + extra
+    return c.fit.chi2 + _record_chi2(c.step_z, c.drift_t)
 
 
 def _shape_scores(cands: list[Candidate]) -> None:
@@ -308,8 +334,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     rate = series.rate_hz
     fit = PartSetup(series.part(0, n_fit), cm0)
     hold = PartSetup(series.part(n_fit, n), cm0) if n_fit < n else None
-    step_real, _ = evidence.step_statistic(series.y, rate)
     variant = Variant(model)
+    det_sum: np.ndarray | float = 0.0
     sims = simulate_channel(model, channel, series, seeds)
     rep_setups = [(PartSetup(r, cm0), r) for r in replicates or []]
     rep_before = [rs.compare(rs.sim_features(simulate_channel(model, channel, r, seeds)))
@@ -325,14 +351,14 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     bg_rep = background.from_replicates(fit.compare(fit.sim_features(sims[:, :n_fit])),
                                         rep_before) if rep_before else None
     for k in range(MAX_EFFECTS):
-        st = _Step(fit, hold, sims, step_real, rate)
+        st = _Step(fit, hold, sims, series, det_sum)
         if first is None:
             first = st
         if not st.significant:
             break
         if k == 0 and bg_rep is not None:
             bg_summary = background.summary(st.before, bg_rep)
-            if bg_summary["within"] and not st.step_fired:
+            if bg_summary["within"] and not (st.step_fired or st.drift_fired):
                 reason = "replicate variation"
                 residual = True
                 break
@@ -351,7 +377,10 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds,
                                 sims, local_sum)
             c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
-            c.step_z = z_against(step_real, step_stats(cs, rate))
+            c.step_z = z_against(st.step_real, step_stats(cs, rate))
+            det = deterministic(c.effect, c.params, cm, series)
+            c.drift_t = (evidence.drift_statistic(series.y - det_sum - det, rate)[0]
+                         if det is not None else st.drift_t)
             if c.effect in ("markov", "telegraph") and shape_w is not None:
                 c.shape_z = z_against(shape_real, np.array(
                     [evidence.smoothed_kurtosis(s[:n_fit], shape_w) for s in cs]))
@@ -391,10 +420,13 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             break
         chosen.accepted = True
         kept.append(chosen)
+        det = deterministic(chosen.effect, chosen.params, cm, series)
+        if det is not None:
+            det_sum = det_sum + det
         variant = variant.add(channel, chosen)
         sims = chosen_sims
     else:
-        residual = _Step(fit, hold, sims, step_real, rate).significant
+        residual = _Step(fit, hold, sims, series, det_sum).significant
     assert first is not None
 
     if not first.significant:
@@ -410,11 +442,11 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         if first.hold is not None:
             bg = background.from_halves(first.before, first.hold).merge(bg_rep)
             bg_summary = background.summary(first.before, bg)
-            if bg_summary["within"] and not first.step_fired:
+            if bg_summary["within"] and not (first.step_fired or first.drift_fired):
                 verdict, reason = "none", "replicate variation"
     ev0["psd"] = (fit.f_hz, fit.real.psd, first.feats.psd.mean(axis=0))
     diag = ChannelDiagnosis(channel, first.before, first.hold, ranked0, verdict, ev0,
-                            kept=kept, reason=reason, step_z=first.step_z,
+                            kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
                             residual_significant=residual, background=bg_summary)
     for (rs, rep), b in zip(rep_setups, rep_before, strict=True):
         a = rs.compare(rs.sim_features(variant.realise(channel, rep, seeds))) if kept else None

@@ -263,3 +263,34 @@ def fit_resonance(f_hz: np.ndarray, psd_real: np.ndarray, psd_model: np.ndarray
     w = ex[j0:j1 + 1]
     fc = float(np.sum(f_hz[j0:j1 + 1] * w) / np.sum(w))
     return ResonanceFit(fc, max((j1 - j0 + 1) * df, df), h)
+
+
+DRIFT_BLOCKS = 32
+"""Blocks of the whole record whose increments the drift test averages."""
+DRIFT_LAGS = 3
+"""Bartlett lags of the Newey-West variance of the mean increment."""
+
+
+def drift_statistic(y: np.ndarray, rate_hz: float) -> tuple[float, int]:
+    """(t of the mean increment of block means, its degrees of freedom).
+
+    A linear drift (a ramp) makes every increment of the block means positive on average;
+    white, flicker and random-walk noise have zero-mean increments. The mean of the
+    DRIFT_BLOCKS - 1 increments is divided by its Newey-West standard error (Bartlett
+    weights, DRIFT_LAGS lags; Newey & West 1987, Econometrica 55, 703-708), so the test
+    normalises itself on the record: against a random walk of density K it has the
+    power ``R sqrt(T) / K`` of a drift R over the record length T, and for white noise
+    (negatively correlated increments) it is conservative. Student t with
+    ``DRIFT_BLOCKS - 2`` dof under no drift."""
+    n_block = max(1, len(y) // DRIFT_BLOCKS)
+    m = block_means_of(y, n_block)
+    d = np.diff(m[np.isfinite(m)])
+    if d.size < 8:
+        return float("nan"), 1
+    c = d - d.mean()
+    var = float(np.mean(c * c))
+    for lag in range(1, DRIFT_LAGS + 1):
+        var += 2.0 * (1.0 - lag / (DRIFT_LAGS + 1)) * float(np.mean(c[lag:] * c[:-lag]))
+    if not var > 0:
+        return float("nan"), d.size - 1
+    return float(d.mean() / math.sqrt(var / d.size)), d.size - 1
