@@ -243,6 +243,16 @@ def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
                     f"{'significant' if r.get('significant') else 'not significant'} "
                     "departures from the model)")
         lines.append(txt + ".")
+    lim = c.get("limits")
+    if lim:
+        parts = []
+        for eff, e in lim["effects"].items():
+            v = e.get("smallest_identified")
+            parts.append(f"{eff} {e['key']} {_f(v)}" if v is not None
+                         else f"{eff} not identified at {_f(e['tried'][0]['size'])}")
+        lines.append("Detection limits on this recording (smallest size identified in "
+                     f"{lim['rate_required']:.0%} of {lim['injections_per_size']} injections): "
+                     + "; ".join(parts) + ".")
     if verdict in ("none", "unexplained") and any(r.get("significant") for r in reps):
         lines.append("Replicates depart from the model beyond their scatter"
                      + (" although this recording does not" if verdict == "none" else "")

@@ -151,6 +151,7 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
             f"<img src='{ch}_adev.png'><img src='{ch}_evidence.png'>"
             "<table border=1><tr><th>effect</th><th>params</th><th>gap after</th>"
             f"<th>held-out gap after</th><th>score</th><th>kept?</th></tr>{eff_rows}</table>"
+            + _limits_table(c.get("limits"))
         )
     index = out_dir / "index.html"
     index.write_text(
@@ -180,3 +181,16 @@ def _regions(regs: list[dict[str, Any]]) -> str:
 
 def _kept_cell(e: dict[str, Any]) -> str:
     return "kept" if e.get("accepted") else html.escape(e.get("rejected_because", ""))
+
+
+def _limits_table(lim: dict[str, Any] | None) -> str:
+    if not lim:
+        return ""
+    rows = "".join(
+        f"<tr><td>{html.escape(eff)}</td><td>{html.escape(e['key'])}</td>"
+        f"<td>{_num(e.get('smallest_identified'))}</td><td>"
+        + ", ".join(f"{t['size']:.3g}: {t['identified']}/{t['of']}" for t in e["tried"])
+        + "</td></tr>" for eff, e in lim["effects"].items())
+    return (f"<h3>Detection limits on this recording</h3><p>{html.escape(lim['note'])}</p>"
+            "<table border=1><tr><th>effect</th><th>key</th><th>smallest identified</th>"
+            f"<th>sizes tried (identified/injections)</th></tr>{rows}</table>")
