@@ -134,6 +134,21 @@ def candidate_sims(model: NoiseModel, channel: str, effect: str, params: dict[st
                             seeds) + local_sum
 
 
+def markov_dominates(sigma: float, tau_c_s: float, tau_s: np.ndarray,
+                     model_avar: np.ndarray) -> bool:
+    """Whether a fitted Gauss-Markov term's AVAR exceeds the model's at 3 tau_c.
+
+    Its descent beyond ~3 tau_c (IEEE 952 C.6) is what tells it from flicker; where the
+    model's own terms (white, random walk) are larger there, the descent is hidden and a
+    Markov term with a short tau_c mimics a flat flicker floor over one decade (measured:
+    flicker B 0.009 dps on an ADIS16405 hour called markov with tau_c 1.8 s)."""
+    from lsm6ds_sim.noise import avar_markov
+
+    t3 = np.array([3.0 * tau_c_s])
+    base = float(np.exp(np.interp(np.log(t3), np.log(tau_s), np.log(model_avar)))[0])
+    return float(avar_markov(t3, sigma, tau_c_s)[0]) >= base
+
+
 def deterministic(effect: str, params: dict[str, float], cm: ChannelModel, series: Series
                   ) -> np.ndarray | None:
     """The deterministic part the effect ADDS to the record (ramp, bias step, temperature
@@ -179,7 +194,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                                          "white": white}, 3))
         elif eff in ("markov", "telegraph"):
             sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
-            if tc * MARKOV_SPAN <= fit.tau_s[-1]:
+            if tc * MARKOV_SPAN <= fit.tau_s[-1] and markov_dominates(
+                    sg, tc, fit.tau_s, model_avar):
                 ev["shape_window"] = max(1, round(0.5 * tc * s.rate_hz))
                 if eff == "markov":
                     cands.append(Candidate(eff, {"markov_sigma": sg, "markov_tau": tc}, 2))
