@@ -248,8 +248,9 @@ def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
         parts = []
         for eff, e in lim["effects"].items():
             v = e.get("smallest_identified")
+            top = max(t["size"] for t in e["tried"])
             parts.append(f"{eff} {e['key']} {_f(v)}" if v is not None
-                         else f"{eff} not identified at {_f(e['tried'][0]['size'])}")
+                         else f"{eff} not identified up to {_f(top)}")
         lines.append("Detection limits on this recording (smallest size identified in "
                      f"{lim['rate_required']:.0%} of {lim['injections_per_size']} injections): "
                      + "; ".join(parts) + ".")

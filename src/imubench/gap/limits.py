@@ -5,8 +5,9 @@ decreasing sizes, :data:`INJECTIONS` times per size with different draws (phase,
 time, noise), and diagnosed with the same model; an injection counts as identified when
 the forward selection keeps that effect. The smallest size identified in at least
 :data:`RATE` of the injections is the limit; the search stops at the first size below
-that rate. With INJECTIONS = 3 "90 %" means 3 of 3: a coarse, bounded estimate (at most
-``len(FACTORS) * INJECTIONS`` diagnoses per effect, each with :data:`REALISATIONS`
+that rate; when the first size is missed, the larger :data:`UP_FACTORS` are tried until
+one is identified. With INJECTIONS = 3 "90 %" means 3 of 3: a coarse, bounded estimate
+(at most ``len(FACTORS) * INJECTIONS`` diagnoses per effect, each with :data:`REALISATIONS`
 realisations), stated as such in the JSON.
 
 Starting sizes come from the recording's own statistics (so the first size is usually
@@ -39,7 +40,10 @@ from imubench.gap.evidence import STEP_BLOCKS, block_means_of
 from imubench.gap.parts import Series
 
 FACTORS: tuple[float, ...] = (4.0, 2.0, 1.0, 0.5)
-"""Sizes tried, as multiples of the starting size, largest first."""
+"""Sizes tried downwards, as multiples of the starting size, largest first."""
+UP_FACTORS: tuple[float, ...] = (8.0, 16.0)
+"""Sizes tried upwards when the first size is not identified (the starting size comes
+from the recording's noise at T/8, which a short fit part may not reach)."""
 INJECTIONS = 3
 """Injections per size."""
 RATE = 0.9
@@ -113,6 +117,19 @@ def inject(series: Series, effect: str, size: float, rng: np.random.Generator
     raise ValueError(f"no injection for {effect!r}")
 
 
+def _hits(model: NoiseModel, channel: str, series: Series, opt: GapOptions, effect: str,
+          size: float, key: list[int]) -> int:
+    """How many of INJECTIONS injections of ``effect`` at ``size`` the diagnosis keeps."""
+    hits = 0
+    for i in range(INJECTIONS):
+        rng = np.random.default_rng([*key, i])
+        inj = Series(inject(series, effect, size, rng), series.temp_c, series.rate_hz,
+                     series.name)
+        d = diagnose_channel(model, channel, inj, replace(opt, seed=opt.seed + i))
+        hits += any(c.effect == effect for c in d.kept)
+    return hits
+
+
 def detection_limits(model: NoiseModel, channel: str, series: Series,
                      options: GapOptions, effects: tuple[str, ...] | None = None
                      ) -> dict[str, Any]:
@@ -125,24 +142,28 @@ def detection_limits(model: NoiseModel, channel: str, series: Series,
     for k, eff in enumerate(wanted):
         if eff not in starts:
             continue
-        tried = []
+        tried: list[dict[str, Any]] = []
         smallest: float | None = None
-        for j, factor in enumerate(FACTORS):
+        # downwards from FACTORS[0] while identified; upwards when FACTORS[0] is missed
+        up = False
+        for j, factor in enumerate((*FACTORS, *UP_FACTORS)):
+            if (j < len(FACTORS)) == up:
+                continue
             size = starts[eff] * factor
-            hits = 0
-            for i in range(INJECTIONS):
-                rng = np.random.default_rng([options.seed, 0x11, k, j, i])
-                inj = Series(inject(series, eff, size, rng), series.temp_c, series.rate_hz,
-                             series.name)
-                d = diagnose_channel(model, channel, inj, replace(opt, seed=opt.seed + i))
-                hits += any(c.effect == eff for c in d.kept)
+            hits = _hits(model, channel, series, opt, eff, size, [options.seed, 0x11, k, j])
             tried.append({"size": size, "identified": hits, "of": INJECTIONS})
-            if hits < need:
+            if hits >= need:
+                smallest = size
+                if up:
+                    break
+            elif j == 0:
+                up = True
+            elif not up:
                 break
-            smallest = size
         out[eff] = {"key": MAIN_KEY[eff], "smallest_identified": smallest, "tried": tried}
     return {"rate_required": RATE, "injections_per_size": INJECTIONS,
             "realisations": opt.realisations, "factors": list(FACTORS),
+            "up_factors": list(UP_FACTORS),
             "note": (f"coarse: {INJECTIONS} injections per size, sizes a factor 2 apart, "
                      "stopping at the first size identified less often than required"),
             "effects": out}
