@@ -140,7 +140,8 @@ def headline(c: dict[str, Any], realisations: int) -> str:
         return ("The model departs from the recording, but no candidate effect explains it "
                 "on both the fit and the held-out part.")
     main = next((k for k in kept if k["effect"] == verdict), None)
-    text = describe(verdict, main["params"] if main else {})
+    ranked = next((e for e in c.get("effects", []) if e["effect"] == verdict), None)
+    text = describe(verdict, (main or ranked or {}).get("params", {}))
     text = text[0].upper() + text[1:] + _closed(c.get("holdout"), main if len(kept) == 1
                                                 else None) + "."
     others = [k for k in kept if k is not main]
