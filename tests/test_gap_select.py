@@ -255,3 +255,21 @@ def test_realise_matches_the_simulator_for_model_terms() -> None:
     a = v.realise("gx", s, [1, 2])
     b = np.stack([simulate(m, n, RATE, sd, channels=["gx"])["gx"] for sd in (1, 2)])
     assert np.allclose(a, b)
+
+
+def test_outliers_after_the_output_filter_close_the_tail_excess() -> None:
+    """Impulses added after a 10 Hz output filter (as a bus glitch appears in a record):
+    the candidate realises them after the filter too, so the tail excess closes."""
+    n = int(300 * RATE)
+    model = NoiseModel.single_term("gx", white=WHITE, bandwidth_hz=10.0, filter_order=2)
+    y = simulate(model, n, RATE, 77, channels=["gx"])["gx"]
+    rng = np.random.default_rng(14)
+    hit = rng.random(n) < 0.2 / RATE
+    y[hit] += 0.3 * rng.standard_normal(int(hit.sum()))
+    d = diagnose_channel(model, "gx", Series(y, None, RATE, "glitch"),
+                         GapOptions(seed=3, realisations=5))
+    assert d.verdict == "outliers"
+    w = d.winner
+    assert w is not None and w.fit is not None
+    assert w.fit.tail_z < 0.2 * d.before.tail_z
+    assert w.params["outlier_rate"] == pytest.approx(0.2, rel=0.35)
