@@ -130,7 +130,9 @@ class Result:
     verdict: str
     kept: list[str] = field(default_factory=list)
     closed: float = float("nan")
-    """Held-out systematic gap closed by the kept effects (1 - excess after / before)."""
+    """Held-out gap closed by the kept effects: the systematic part (1 - excess after /
+    before) when it exceeds 0.05 before, else the held-out excess chi-squared closed
+    (line, tails, temperature and step effects barely move the Allan curve)."""
     param_error: float = float("nan")
     seconds: float = 0.0
     detail: str = ""
@@ -160,8 +162,10 @@ def run(group: str, case: str, bg: str, model: NoiseModel, ch: str, series: Seri
     r = Result(group, case, bg, d.verdict, [k["effect"] for k in out["kept"]],
                seconds=time.perf_counter() - t0)
     h = out["holdout"] or {}
-    if h.get("gap_excess_before"):
+    if (h.get("gap_excess_before") or 0.0) > 0.05:
         r.closed = 1.0 - (h["gap_excess_after"] or 0.0) / h["gap_excess_before"]
+    elif h.get("chi2_closed") is not None and r.kept:
+        r.closed = h["chi2_closed"]
     w = d.winner
     if truth and w is not None and w.effect in MAIN and MAIN[w.effect] in truth:
         key = MAIN[w.effect]
