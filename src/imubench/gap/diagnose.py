@@ -326,6 +326,71 @@ def _acceptable(c: Candidate, st: _Step) -> str:
     return ""
 
 
+def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
+              fit: PartSetup, st: _Step, sims: np.ndarray, det_sum: np.ndarray | float,
+              effects: tuple[str, ...]
+              ) -> tuple[list[Candidate], dict[int, np.ndarray], dict[str, Any]]:
+    """Fit, realise and score every candidate of one step.
+
+    Returns the candidates ranked by score (one per effect), the realisations of the best
+    HOLDOUT_TOP (keyed by ``id`` of the candidate) and the evidence of the fits."""
+    n, rate = len(series.y), series.rate_hz
+    n_fit = len(fit.series.y)
+    cm = variant.model[channel]
+    cands, ev = fit_candidates(cm, fit, series, st.before, st.feats, effects, st.step_fired)
+    local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
+    penalty = math.log(st.before.n_terms)
+    excess0 = st.before.chi2 - st.before.n_terms
+    best: dict[int, np.ndarray] = {}
+    shape_w = ev.get("shape_window")
+    shape_real = (evidence.smoothed_kurtosis(fit.series.y, shape_w)
+                  if shape_w is not None else math.nan)
+    for c in cands:
+        cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
+                            local_sum)
+        c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
+        c.step_z = z_against(st.step_real, step_stats(cs, rate))
+        det = deterministic(c.effect, c.params, cm, series)
+        c.drift_t = (evidence.drift_statistic(series.y - det_sum - det, rate)[0]
+                     if det is not None else st.drift_t)
+        if c.effect in ("markov", "telegraph") and shape_w is not None:
+            c.shape_z = z_against(shape_real, np.array(
+                [evidence.smoothed_kurtosis(s[:n_fit], shape_w) for s in cs]))
+        c.score = _cand_chi2(c) + penalty * c.n_params
+        c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
+        c.evidence_closed = st.evidence_closed(c)
+        best[id(c)] = cs
+        if len(best) > HOLDOUT_TOP:  # keep the realisations of the best few only
+            worst = max((x for x in cands if id(x) in best), key=lambda x: x.score)
+            del best[id(worst)]
+    _shape_scores(cands)
+    ranked: list[Candidate] = []
+    seen: set[str] = set()
+    for c in sorted(cands, key=lambda x: x.score):
+        if c.effect not in seen:  # temperature: linear or quadratic, the better
+            seen.add(c.effect)
+            ranked.append(c)
+    return ranked, best, ev
+
+
+def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetup | None,
+            st: _Step) -> tuple[Candidate | None, np.ndarray | None]:
+    """The best of the first HOLDOUT_TOP candidates that passes :func:`_acceptable`
+    (each examined one gets its held-out comparison and, if refused, its reason)."""
+    for c in ranked[:HOLDOUT_TOP]:
+        cs = best.get(id(c))
+        if cs is None:
+            continue
+        if hold is not None and st.hold is not None:
+            n_fit = cs.shape[1] - len(hold.series.y)
+            c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]))
+            c.holdout_dchi2 = st.hold.chi2 - c.holdout.chi2
+        c.note = _acceptable(c, st)
+        if not c.note:
+            return c, cs
+    return None, None
+
+
 def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                      options: GapOptions | None = None,
                      replicates: list[Series] | None = None) -> ChannelDiagnosis:
@@ -340,7 +405,6 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             f"{opt.holdout_fraction} (each part needs >= 256 samples)"
         )
     seeds = seeds_of(opt.seed, opt.realisations)
-    rate = series.rate_hz
     fit = PartSetup(series.part(0, n_fit), cm0)
     hold = PartSetup(series.part(n_fit, n), cm0) if n_fit < n else None
     variant = Variant(model)
@@ -357,12 +421,12 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     residual = False
     reason = ""
     bg_summary: dict[str, Any] | None = None
-    bg_rep = background.from_replicates(fit.compare(fit.sim_features(sims[:, :n_fit])),
-                                        rep_before) if rep_before else None
+    bg_rep: background.Background | None = None
     for k in range(MAX_EFFECTS):
         st = _Step(fit, hold, sims, series, det_sum)
         if first is None:
             first = st
+            bg_rep = background.from_replicates(st.before, rep_before)
         if not st.significant:
             break
         if k == 0 and bg_rep is not None:
@@ -373,57 +437,12 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                 break
         cm = variant.model[channel]
         done = {c.effect for c in kept}
-        cands, ev = fit_candidates(cm, fit, series, st.before, st.feats,
-                                   tuple(e for e in opt.effects if e not in done),
-                                   st.step_fired)
-        local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
-        penalty = math.log(st.before.n_terms)
-        best_sims: dict[int, np.ndarray] = {}
-        shape_w = ev.get("shape_window")
-        shape_real = (evidence.smoothed_kurtosis(fit.series.y, shape_w)
-                      if shape_w is not None else math.nan)
-        for i, c in enumerate(cands):
-            cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds,
-                                sims, local_sum)
-            c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
-            c.step_z = z_against(st.step_real, step_stats(cs, rate))
-            det = deterministic(c.effect, c.params, cm, series)
-            c.drift_t = (evidence.drift_statistic(series.y - det_sum - det, rate)[0]
-                         if det is not None else st.drift_t)
-            if c.effect in ("markov", "telegraph") and shape_w is not None:
-                c.shape_z = z_against(shape_real, np.array(
-                    [evidence.smoothed_kurtosis(s[:n_fit], shape_w) for s in cs]))
-            c.score = _cand_chi2(c) + penalty * c.n_params
-            excess0 = st.before.chi2 - st.before.n_terms
-            c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
-            c.evidence_closed = st.evidence_closed(c)
-            best_sims[i] = cs
-            if len(best_sims) > HOLDOUT_TOP:  # keep the realisations of the best few only
-                worst = max(best_sims, key=lambda j: cands[j].score)
-                del best_sims[worst]
-        _shape_scores(cands)
-        ranked: list[Candidate] = []
-        seen: set[str] = set()
-        for i in sorted(range(len(cands)), key=lambda j: cands[j].score):
-            if cands[i].effect not in seen:  # temperature: linear or quadratic, the better
-                seen.add(cands[i].effect)
-                ranked.append(cands[i])
+        ranked, best_sims, ev = _evaluate(
+            variant, channel, series, seeds, fit, st, sims, det_sum,
+            tuple(e for e in opt.effects if e not in done))
         if k == 0:
             ranked0, ev0 = ranked, ev
-        chosen: Candidate | None = None
-        chosen_sims: np.ndarray | None = None
-        for c in ranked[:HOLDOUT_TOP]:
-            got = best_sims.get(cands.index(c))
-            if got is None:
-                continue
-            cs = got
-            if hold is not None and st.hold is not None:
-                c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]))
-                c.holdout_dchi2 = st.hold.chi2 - c.holdout.chi2
-            c.note = _acceptable(c, st)
-            if not c.note:
-                chosen, chosen_sims = c, cs
-                break
+        chosen, chosen_sims = _choose(ranked, best_sims, hold, st)
         if chosen is None or chosen_sims is None:
             residual = True
             break
