@@ -108,8 +108,6 @@ def additive(cm: ChannelModel, effect: str) -> bool:
     """True when the simulator's term for ``effect`` simulates alone and adds."""
     if effect == "markov":
         return cm.markov_sigma == 0.0
-    if effect == "sine":
-        return cm.sine_amplitude == 0.0
     return effect != "base_model"
 
 

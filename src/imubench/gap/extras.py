@@ -7,6 +7,10 @@ from its own random stream per realisation seed, so a candidate's realisations a
 current realisations plus the increment (common random numbers).
 
 * ``bias_step``: ``size * 1[t >= step_time_s]``; deterministic.
+* ``sine``: ``sine_amplitude * sin(2 pi sine_freq t + phi)``, phi uniform per seed; an
+  increment rather than the simulator's sine term, so a model that already carries a
+  line (the ADIS16405 gz fit has 0.42 dps at 20.8 Hz) keeps it when a second one is
+  added (with the simulator's single sine term the candidate replaced the model's line).
 * ``telegraph``: symmetric random telegraph signal between ``0`` and ``telegraph_step``
   with mean dwell ``telegraph_dwell_s`` in each level (exponential dwell times, switching
   rate ``1 / dwell``). Its autocovariance is ``(step/2)^2 exp(-2 |t| / dwell)``
@@ -33,10 +37,10 @@ import math
 import numpy as np
 from scipy.signal import lfilter
 
-LOCAL_EFFECTS: tuple[str, ...] = ("bias_step", "telegraph", "resonance", "outliers")
+LOCAL_EFFECTS: tuple[str, ...] = ("bias_step", "sine", "telegraph", "resonance", "outliers")
 """Effects realised here rather than by the simulator."""
 
-_STREAM = {"bias_step": 1, "telegraph": 2, "resonance": 3, "outliers": 4}
+_STREAM = {"bias_step": 1, "telegraph": 2, "resonance": 3, "outliers": 4, "sine": 5}
 
 
 def _rng(seed: int, effect: str) -> np.random.Generator:
@@ -50,6 +54,10 @@ def increment(effect: str, params: dict[str, float], n: int, rate_hz: float, see
         t = np.arange(n) / rate_hz
         return np.where(t >= params["step_time_s"], params["step_size"], 0.0)
     rng = _rng(seed, effect)
+    if effect == "sine":
+        t = np.arange(n) / rate_hz
+        return params["sine_amplitude"] * np.sin(2.0 * math.pi * params["sine_freq"] * t
+                                                 + rng.uniform(0.0, 2.0 * math.pi))
     if effect == "telegraph":
         return telegraph_signal(rng, n, rate_hz, params["telegraph_step"],
                                 params["telegraph_dwell_s"])
