@@ -178,7 +178,8 @@ def run(group: str, case: str, bg: str, model: NoiseModel, ch: str, series: Seri
     return r
 
 
-def effect_cases(group: str, reps: tuple[int, ...], axes: tuple[str, ...]) -> list[Result]:
+def effect_cases(group: str, reps: tuple[int, ...], axes: tuple[str, ...],
+                 only: tuple[str, ...] = ()) -> list[Result]:
     out = []
     for rep in reps:
         for ax_i, ch in enumerate(AXES):
@@ -190,6 +191,8 @@ def effect_cases(group: str, reps: tuple[int, ...], axes: tuple[str, ...]) -> li
             hour2 = y[n:2 * n]
             temp = temperature_history(n, fs)
             for j, (case, effs) in enumerate(EFFECTS.items()):
+                if only and case not in only:
+                    continue
                 rng = np.random.default_rng(1000 * rep + 10 * ax_i + j)
                 add = sum((effect_signal(rng, n, fs, e, p, temp) for e, p in effs),
                           np.zeros(n))
@@ -249,6 +252,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="gx only, fewer nulls")
     ap.add_argument("--set", default="tune,heldout,nulls")
+    ap.add_argument("--axes", default=None, help="comma list of gx,gy,gz (default all)")
+    ap.add_argument("--cases", default="", help="comma list of effect cases (default all)")
     args = ap.parse_args(argv)
     if not (REFERENCE / "adis16405").is_dir():
         print("no reference data", file=sys.stderr)
@@ -256,13 +261,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"# bench_gap_acceptance {datetime.date.today()} {platform.node()} "
           f"cpus={os.cpu_count()} python {sys.version.split()[0]} quick={args.quick}")
     axes = ("gx",) if args.quick else AXES
+    if args.axes:
+        axes = tuple(args.axes.split(","))
+    only = tuple(c for c in args.cases.split(",") if c)
     sets = args.set.split(",")
     results: dict[str, list[Result]] = {}
     if "tune" in sets:
         results["tune (replicates 1, 2)"] = effect_cases("tune", (1, 2) if not args.quick
-                                                        else (1,), axes)
+                                                        else (1,), axes, only)
     if "heldout" in sets:
-        results["held out (replicate 3)"] = effect_cases("heldout", (3,), axes)
+        results["held out (replicate 3)"] = effect_cases("heldout", (3,), axes, only)
     if "nulls" in sets:
         pairs = [(2, 1, 3), (1, 1, 1)] if args.quick else [(2, 1, 3), (1, 2, 3), (3, 1, 2),
                                                           (1, 1, 1), (2, 2, 2), (3, 3, 3)]
