@@ -139,6 +139,8 @@ class Result:
 
     @property
     def right(self) -> bool:
+        """Nulls: ``none`` or ``base_model`` (``unexplained`` is a false alarm that names
+        nothing); effects: named (both kept for two at once)."""
         if self.case.startswith("null"):
             return self.verdict in ("none", "base_model")
         truth = self.case.split("@")[0]
@@ -243,8 +245,9 @@ def summarise(name: str, rs: list[Result]) -> None:
               f"median main-parameter error {np.median(perr) if perr else math.nan:.0%}")
     if nul:
         verdicts = Counter(r.verdict for r in nul)
-        named = sum(r.verdict not in ("none", "base_model") for r in nul)
-        print(f"  nulls: named an unmodelled effect {named}/{len(nul)}; verdicts "
+        named = sum(r.verdict not in ("none", "base_model", "unexplained") for r in nul)
+        print(f"  nulls: named an unmodelled effect {named}/{len(nul)}; unexplained "
+              f"{verdicts.get('unexplained', 0)}/{len(nul)}; verdicts "
               f"{dict(verdicts)}; reasons {dict(Counter(r.detail.split()[0] for r in nul))}")
 
 
