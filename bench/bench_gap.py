@@ -58,7 +58,7 @@ TEMP_PROFILE = SineTemperature(25.0, 4.0, 900.0)
 
 MAGNITUDES: dict[str, list[dict[str, float]]] = {
     "flicker": [{"flicker": v} for v in (0.002, 0.0014, 0.0011)],
-    "filter": [{"bandwidth_hz": v, "filter_order": 2} for v in (15.0, 30.0, 40.0)],
+    "base_model": [{"bandwidth_hz": v, "filter_order": 2} for v in (15.0, 30.0, 40.0)],
     "random_walk": [{"random_walk": v} for v in (4e-4, 2.5e-4, 1.5e-4)],
     "ramp": [{"ramp": v} for v in (2e-5, 1e-5, 5e-6)],
     "quantization": [{"quantization": v} for v in (2e-4, 1e-4, 5e-5)],
@@ -134,7 +134,7 @@ def indep_series(rng: np.random.Generator, n: int, fs: float, effect: str,
     elif effect == "outliers":
         hit = rng.random(n) < p["outlier_rate"] * tau0
         y[hit] += p["outlier_amplitude"] * rng.standard_normal(int(hit.sum()))
-    elif effect == "filter":  # the same Butterworth design as the simulator (not independent)
+    elif effect == "base_model":  # a withheld output filter (scipy Butterworth, as simulated)
         b_, a_ = butter(int(p["filter_order"]), p["bandwidth_hz"], fs=fs)
         y = lfilter(b_, a_, y)
     return y
@@ -170,8 +170,9 @@ def run_case(case: Case, series: Series, model: NoiseModel, channel: str, seed: 
             case.holdout_closed = 1.0 - h["region_gap_after"] / h["region_gap_before"]
         else:
             case.holdout_closed = h["chi2_closed"]
-    if case.verdict == case.truth and case.truth != "none" and truth_value:
-        case.param_error = main_param_error(case.truth, d.candidates[0].params, truth_value)
+    w = d.winner
+    if case.verdict == case.truth and case.truth != "none" and truth_value and w is not None:
+        case.param_error = main_param_error(case.truth, w.params, truth_value)
     return case
 
 

@@ -50,13 +50,13 @@ CASES: dict[str, dict[str, float]] = {
     "sine": {"sine_amplitude": 0.006, "sine_freq": 3.3},
     "temperature": {"temp_coeff": 0.003},
     "outliers": {"outlier_rate": 0.2, "outlier_amplitude": 0.5},
-    "filter": {"bandwidth_hz": 20.0, "filter_order": 2},
+    "base_model": {"bandwidth_hz": 20.0, "filter_order": 2},  # a withheld output filter
 }
 CONTRACT_KEYS = {"gap_before", "significant", "regions", "effects", "verdict", "gap_after",
                  "holdout"}
 
 
-LONG_CASES = {"markov", "flicker", "quantization", "filter", "random_walk", "ramp"}
+LONG_CASES = {"markov", "flicker", "quantization", "base_model", "random_walk", "ramp"}
 """Cases whose evidence needs long taus (or is only ``slow``) use N samples; the others
 10 min (the default run stays fast)."""
 
@@ -67,7 +67,7 @@ def blind(extra: dict[str, float], seed: int = 12345, n: int = N) -> Series:
     return Series(s["gx"], s["temp_c"], RATE, "blind")
 
 
-SLOW_CASES = {"filter", "quantization", "ramp", "flicker"}
+SLOW_CASES = {"base_model", "quantization", "ramp", "flicker"}
 """Blind cases run only with ``-m slow`` (the default run keeps the five whose evidence
 differs most: Allan bump, rising curve, spectral line, tails, temperature)."""
 
@@ -111,7 +111,7 @@ def _null_comparison(m: int, k: int, spike_z: float | None) -> Comparison:
     bands = np.exp(0.2 * rng.standard_normal((k, 6)))
     sims = SimFeatures(avar, bands, np.ones((k, 8)), np.zeros(k),
                        rng.standard_normal(k), rng.standard_normal(k),
-                       rng.standard_normal(k), rng.standard_normal(k))
+                       rng.standard_normal(k), rng.standard_normal(k), np.zeros(k))
     edges = np.logspace(-2, 1, 7)
 
     def run(real_avar: np.ndarray) -> Comparison:

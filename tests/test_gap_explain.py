@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from imubench.gap.curves import Z_SLOPE, t_threshold
+from imubench.gap.diagnose import MIN_CLOSURE
 from imubench.gap.explain import explain_channel
 
 
@@ -30,7 +31,7 @@ TEMP_EFFECT = {"effect": "temperature", "params": {"temp_coeff": 0.0081}, "gap_a
                "evidence_closed": 0.97}
 RW_EFFECT = {"effect": "random_walk", "params": {"random_walk": 2e-4}, "gap_after": 0.3,
              "n_params": 1, "score": 71.0, "chi2_closed": 0.2,
-             "evidence_closed": 0.41}
+             "evidence_closed": 0.21}
 
 
 def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
@@ -42,7 +43,8 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     assert f"correlation with temperature (t 11.7 against the threshold {thr:.1f})" in text
     assert "Allan curve real above over 20-315 s (largest |z| 7.4" in text
     assert ("Verdict temperature (temp_coeff = 0.0081): it removes 97% of the significant "
-            "excess chi-squared (the verdict needs 50%; 93% of the total)") in text
+            f"excess chi-squared (the verdict needs {MIN_CLOSURE:.0%}; 93% of the total)") in text
+    assert text.startswith("The rate drifts with temperature, 0.0081 per degC")
     assert "runner-up random_walk scores 71.0" in text
     assert "systematic part is 0.49 -> 0.07" in text
     assert "over the fit part's regions 0.9 -> 0.1" in text
@@ -55,16 +57,17 @@ def test_unexplained_gives_the_shortfall() -> None:
                bands=[{"f_min_hz": 0.01, "f_max_hz": 0.04, "direction": "real_above"}])
     text = "\n".join(explain_channel(c, 10))
     assert "spectrum real above over 0.01-0.04 Hz" in text
-    assert ("best candidate, random_walk, removes 41% of the significant excess chi-squared "
-            "(the verdict needs 50%, without raising the total)") in text
+    assert ("best candidate, random_walk, removes 21% of the significant excess chi-squared "
+            f"(the verdict needs {MIN_CLOSURE:.0%}, without raising the total)") in text
 
 
 def test_none_names_the_closest_statistic() -> None:
     thr = t_threshold(Z_SLOPE, 9)
     c = _entry("none", trend_z=-4.0, holdout=None, gap_after=0.5)
     lines = explain_channel(c, 10)
-    assert lines[0].startswith("Nothing on the fit part exceeds its threshold")
-    assert f"closest to its threshold is trend (t 4.0 against {thr:.1f})" in lines[0]
+    assert lines[0].startswith("No unmodelled effect: the model explains the recording")
+    assert lines[1].startswith("Nothing on the fit part exceeds its threshold")
+    assert f"closest to its threshold is trend (t 4.0 against {thr:.1f})" in lines[1]
     assert any(s.startswith("Verdict none") for s in lines)
     assert not any(s.startswith("Held-out") for s in lines)
 

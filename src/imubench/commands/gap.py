@@ -3,7 +3,7 @@ effect causes it, and how far the gap closes once it is modelled, checked on hel
 
     imubench gap REAL --model MODEL.toml [--channels gx,...] [--holdout-fraction 0.5]
         [--holdout REC2 ...] [--effects flicker,...] [--realisations 10] [--seed N]
-        [--report DIR] --json OUT
+        [--report DIR] [--limits] --json OUT
 
 REAL is a recording (.imbr or .csv, with a ``temp`` column when the sensor has one).
 See docs/gap.md. Exit status 0 on success, 2 on an imubench error.
@@ -62,6 +62,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--realisations", type=int, default=10,
                    help="simulated realisations per model variant (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the realisations")
+    p.add_argument("--limits", action="store_true",
+                   help="inject each candidate into this recording at decreasing sizes and "
+                        "report the smallest identified 90%% of the time (slow: minutes "
+                        "per channel)")
     p.add_argument("--report", type=Path, default=None, metavar="DIR",
                    help="write PNG/SVG plots and index.html here")
     p.add_argument("--json", default=None, metavar="OUT|-",
@@ -109,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
     with progress(n_channels, "gap", unit="channel") as bar:
         out, diags = diagnose_recording(rec, model, args.channels, options, reps,
                                         effects_requested=args.effects is not None,
-                                        progress=lambda ch: bar.update(1))
+                                        progress=lambda ch: bar.update(1),
+                                        limits=args.limits)
     out["units"] = gap_units(list(out["channels"]))
     if args.report is not None:
         from imubench.gap.report import write_report  # matplotlib only when asked

@@ -13,13 +13,13 @@ flicker               flicker B                   (2 ln2 / pi) B^2
 random_walk           random_walk K               K^2 tau / 3
 quantization          quantization Q              3 Q^2 / tau^2
 markov                markov_sigma, markov_tau    IEEE 952 C.6
-filter                bandwidth_hz, filter_order  exact sampled AVAR of the filtered
-                      (and white, refitted)       model, imubench.noisefit.model_avar
+base_model            bandwidth_hz, filter_order  exact sampled AVAR of the filtered
+                      and white, refitted         model, imubench.noisefit.model_avar
 ====================  ==========================  ===============================
 
-The output filter is not additive: its candidate scales the model's expected curve by
-``model_avar(cm') / model_avar(cm)`` where ``cm'`` carries the filter (Butterworth,
-bilinear; the noise fit's exact sampled-data AVAR) and a refitted white density (a
+The base model (white level, output filter) is not additive: its refit scales the model's
+expected curve by ``model_avar(cm') / model_avar(cm)`` where ``cm'`` carries the filter
+(Butterworth, bilinear; the noise fit's exact sampled-data AVAR) and a refitted white density (a
 filter lowers the short-tau curve; the white level that the unfiltered model had fitted
 usually compromised between both ends). The ramp is fitted in time, not here
 (:mod:`imubench.gap.evidence`: least-squares slope of the block means).
@@ -80,35 +80,39 @@ def fit_single(effect: str, tau_s: np.ndarray, real_avar: np.ndarray,
     return float(10.0 ** res.x)
 
 
-def fit_filter(cm: ChannelModel, tau_s: np.ndarray, rate_hz: float, real_avar: np.ndarray,
-               model_avar_sim: np.ndarray, sigma_ln_adev: np.ndarray
-               ) -> tuple[float, int, float]:
-    """(bandwidth_hz, filter_order, white): grid over bandwidth (order 1 and 2), white by
-    1-D search; uses the linearity of AVAR in the terms' powers (two model_avar calls per
-    grid point)."""
+def fit_base_model(cm: ChannelModel, tau_s: np.ndarray, rate_hz: float,
+                   real_avar: np.ndarray, model_avar_sim: np.ndarray,
+                   sigma_ln_adev: np.ndarray) -> tuple[float, int, float]:
+    """Refit of the base model: (bandwidth_hz, filter_order, white).
+
+    The model's own filter (unchanged) and a grid over bandwidth (0.01-0.49 of the rate,
+    order 1 and 2), each with the white density refitted by a 1-D search; uses the
+    linearity of AVAR in the terms' powers (two model_avar calls per grid point)."""
     from imubench.noisefit import model_avar
 
     base = model_avar(cm, tau_s, rate_hz)
-    best = (math.inf, 0.0, 1, cm.white)
-    for order in (1, 2):
-        for bw in np.geomspace(0.01 * rate_hz, 0.49 * rate_hz, 30):
-            filt = cm.replace(bandwidth_hz=float(bw), filter_order=order)
-            a_other = model_avar(filt.replace(white=0.0), tau_s, rate_hz)
-            a_white = model_avar(filt.replace(white=1.0), tau_s, rate_hz) - a_other
+    best = (math.inf, float(cm.bandwidth_hz), int(cm.filter_order), cm.white)
+    grid = [(float(cm.bandwidth_hz), int(cm.filter_order))] + [
+        (float(bw), order) for order in (1, 2)
+        for bw in np.geomspace(0.01 * rate_hz, 0.49 * rate_hz, 30)]
+    for bw, order in grid:
+        filt = cm.replace(bandwidth_hz=bw, filter_order=order)
+        a_other = model_avar(filt.replace(white=0.0), tau_s, rate_hz)
+        a_white = model_avar(filt.replace(white=1.0), tau_s, rate_hz) - a_other
 
-            def loss(lw: float, a_w: np.ndarray = a_white, a_o: np.ndarray = a_other) -> float:
-                pred = model_avar_sim * (a_o + a_w * 10.0 ** (2 * lw)) / base
-                return _loss(real_avar, pred, np.zeros_like(pred), sigma_ln_adev)
+        def loss(lw: float, a_w: np.ndarray = a_white, a_o: np.ndarray = a_other) -> float:
+            pred = model_avar_sim * (a_o + a_w * 10.0 ** (2 * lw)) / base
+            return _loss(real_avar, pred, np.zeros_like(pred), sigma_ln_adev)
 
-            if cm.white > 0:
-                lw0 = math.log10(cm.white)
-                res = minimize_scalar(loss, bounds=(lw0 - 1.0, lw0 + 1.0), method="bounded",
-                                      options={"xatol": 1e-3})
-                val, white = float(res.fun), float(10.0 ** res.x)
-            else:
-                val, white = loss(-300.0), 0.0
-            if val < best[0]:
-                best = (val, float(bw), order, white)
+        if cm.white > 0:
+            lw0 = math.log10(cm.white)
+            res = minimize_scalar(loss, bounds=(lw0 - 1.0, lw0 + 1.0), method="bounded",
+                                  options={"xatol": 1e-3})
+            val, white = float(res.fun), float(10.0 ** res.x)
+        else:
+            val, white = loss(-300.0), 0.0
+        if val < best[0]:
+            best = (val, bw, order, white)
     return best[1], best[2], best[3]
 
 

@@ -118,6 +118,8 @@ class SimFeatures:
     trend_corr: np.ndarray
     line_ln: np.ndarray
     level_corr: np.ndarray
+    trend_slope: np.ndarray
+    """Least-squares slopes of the block means against time (unit/s)."""
 
     @property
     def k(self) -> int:
@@ -572,6 +574,7 @@ def stack(feats: list[Features]) -> SimFeatures:
         np.array([f.trend_corr for f in feats]),
         np.array([f.line_ln for f in feats]),
         np.array([f.level_corr for f in feats]),
+        np.array([f.trend_slope for f in feats]),
     )
 
 
@@ -626,12 +629,25 @@ def line_peak(psd: np.ndarray) -> tuple[int, float]:
     return ib, float(r[ib])
 
 
-def _z_against(value: float, sims: np.ndarray) -> float:
-    """t = (value - mean) / (std sqrt(1 + 1/K)) over the realisations (NaN if undefined)."""
+FISHER_SD_FLOOR = 0.5 / math.sqrt(N_BLOCKS - 4)
+"""Smallest spread used for the Fisher-z statistics (temperature, trend, level): half the
+sampling standard deviation of atanh r from N_BLOCKS - 1 increments, ``1 / sqrt(N - 3)``
+(Fisher 1921, Metron 1, 3-32); half, because K = 5 realisations often estimate the null
+spread below its theoretical value and the full floor cost the short temperature cases
+their detection. Realisations that carry a deterministic response (a
+temperature or ramp candidate) all give r near 1 with a tiny spread, and the real
+record's slightly lower r (its own noise, a second effect) then scored as a huge
+departure; measured: a temperature candidate that removed the temperature correlation
+(t 40) lost to flicker with K = 5 (issue 15, two effects at once)."""
+
+
+def z_against(value: float, sims: np.ndarray, sd_floor: float = 0.0) -> float:
+    """t = (value - mean) / (std sqrt(1 + 1/K)) over the realisations (NaN if undefined);
+    the standard deviation is at least ``sd_floor``."""
     ok = np.isfinite(sims)
     if not math.isfinite(value) or ok.sum() < 3:
         return float("nan")
-    sd = float(sims[ok].std(ddof=1)) * math.sqrt(1.0 + 1.0 / ok.sum())
+    sd = max(float(sims[ok].std(ddof=1)), sd_floor) * math.sqrt(1.0 + 1.0 / ok.sum())
     if not sd > 0:
         return float("nan")
     return float((value - sims[ok].mean()) / sd)
@@ -700,9 +716,10 @@ def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.
         adev_sim_hi=np.exp(np.quantile(ln_sim, 0.95, axis=0)),
         d=d, z=z, sigma=s, band_f_hz=np.sqrt(edges[:-1] * edges[1:]), band_z=band_z,
         line_z=line_z, line_f_hz=real.line_f_hz, tail_z=tail_z,
-        temp_z=_z_against(real.temp_corr, sims.temp_corr),
-        trend_z=_z_against(real.trend_corr, sims.trend_corr),
-        level_z=_z_against(real.level_corr, sims.level_corr), realisations=k,
+        temp_z=z_against(real.temp_corr, sims.temp_corr, FISHER_SD_FLOOR),
+        trend_z=z_against(real.trend_corr, sims.trend_corr, FISHER_SD_FLOOR),
+        level_z=z_against(real.level_corr, sims.level_corr, FISHER_SD_FLOOR),
+        realisations=k,
     )
     if corr is not None:
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -1,18 +1,30 @@
-"""Which unmodelled effect makes the simulated sensor depart from the real one.
+"""Which unmodelled effects make the simulated sensor depart from the real one.
 
 For one channel: simulate K realisations of the model over the record's length, rate and
 temperature history (:mod:`imubench.gap.curves` compares them with the real record on the
-fit part); fit each candidate effect to the REAL fit part with the evidence that suits it
-(:mod:`imubench.gap.evidence`, :mod:`imubench.gap.avarfit`); re-simulate with the effect
-added (same seeds: common random numbers, so candidates differ only by their effect);
-rank by the score ``chi2_after + ln(n_terms) * n_params`` (Schwarz's BIC penalty per
-added parameter, Schwarz 1978, Ann. Statist. 6(2)); report the winner's and the
-runners-up's gap before/after on the fit part and on the held-out part.
+fit part, :mod:`imubench.gap.evidence` tests a bias step on the whole record); then
+**forward selection** (Efroymson 1960, in Ralston & Wilf, Mathematical Methods for Digital
+Computers, ch. 17): fit every candidate (:mod:`imubench.gap.candidates`) to the REAL fit
+part, re-simulate with it added (same seeds), rank by the score
+``chi2_after + ln(n_terms) * n_params`` (Schwarz's BIC penalty per added parameter,
+Schwarz 1978, Ann. Statist. 6(2)), and keep the best candidate that
 
-Verdict: ``none`` when nothing on the fit part is significant, ``unexplained`` when the
-best candidate removes less than :data:`MIN_CLOSURE` of the significant excess chi-squared
-(:meth:`~imubench.gap.curves.Comparison.evidence_closed`: over the terms that fired) or
-raises the total chi-squared, else the winning effect's name.
+1. lowers the total chi-squared, and either removes at least :data:`MIN_CLOSURE` of the
+   significant excess or improves the fit part beyond the likelihood-ratio level
+   :data:`FIT_ALPHA`, and
+2. reduces the held-out part's chi-squared by more than its scatter
+   (``chi2.isf(HOLDOUT_ALPHA, n_params)``, the likelihood-ratio level of a candidate
+   whose parameters were fitted elsewhere; the bias step is located on the whole record
+   and exempt);
+
+then re-diagnose against the model with the kept effects and repeat while a significant
+excess remains (at most :data:`MAX_EFFECTS`).
+
+Verdict: ``none`` when nothing is significant, or when the departure is within the
+recording's own variation (:mod:`imubench.gap.background`: replicates first, then the two
+halves of the record when no candidate is kept; ``reason`` says which); the first kept
+unmodelled effect's name; ``base_model`` when only the base model's refit is kept;
+``unexplained`` when no candidate is accepted.
 """
 
 from __future__ import annotations
@@ -22,63 +34,48 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from lsm6ds_sim.model import ChannelModel, NoiseModel
-from lsm6ds_sim.physics import simulate
-from lsm6ds_sim.temperature import ReplayTemperature
+from lsm6ds_sim.model import NoiseModel
+from scipy.stats import chi2 as chi2_dist
 
-from imubench.gap import avarfit, evidence
-from imubench.gap.curves import (
-    Comparison,
-    Features,
-    SimFeatures,
-    analysis_afs,
-    band_edges,
-    compare,
-    features,
-    line_segment,
-    psd_segment,
-    stack,
-    t_threshold,
-    welch_psd,
+from imubench.gap import background, evidence, extras
+from imubench.gap.candidates import (
+    EFFECTS,
+    MAIN_PARAM,
+    Candidate,
+    candidate_sims,
+    deterministic,
+    fit_candidates,
 )
+from imubench.gap.curves import Comparison, stat_fired, z_against
 from imubench.gap.errors import GapError
-from imubench.noisefit.covariance import oavar_correlation
-from imubench.stats import oadev
+from imubench.gap.parts import PartSetup, Series, seeds_of, simulate_channel
 
-EFFECTS: tuple[str, ...] = (
-    "flicker", "random_walk", "ramp", "quantization", "markov", "sine", "temperature",
-    "outliers", "filter",
-)
-"""Candidate effects, by the names the JSON uses."""
-MAIN_PARAM: dict[str, str] = {
-    "flicker": "flicker", "random_walk": "random_walk", "ramp": "ramp",
-    "quantization": "quantization", "markov": "markov_sigma", "sine": "sine_amplitude",
-    "temperature": "temp_coeff", "outliers": "outlier_rate", "filter": "bandwidth_hz",
-}
-"""The model-file key that measures each effect's size (used for parameter errors)."""
-MIN_CLOSURE = 0.5
-"""Fraction of the significant excess chi-squared (over the taus, bands and statistics that
-fired on the fit part) the best candidate must remove, else unexplained. Measured over the
-fired terms only since 2026-11-21: over all terms, the sub-threshold scatter a loose base
-model leaves (a noise fit of a real recording) counted as gap no single effect could
-remove, and a clear added sine (line t 7.3) or temperature (t 7.5) on the real ADIS hour
-came out `unexplained`."""
-MARKOV_SPAN = 15.0
-"""A Markov candidate needs its tau_c at most the longest analysed tau / MARKOV_SPAN.
-
-Gauss-Markov ADEV peaks near 1.9 tau_c and falls as tau^-1/2 beyond ~3 tau_c (IEEE 952
-C.6); only that descent, seen over a factor 5 in tau (3 to 15 tau_c, a factor 2.2 in
-ADEV), tells it from flicker (flat) or random walk (rising), which have one parameter
-fewer. A longer tau_c is reported as those."""
-Z_TEMP_CANDIDATE = 2.5
-"""The temperature candidate needs |temp_z| (the correlation of the block means'
-INCREMENTS with the temperature's, against the realisations') above this normal-
-equivalent z (as Student t with K - 1 dof). A random walk or flicker level correlates
-with any slow temperature history in levels, and then a temperature coefficient closes
-a rising Allan curve as well as the random walk does; only a correlation of the
-prewhitened (differenced) series beyond the realisations' chance level is evidence."""
+MIN_CLOSURE = 1.0 / 3.0
+"""Share of the significant excess chi-squared (over the taus, bands and statistics that
+fired) a candidate must remove when it is the only effect kept. Under forward selection a
+candidate that removes less is still kept when its improvement on the fit part passes
+the likelihood-ratio level FIT_ALPHA and the held-out check: on real backgrounds a
+base-model mismatch (e.g. ADIS16405 gz, second hour against the first hour's model:
+short-tau z 11.6) carries most of the excess, and a clear bias step (step t 11) removed
+only 26 % of it."""
+FIT_ALPHA = 1e-3
+"""Level of the fit-part improvement ``chi2_before - chi2_after > chi2.isf(FIT_ALPHA,
+n_params)`` (Wilks 1938: the likelihood-ratio statistic of nested models with n_params
+more parameters), the alternative to MIN_CLOSURE."""
 HOLDOUT_TOP = 3
-"""Effects (winner and runners-up) re-checked on the held-out part and replicates."""
+"""Candidates (in score order) examined for acceptance, with the held-out check, per step."""
+HOLDOUT_ALPHA = 0.05
+"""Level of the held-out check: the held-out chi-squared must fall by more than
+``chi2.isf(HOLDOUT_ALPHA, n_params)``."""
+MAX_EFFECTS = 3
+"""Most effects kept by the forward selection."""
+STEP_SIGMAS = 5.0
+"""Largest normalised jump of block means that flags a bias step (it must also exceed
+every realisation's). About 510 increments are tested (lags 1 and 2 of 256 blocks);
+Gaussian increments exceed 5 robust sigmas somewhere with probability ~3e-4 (Bonferroni,
+``1020 Q(5)``)."""
+Z_DRIFT = 3.5
+"""Normal-equivalent threshold of the whole-record drift t (two-sided, as Student t)."""
 
 
 @dataclass(frozen=True)
@@ -103,55 +100,27 @@ class GapOptions:
 
 
 @dataclass
-class Series:
-    """One channel of one record: rate samples, temperature (or None), rate."""
+class Variant:
+    """The model with the kept effects: simulator terms in ``model``, the rest as
+    increments (:mod:`imubench.gap.extras`)."""
 
-    y: np.ndarray
-    temp_c: np.ndarray | None
-    rate_hz: float
-    name: str = "<record>"
+    model: NoiseModel
+    local: list[tuple[str, dict[str, float]]] = field(default_factory=list)
 
-    def part(self, start: int, stop: int) -> Series:
-        t = None if self.temp_c is None else self.temp_c[start:stop]
-        return Series(self.y[start:stop], t, self.rate_hz, self.name)
+    def add(self, channel: str, c: Candidate) -> Variant:
+        if c.effect in extras.LOCAL_EFFECTS:
+            return Variant(self.model, [*self.local, (c.effect, c.params)])
+        return Variant(self.model.with_channel(channel, **c.params), list(self.local))
 
-    @property
-    def has_temperature(self) -> bool:
-        return self.temp_c is not None and bool(np.isfinite(self.temp_c).sum() > 1)
+    def local_sum(self, n: int, rate_hz: float, seeds: list[int]) -> np.ndarray | float:
+        out: np.ndarray | float = 0.0
+        for eff, p in self.local:
+            out = out + extras.increments(eff, p, n, rate_hz, seeds)
+        return out
 
-
-@dataclass
-class Candidate:
-    effect: str
-    params: dict[str, float]
-    """Model-file keys with their values AFTER adding the effect."""
-    n_params: int
-    fit: Comparison | None = None
-    holdout: Comparison | None = None
-    replicates: list[Comparison] = field(default_factory=list)
-    score: float = math.inf
-    closure: float = 0.0
-    """Share of the total excess chi-squared removed (all taus, bands, statistics)."""
-    evidence_closed: float = float("nan")
-    """Share of the significant excess chi-squared removed (the verdict's criterion)."""
-
-    def to_dict(self, before: Comparison, holdout_before: Comparison | None) -> dict[str, Any]:
-        assert self.fit is not None
-        d: dict[str, Any] = {
-            "effect": self.effect,
-            "params": self.params,
-            "gap_after": self.fit.gap,
-            "n_params": self.n_params,
-            "score": self.score,
-            "chi2_closed": self.closure,
-            "evidence_closed": self.evidence_closed,
-            "gap_closed": 1.0 - self.fit.gap / before.gap if before.gap > 0 else 0.0,
-            "gap_excess_after": self.fit.gap_excess,
-        }
-        if self.holdout is not None and holdout_before is not None:
-            d["holdout_gap_after"] = self.holdout.gap
-            d["holdout_gap_excess_after"] = self.holdout.gap_excess
-        return d
+    def realise(self, channel: str, series: Series, seeds: list[int]) -> np.ndarray:
+        sims = simulate_channel(self.model, channel, series, seeds)
+        return sims + self.local_sum(len(series.y), series.rate_hz, seeds)
 
 
 @dataclass
@@ -160,50 +129,74 @@ class ChannelDiagnosis:
     before: Comparison
     holdout_before: Comparison | None
     candidates: list[Candidate]
+    """The first step's candidates, ranked by score (one per effect)."""
     verdict: str
     evidence: dict[str, Any]
+    kept: list[Candidate] = field(default_factory=list)
+    """Effects kept by the forward selection, in order."""
+    reason: str = ""
+    step_z: float = float("nan")
+    """Whole-record bias-step statistic against the base realisations."""
+    drift_t: float = float("nan")
+    """Whole-record drift t (:func:`imubench.gap.evidence.drift_statistic`)."""
+    residual_significant: bool = False
+    """A significant departure remains after the kept effects."""
+    background: dict[str, Any] | None = None
     replicates: list[tuple[str, Comparison, Comparison | None]] = field(default_factory=list)
 
     @property
     def winner(self) -> Candidate | None:
-        if self.verdict in ("none", "unexplained"):
-            return None
-        return self.candidates[0]
+        """The verdict's effect (the first kept unmodelled effect, or the base model)."""
+        for c in self.kept:
+            if c.effect == self.verdict:
+                return c
+        return None
+
+    @property
+    def final_fit(self) -> Comparison | None:
+        return self.kept[-1].fit if self.kept else None
+
+    @property
+    def final_holdout(self) -> Comparison | None:
+        return self.kept[-1].holdout if self.kept else None
 
     def to_dict(self) -> dict[str, Any]:
-        w = self.winner
-        after = w.fit.gap if w is not None and w.fit is not None else self.before.gap
+        ff = self.final_fit or self.before
         out: dict[str, Any] = {
             "gap_before": self.before.gap,
             "significant": self.before.significant,
             "regions": [r.to_dict() for r in self.before.regions],
-            "effects": [c.to_dict(self.before, self.holdout_before) for c in self.candidates],
+            "effects": [c.to_dict(self.before) for c in self.candidates],
             "verdict": self.verdict,
-            "gap_after": after,
+            "reason": self.reason,
+            "kept": [_kept_dict(c) for c in self.kept],
+            "residual_significant": self.residual_significant,
+            "gap_after": ff.gap,
             "gap_null": self.before.gap_null,
             "gap_excess_before": self.before.gap_excess,
-            "gap_excess_after": (w.fit.gap_excess if w is not None and w.fit is not None
-                                 else self.before.gap_excess),
+            "gap_excess_after": ff.gap_excess,
             "holdout": None,
             "bands": self.before.bands,
             "line": {"f_hz": self.before.line_f_hz, "z": self.before.line_z},
             "impulses_z": self.before.tail_z,
             "temperature_slope_z": self.before.temp_z,
             "trend_z": self.before.trend_z,
+            "bias_step_z": self.step_z,
+            "drift_t": self.drift_t,
             "global": self.before.global_dict(),
+            "background": self.background,
         }
-        regions = self.before.regions
-        for rd, r in zip(out["regions"], regions, strict=True):
-            rd["gap_after"] = (w.fit.gap_over(r.tau_min_s, r.tau_max_s)
-                               if w is not None and w.fit is not None else rd["gap"])
+        for rd, r in zip(out["regions"], self.before.regions, strict=True):
+            rd["gap_after"] = ff.gap_over(r.tau_min_s, r.tau_max_s)
         if self.holdout_before is not None:
             hb = self.holdout_before
-            ha = w.holdout if w is not None and w.holdout is not None else hb
+            ha = self.final_holdout or hb
+            regions = self.before.regions
             out["holdout"] = {
                 "gap_before": hb.gap, "gap_after": ha.gap,
                 "region_gap_before": hb.region_gap(regions),
                 "region_gap_after": ha.region_gap(regions),
-                "chi2_closed": ha.excess_closed(hb) if w is not None else 0.0,
+                "chi2_closed": ha.excess_closed(hb) if self.kept else 0.0,
                 "gap_null": hb.gap_null,
                 "gap_excess_before": hb.gap_excess,
                 "gap_excess_after": ha.gap_excess,
@@ -219,171 +212,183 @@ class ChannelDiagnosis:
         return out
 
 
-def _seeds(seed: int, k: int) -> list[int]:
-    return [int(s) for s in np.random.SeedSequence(int(seed)).generate_state(k)]
+def _kept_dict(c: Candidate) -> dict[str, Any]:
+    assert c.fit is not None
+    d: dict[str, Any] = {"effect": c.effect, "params": c.params, "gap_after": c.fit.gap,
+                         "gap_excess_after": c.fit.gap_excess,
+                         "evidence_closed": c.evidence_closed}
+    if c.holdout is not None:
+        d["holdout_gap_after"] = c.holdout.gap
+        d["holdout_gap_excess_after"] = c.holdout.gap_excess
+        d["holdout_chi2_drop"] = c.holdout_dchi2
+    return d
 
 
-def _profile(series: Series) -> ReplayTemperature | None:
-    if not series.has_temperature:
-        return None
-    assert series.temp_c is not None
-    t = np.arange(len(series.temp_c)) / series.rate_hz
-    return ReplayTemperature(t, series.temp_c, name=series.name)
+def step_stats(sims: np.ndarray, rate_hz: float) -> np.ndarray:
+    return np.array([evidence.step_statistic(s, rate_hz)[0] for s in sims])
 
 
-def simulate_channel(model: NoiseModel, channel: str, series: Series, seeds: list[int]
-                     ) -> np.ndarray:
-    """(K, n) realisations of ``channel`` over the series' length and temperature."""
-    prof = _profile(series)
-    n = len(series.y)
-    out = np.empty((len(seeds), n))
-    for i, s in enumerate(seeds):
-        out[i] = simulate(model, n, series.rate_hz, s, temperature=prof,
-                          channels=[channel])[channel]
-    nan = ~np.isfinite(series.y)
-    if nan.any():
-        out[:, nan] = np.nan
-    return out
+class _Step:
+    """One step of the forward selection: the current realisations against the record.
 
-
-def tau_correlation(cm: ChannelModel, afs: np.ndarray, n: int, rate_hz: float) -> np.ndarray:
-    """Model correlation of the OAVAR estimates at averaging factors ``afs`` of n samples.
-
-    From the channel's stochastic terms (:func:`imubench.noisefit.covariance.
-    oavar_correlation`); the global test (:func:`imubench.gap.curves.global_chi2`) needs it.
+    Besides the fit part's comparison, two whole-record tests: the bias step (the largest
+    normalised jump of block means, :func:`imubench.gap.evidence.step_statistic`, fired
+    when it exceeds STEP_SIGMAS and every realisation's; scored as its t against the
+    realisations) and the drift (:func:`imubench.gap.evidence.drift_statistic` of the
+    record minus the deterministic parts of the kept effects, self-normalised Student t).
     """
-    amp2 = {"white": cm.white**2, "flicker": cm.flicker**2,
-            "random_walk": cm.random_walk**2, "quantization": cm.quantization**2,
-            "output_white": cm.output_white**2}
-    tau_c = 0.0
-    if cm.markov_sigma > 0 and cm.markov_tau > 0:
-        amp2["markov"] = cm.markov_sigma**2
-        tau_c = float(cm.markov_tau)
-    m = np.asarray(afs, dtype=np.int64)
-    return oavar_correlation(m, n - 2 * m, amp2, rate_hz, tau_c_s=tau_c,
-                             bandwidth_hz=float(cm.bandwidth_hz),
-                             filter_order=int(cm.filter_order))
+
+    def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
+                 series: Series, det_sum: np.ndarray | float) -> None:
+        n_fit = len(fit.series.y)
+        rate = series.rate_hz
+        self.feats = fit.sim_features(sims[:, :n_fit])
+        self.before = fit.compare(self.feats)
+        self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
+                     if hold is not None else None)
+        self.step_real, _ = evidence.step_statistic(series.y, rate)
+        sim_steps = step_stats(sims, rate)
+        self.step_z = z_against(self.step_real, sim_steps)
+        self.step_fired = bool(self.step_real > STEP_SIGMAS
+                               and self.step_real > float(np.max(sim_steps)))
+        self.drift_t, self.drift_dof = evidence.drift_statistic(series.y - det_sum, rate)
+        self.drift_fired = stat_fired(self.drift_t, Z_DRIFT, False, self.drift_dof)
+
+    @property
+    def significant(self) -> bool:
+        return self.before.significant or self.step_fired or self.drift_fired
+
+    def _record_excess(self, step_z: float, drift_t: float) -> float:
+        e = 0.0
+        if self.step_fired and math.isfinite(step_z):
+            e += max(max(step_z, 0.0) ** 2 - 1.0, 0.0)
+        if self.drift_fired and math.isfinite(drift_t):
+            e += max(drift_t**2 - 1.0, 0.0)
+        return e
+
+    def evidence_closed(self, c: Candidate) -> float:
+        """Share of the significant excess (fit part and whole-record tests) removed."""
+        assert c.fit is not None
+        zb = self.before._fired_z(self.before)
+        za = c.fit._fired_z(self.before)
+        e0 = float(np.sum(np.maximum(zb * zb - 1.0, 0.0)))
+        e1 = float(np.sum(np.maximum(za * za - 1.0, 0.0)))
+        e0 += self._record_excess(self.step_z, self.drift_t)
+        e1 += self._record_excess(c.step_z, c.drift_t)
+        return 1.0 - e1 / e0 if e0 > 0 else float("nan")
+
+    def chi2(self) -> float:
+        return self.before.chi2 + _record_chi2(self.step_z, self.drift_t)
 
 
-class _PartSetup:
-    """Taus, bands and the real features of one part (fit, holdout or a replicate)."""
-
-    def __init__(self, series: Series, cm: ChannelModel | None = None) -> None:
-        n = len(series.y)
-        if np.isfinite(series.y).sum() < 64:
-            raise GapError(f"{series.name}: fewer than 64 valid samples to analyse")
-        self.series = series
-        self.afs = analysis_afs(n, series.rate_hz)
-        self.nperseg = psd_segment(n)
-        f, _ = welch_psd(series.y[:self.nperseg], series.rate_hz, self.nperseg)
-        self.f_hz = f
-        self.edges = band_edges(f)
-        full = oadev(series.y, series.rate_hz, "freq", afs=self.afs)
-        self.tau_s = np.asarray(full.tau_s)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            self.ci_s = 0.5 * np.log(np.asarray(full.ci_high) / np.asarray(full.ci_low))
-        self.real = features(series.y, series.rate_hz, self.afs, self.edges, self.nperseg,
-                             series.temp_c)
-        self.corr = (None if cm is None
-                     else tau_correlation(cm, self.afs, n, series.rate_hz)[:len(self.tau_s),
-                                                                           :len(self.tau_s)])
-
-    def sim_features(self, sims: np.ndarray) -> SimFeatures:
-        return stack([features(s, self.series.rate_hz, self.afs, self.edges, self.nperseg,
-                               self.series.temp_c) for s in sims])
-
-    def compare(self, sims: SimFeatures) -> Comparison:
-        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr)
+def _record_chi2(step_z: float, drift_t: float) -> float:
+    return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
+            + (drift_t**2 if math.isfinite(drift_t) else 0.0))
 
 
-def _additive(cm: ChannelModel, effect: str) -> bool:
-    """True when the effect's increment simulates alone and adds (linear output chain)."""
-    if effect == "markov":
-        return cm.markov_sigma == 0.0
-    if effect == "sine":
-        return cm.sine_amplitude == 0.0
-    if effect == "outliers":
-        return cm.outlier_rate == 0.0
-    return effect != "filter"
+def _cand_chi2(c: Candidate) -> float:
+    assert c.fit is not None
+    return c.fit.chi2 + _record_chi2(c.step_z, c.drift_t)
 
 
-def _increment(cm: ChannelModel, params: dict[str, float]) -> dict[str, float]:
-    """Model keys to simulate alone so that base + increment has the totals ``params``.
+def _shape_scores(cands: list[Candidate]) -> None:
+    """Add the amplitude-shape term to the Markov and telegraph scores.
 
-    Common random numbers: a term of a single-term model draws the same stream as that
-    term of the full model, so the sum equals the model with the total coefficient.
-    """
-    inc: dict[str, float] = {}
-    for k, v in params.items():
-        v0 = getattr(cm, k)
-        # the increment draws the SAME random stream as the model's term (same seed,
-        # channel and term), so base + increment is that term with coefficient v0 + inc
-        inc[k] = v - v0
-    return inc
-
-
-def _effect_realisations(model: NoiseModel, channel: str, effect: str,
-                         params: dict[str, float], series: Series, seeds: list[int],
-                         base: np.ndarray) -> np.ndarray:
-    cm = model[channel]
-    if _additive(cm, effect):
-        keep = {"bandwidth_hz": cm.bandwidth_hz, "filter_order": cm.filter_order,
-                "temp_ref": cm.temp_ref}
-        inc_model = NoiseModel.single_term(channel, **keep, **_increment(cm, params))
-        return base + simulate_channel(inc_model, channel, series, seeds)
-    return simulate_channel(model.with_channel(channel, **params), channel, series, seeds)
+    The two have the same Allan curve (:mod:`imubench.gap.extras`); only the smoothed
+    kurtosis tells them apart. Each gets ``shape_z^2`` minus the smaller of the two, so
+    the one that matches the amplitude distribution keeps its score and the other one
+    pays the difference (the other candidates are not compared on this statistic)."""
+    pair = [c for c in cands if c.effect in ("markov", "telegraph")
+            and math.isfinite(c.shape_z)]
+    if len(pair) < 2:
+        return
+    low = min(c.shape_z**2 for c in pair)
+    for c in pair:
+        c.score += c.shape_z**2 - low
 
 
-def fit_candidates(cm: ChannelModel, fit: _PartSetup, before: Comparison,
-                   base_feats: SimFeatures, effects: tuple[str, ...]
-                   ) -> tuple[list[Candidate], dict[str, Any]]:
-    """Each applicable effect with parameters fitted to the real fit part, and evidence."""
-    s = fit.series
-    cands: list[Candidate] = []
-    ev: dict[str, Any] = {}
-    model_avar = base_feats.avar.mean(axis=0)
-    sig = before.sigma
-    for eff in effects:
-        if eff in avarfit.BASES:
-            p = avarfit.fit_single(eff, fit.tau_s, fit.real.avar, model_avar, sig)
-            p0 = getattr(cm, eff)
-            cands.append(Candidate(eff, {eff: math.sqrt(p0 * p0 + p * p)}, 1))
-        elif eff == "ramp":
-            cands.append(Candidate(eff, {"ramp": fit.real.trend_slope}, 1))
-        elif eff == "filter":
-            bw, order, white = avarfit.fit_filter(cm, fit.tau_s, s.rate_hz, fit.real.avar,
-                                                  model_avar, sig)
-            cands.append(Candidate(eff, {"bandwidth_hz": bw, "filter_order": order,
-                                         "white": white}, 3))
-        elif eff == "markov":
-            sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
-            if tc * MARKOV_SPAN <= fit.tau_s[-1]:
-                cands.append(Candidate(eff, {"markov_sigma": sg, "markov_tau": tc}, 2))
-        elif eff == "sine":
-            if before.line_z > 3.0:
-                bin_hz = s.rate_hz / line_segment(len(s.y))
-                sf = evidence.fit_sine(s.y, s.rate_hz, before.line_f_hz, bin_hz)
-                cands.append(Candidate(eff, {"sine_amplitude": sf.sine_amplitude,
-                                             "sine_freq": sf.sine_freq}, 2))
-                ev["sine"] = sf
-        elif eff == "temperature":
-            dof = base_feats.k - 1
-            if s.has_temperature and abs(before.temp_z) > t_threshold(Z_TEMP_CANDIDATE, dof):
-                assert s.temp_c is not None
-                tf = evidence.fit_temperature(s.y, s.temp_c, s.rate_hz, cm.temp_ref)
-                if tf is not None:
-                    ev["temperature"] = tf
-                    cands.append(Candidate(eff, {"temp_coeff": tf.temp_coeff_linear,
-                                                 "temp_coeff2": cm.temp_coeff2}, 1))
-                    cands.append(Candidate(eff, {"temp_coeff": tf.temp_coeff,
-                                                 "temp_coeff2": tf.temp_coeff2}, 2))
-        elif eff == "outliers":
-            of = evidence.fit_outliers(s.y, s.rate_hz, float(base_feats.impulses.mean()))
-            if of is not None:
-                ev["outliers"] = of
-                cands.append(Candidate(eff, {"outlier_rate": of.outlier_rate,
-                                             "outlier_amplitude": of.outlier_amplitude}, 2))
-    return cands, ev
+def _acceptable(c: Candidate, st: _Step) -> str:
+    """Empty when ``c`` is kept; else why not, in plain words."""
+    assert c.fit is not None
+    drop = st.chi2() - _cand_chi2(c)
+    if drop <= 0:
+        return "raises the total chi-squared"
+    need_fit = float(chi2_dist.isf(FIT_ALPHA, c.n_params))
+    if not (c.evidence_closed >= MIN_CLOSURE or drop > need_fit):
+        share = (f"{c.evidence_closed:.0%}" if math.isfinite(c.evidence_closed) else "none")
+        return (f"removes {share} of the significant excess (needs {MIN_CLOSURE:.0%}) "
+                f"and lowers chi-squared by {drop:.1f} (needs {need_fit:.1f})")
+    if c.holdout is not None and st.hold is not None and c.effect != "bias_step":
+        need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))
+        if not c.holdout_dchi2 > need:
+            return (f"does not reduce the held-out gap beyond its scatter (chi-squared "
+                    f"drop {c.holdout_dchi2:.1f}, needs {need:.1f})")
+    return ""
+
+
+def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
+              fit: PartSetup, st: _Step, sims: np.ndarray, det_sum: np.ndarray | float,
+              effects: tuple[str, ...]
+              ) -> tuple[list[Candidate], dict[int, np.ndarray], dict[str, Any]]:
+    """Fit, realise and score every candidate of one step.
+
+    Returns the candidates ranked by score (one per effect), the realisations of the best
+    HOLDOUT_TOP (keyed by ``id`` of the candidate) and the evidence of the fits."""
+    n, rate = len(series.y), series.rate_hz
+    n_fit = len(fit.series.y)
+    cm = variant.model[channel]
+    cands, ev = fit_candidates(cm, fit, series, st.before, st.feats, effects, st.step_fired)
+    local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
+    penalty = math.log(st.before.n_terms)
+    excess0 = st.before.chi2 - st.before.n_terms
+    best: dict[int, np.ndarray] = {}
+    shape_w = ev.get("shape_window")
+    shape_real = (evidence.smoothed_kurtosis(fit.series.y, shape_w)
+                  if shape_w is not None else math.nan)
+    for c in cands:
+        cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
+                            local_sum)
+        c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
+        c.step_z = z_against(st.step_real, step_stats(cs, rate))
+        det = deterministic(c.effect, c.params, cm, series)
+        c.drift_t = (evidence.drift_statistic(series.y - det_sum - det, rate)[0]
+                     if det is not None else st.drift_t)
+        if c.effect in ("markov", "telegraph") and shape_w is not None:
+            c.shape_z = z_against(shape_real, np.array(
+                [evidence.smoothed_kurtosis(s[:n_fit], shape_w) for s in cs]))
+        c.score = _cand_chi2(c) + penalty * c.n_params
+        c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
+        c.evidence_closed = st.evidence_closed(c)
+        best[id(c)] = cs
+        if len(best) > HOLDOUT_TOP:  # keep the realisations of the best few only
+            worst = max((x for x in cands if id(x) in best), key=lambda x: x.score)
+            del best[id(worst)]
+    _shape_scores(cands)
+    ranked: list[Candidate] = []
+    seen: set[str] = set()
+    for c in sorted(cands, key=lambda x: x.score):
+        if c.effect not in seen:  # temperature: linear or quadratic, the better
+            seen.add(c.effect)
+            ranked.append(c)
+    return ranked, best, ev
+
+
+def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetup | None,
+            st: _Step) -> tuple[Candidate | None, np.ndarray | None]:
+    """The best of the first HOLDOUT_TOP candidates that passes :func:`_acceptable`
+    (each examined one gets its held-out comparison and, if refused, its reason)."""
+    for c in ranked[:HOLDOUT_TOP]:
+        cs = best.get(id(c))
+        if cs is None:
+            continue
+        if hold is not None and st.hold is not None:
+            n_fit = cs.shape[1] - len(hold.series.y)
+            c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]))
+            c.holdout_dchi2 = st.hold.chi2 - c.holdout.chi2
+        c.note = _acceptable(c, st)
+        if not c.note:
+            return c, cs
+    return None, None
 
 
 def diagnose_channel(model: NoiseModel, channel: str, series: Series,
@@ -391,7 +396,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                      replicates: list[Series] | None = None) -> ChannelDiagnosis:
     """Diagnose one channel of one record (and check the result on replicate records)."""
     opt = options or GapOptions()
-    cm = model[channel]
+    cm0 = model[channel]
     n = len(series.y)
     n_fit = n if opt.holdout_fraction == 0 else round(n * (1.0 - opt.holdout_fraction))
     if n_fit < 256 or (opt.holdout_fraction > 0 and n - n_fit < 256):
@@ -399,60 +404,80 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             f"{series.name}: {n} samples are too few to split with --holdout-fraction "
             f"{opt.holdout_fraction} (each part needs >= 256 samples)"
         )
-    seeds = _seeds(opt.seed, opt.realisations)
-    base = simulate_channel(model, channel, series, seeds)
-    fit = _PartSetup(series.part(0, n_fit), cm)
-    base_fit = fit.sim_features(base[:, :n_fit])
-    before = fit.compare(base_fit)
-    hold: _PartSetup | None = None
-    hold_before: Comparison | None = None
-    base_hold: np.ndarray | None = None
-    if n_fit < n:
-        hold = _PartSetup(series.part(n_fit, n), cm)
-        base_hold = base[:, n_fit:]
-        hold_before = hold.compare(hold.sim_features(base_hold))
+    seeds = seeds_of(opt.seed, opt.realisations)
+    fit = PartSetup(series.part(0, n_fit), cm0)
+    hold = PartSetup(series.part(n_fit, n), cm0) if n_fit < n else None
+    variant = Variant(model)
+    det_sum: np.ndarray | float = 0.0
+    sims = simulate_channel(model, channel, series, seeds)
+    rep_setups = [(PartSetup(r, cm0), r) for r in replicates or []]
+    rep_before = [rs.compare(rs.sim_features(simulate_channel(model, channel, r, seeds)))
+                  for rs, r in rep_setups]
 
-    cands, ev = fit_candidates(cm, fit, before, base_fit, opt.effects)
-    ev["psd"] = (fit.f_hz, fit.real.psd, base_fit.psd.mean(axis=0))
-    penalty = math.log(before.n_terms)
-    excess0 = before.chi2 - before.n_terms
-    held_sims: dict[int, np.ndarray] = {}  # the held-out part of each candidate's realisations
-    for i, c in enumerate(cands):
-        sims = _effect_realisations(model, channel, c.effect, c.params, series, seeds, base)
-        if hold is not None:
-            held_sims[i] = sims[:, n_fit:].copy()  # the fit part is not kept
-        c.fit = fit.compare(fit.sim_features(sims[:, :n_fit]))
-        c.score = c.fit.chi2 + penalty * c.n_params
-        c.closure = c.fit.excess_closed(before) if excess0 > 1e-9 else 0.0
-        c.evidence_closed = c.fit.evidence_closed(before)
-    order = sorted(range(len(cands)), key=lambda i: cands[i].score)
-    ranked: list[Candidate] = []
-    seen: set[str] = set()
-    for i in order:  # one entry per effect (temperature: linear or quadratic, the better)
-        if cands[i].effect not in seen:
-            seen.add(cands[i].effect)
-            ranked.append(cands[i])
-    if not before.significant:
-        verdict = "none"
-    elif (not ranked or not ranked[0].evidence_closed >= MIN_CLOSURE
-          or ranked[0].fit is None or ranked[0].fit.chi2 > before.chi2):
-        verdict = "unexplained"
+    first: _Step | None = None
+    ranked0: list[Candidate] = []
+    ev0: dict[str, Any] = {}
+    kept: list[Candidate] = []
+    residual = False
+    reason = ""
+    bg_summary: dict[str, Any] | None = None
+    bg_rep: background.Background | None = None
+    for k in range(MAX_EFFECTS):
+        st = _Step(fit, hold, sims, series, det_sum)
+        if first is None:
+            first = st
+            bg_rep = background.from_replicates(st.before, rep_before)
+        if not st.significant:
+            break
+        if k == 0 and bg_rep is not None:
+            bg_summary = background.summary(st.before, bg_rep)
+            if bg_summary["within"] and not (st.step_fired or st.drift_fired):
+                reason = "replicate variation"
+                residual = True
+                break
+        cm = variant.model[channel]
+        done = {c.effect for c in kept}
+        ranked, best_sims, ev = _evaluate(
+            variant, channel, series, seeds, fit, st, sims, det_sum,
+            tuple(e for e in opt.effects if e not in done))
+        if k == 0:
+            ranked0, ev0 = ranked, ev
+        chosen, chosen_sims = _choose(ranked, best_sims, hold, st)
+        if chosen is None or chosen_sims is None:
+            residual = True
+            break
+        chosen.accepted = True
+        kept.append(chosen)
+        det = deterministic(chosen.effect, chosen.params, cm, series)
+        if det is not None:
+            det_sum = det_sum + det
+        variant = variant.add(channel, chosen)
+        sims = chosen_sims
     else:
-        verdict = ranked[0].effect
-    top = ranked[:HOLDOUT_TOP]
-    if hold is not None and base_hold is not None:
-        for c in top:
-            c.holdout = hold.compare(hold.sim_features(held_sims[cands.index(c)]))
-    diag = ChannelDiagnosis(channel, before, hold_before, ranked, verdict, ev)
-    for rep in replicates or []:
-        rs = _PartSetup(rep, cm)
-        rbase = simulate_channel(model, channel, rep, seeds)
-        b = rs.compare(rs.sim_features(rbase))
-        a = None
-        w = diag.winner
-        if w is not None:
-            rsims = _effect_realisations(model, channel, w.effect, w.params, rep, seeds, rbase)
-            a = rs.compare(rs.sim_features(rsims))
+        residual = _Step(fit, hold, sims, series, det_sum).significant
+    assert first is not None
+
+    if not first.significant:
+        verdict, reason = "none", "within the scatter of the realisations"
+    elif reason == "replicate variation":
+        verdict = "none"
+    elif kept:
+        main = [c.effect for c in kept if c.effect != "base_model"]
+        verdict = main[0] if main else "base_model"
+        reason = "effect" if main else "base model mismatch"
+    else:
+        verdict, reason = "unexplained", "no candidate accepted"
+        if first.hold is not None:
+            bg = background.from_halves(first.before, first.hold).merge(bg_rep)
+            bg_summary = background.summary(first.before, bg)
+            if bg_summary["within"] and not (first.step_fired or first.drift_fired):
+                verdict, reason = "none", "replicate variation"
+    ev0["psd"] = (fit.f_hz, fit.real.psd, first.feats.psd.mean(axis=0))
+    diag = ChannelDiagnosis(channel, first.before, first.hold, ranked0, verdict, ev0,
+                            kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
+                            residual_significant=residual, background=bg_summary)
+    for (rs, rep), b in zip(rep_setups, rep_before, strict=True):
+        a = rs.compare(rs.sim_features(variant.realise(channel, rep, seeds))) if kept else None
         diag.replicates.append((rep.name, b, a))
     return diag
 
@@ -464,6 +489,6 @@ def main_param_error(effect: str, fitted: dict[str, float], truth: float) -> flo
 
 
 __all__ = [
-    "EFFECTS", "MAIN_PARAM", "MIN_CLOSURE", "Candidate", "ChannelDiagnosis", "Features",
+    "EFFECTS", "MAIN_PARAM", "MIN_CLOSURE", "Candidate", "ChannelDiagnosis",
     "GapOptions", "Series", "diagnose_channel", "main_param_error", "simulate_channel",
 ]

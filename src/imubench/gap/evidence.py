@@ -132,3 +132,165 @@ def fit_outliers(y: np.ndarray, rate_hz: float, false_per_record: float = 0.0
     duration = np.isfinite(y).sum() / rate_hz
     rate = n_hit / (duration * 2.0 * norm.sf(u))
     return OutlierFit(float(rate), float(amp), hit, sigma, thr)
+
+
+STEP_BLOCKS = 256
+"""Blocks of the whole record whose means the bias-step statistic compares."""
+STEP_WINDOW_BLOCKS = 8
+"""Blocks on each side of a located step whose means give its size."""
+
+
+def _mad_sigma(v: np.ndarray) -> float:
+    v = v[np.isfinite(v)]
+    return float(1.4826 * np.median(np.abs(v - np.median(v)))) if v.size else float("nan")
+
+
+def step_statistic(y: np.ndarray, rate_hz: float) -> tuple[float, int]:
+    """(largest normalised jump of block means, block index of the jump).
+
+    Increments of block means at lag 1 and 2 blocks, each divided by its robust (MAD)
+    sigma; the largest absolute value. Gaussian increments (white, flicker, a random
+    walk, a ramp: a constant increment) keep it near the maximum of ~STEP_BLOCKS
+    normals (about 3.5-4); a bias step puts one increment (or two adjacent ones, when it
+    falls inside a block) far out in the tail (Page 1954, Biometrika 41, 100-115: a
+    change in mean is a jump of the cumulative sum; here one jump among Gaussian
+    increments). The record is never split for this test, so a step at the fit/held-out
+    boundary is seen like any other.
+    """
+    n_block = max(1, len(y) // STEP_BLOCKS)
+    m = block_means_of(y, n_block)
+    best, where = 0.0, 0
+    for lag in (1, 2):
+        if len(m) <= lag + 4:
+            continue
+        d = m[lag:] - m[:-lag]
+        s = _mad_sigma(d)
+        if not s > 0:
+            continue
+        r = np.abs(d - np.nanmedian(d)) / s
+        if np.isfinite(r).any():
+            i = int(np.nanargmax(r))
+            if r[i] > best:
+                best, where = float(r[i]), i + 1
+    return best, where
+
+
+def block_means_of(y: np.ndarray, n_block: int) -> np.ndarray:
+    nb = len(y) // n_block
+    with np.errstate(invalid="ignore"):
+        v = y[: nb * n_block].reshape(nb, n_block)
+        ok = np.isfinite(v)
+        cnt = ok.sum(axis=1)
+        s = np.where(ok, v, 0.0).sum(axis=1)
+    return np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan)
+
+
+@dataclass(frozen=True)
+class StepFit:
+    step_time_s: float
+    step_size: float
+
+
+def fit_bias_step(y: np.ndarray, rate_hz: float) -> StepFit:
+    """Time and size of the largest bias step of the whole record.
+
+    Located to a block by :func:`step_statistic`, then to a sample by the largest
+    absolute cumulative sum of the mean-removed samples of the three blocks around it (the
+    least-squares change point of a mean shift, Hinkley 1970, Biometrika 57, 1-17); the
+    size is the difference of the means of STEP_WINDOW_BLOCKS blocks on either side,
+    skipping the block the step falls in (a local estimate: a slow wander of the
+    background does not bias it the way whole-record means would).
+    """
+    n_block = max(1, len(y) // STEP_BLOCKS)
+    _, jb = step_statistic(y, rate_hz)
+    lo = max(0, (jb - 1) * n_block)
+    hi = min(len(y), (jb + 2) * n_block)
+    seg = y[lo:hi]
+    seg = np.where(np.isfinite(seg), seg, np.nanmean(seg))
+    cs = np.cumsum(seg - seg.mean())
+    k = lo + int(np.argmax(np.abs(cs))) + 1
+    w = STEP_WINDOW_BLOCKS * n_block
+    left = y[max(0, k - n_block // 2 - w): max(0, k - n_block // 2)]
+    right = y[k + n_block // 2: k + n_block // 2 + w]
+    size = float(np.nanmean(right) - np.nanmean(left)) if left.size and right.size else 0.0
+    return StepFit(k / rate_hz, size)
+
+
+def smoothed_kurtosis(y: np.ndarray, window: int) -> float:
+    """Excess kurtosis of the means of consecutive windows of ``window`` samples.
+
+    Random telegraph noise (two levels) has excess kurtosis -2 when it dominates the
+    smoothed series; Gaussian (Markov, white) noise 0 (the fourth standardised moment
+    minus 3; e.g. Kendall & Stuart, vol. 1, sec. 3.31)."""
+    m = block_means_of(y, max(1, window))
+    m = m[np.isfinite(m)]
+    if m.size < 16:
+        return float("nan")
+    c = m - m.mean()
+    v = float(np.mean(c * c))
+    return float(np.mean(c**4) / (v * v) - 3.0) if v > 0 else float("nan")
+
+
+@dataclass(frozen=True)
+class ResonanceFit:
+    resonance_freq_hz: float
+    resonance_width_hz: float
+    resonance_height: float
+
+
+def fit_resonance(f_hz: np.ndarray, psd_real: np.ndarray, psd_model: np.ndarray
+                  ) -> ResonanceFit | None:
+    """Centre, -3 dB width and peak height (unit^2/Hz) of the largest spectral excess.
+
+    The excess ``psd_real - psd_model`` (Welch, one-sided) smoothed over three bins; its
+    highest bin above the first two; the width is the contiguous run of bins above half
+    the peak (full width at half maximum of a Lorentzian line, at least one bin); the
+    centre the excess-weighted mean frequency of that run. None when there is no excess.
+    """
+    ex = np.convolve(psd_real - psd_model, np.ones(3) / 3.0, mode="same")
+    ex[:2] = -np.inf
+    i = int(np.argmax(ex))
+    h = float(ex[i])
+    if not h > 0:
+        return None
+    j0 = i
+    while j0 > 2 and ex[j0 - 1] > h / 2:
+        j0 -= 1
+    j1 = i
+    while j1 + 1 < len(ex) and ex[j1 + 1] > h / 2:
+        j1 += 1
+    df = float(f_hz[1] - f_hz[0])
+    w = ex[j0:j1 + 1]
+    fc = float(np.sum(f_hz[j0:j1 + 1] * w) / np.sum(w))
+    return ResonanceFit(fc, max((j1 - j0 + 1) * df, df), h)
+
+
+DRIFT_BLOCKS = 32
+"""Blocks of the whole record whose increments the drift test averages."""
+DRIFT_LAGS = 3
+"""Bartlett lags of the Newey-West variance of the mean increment."""
+
+
+def drift_statistic(y: np.ndarray, rate_hz: float) -> tuple[float, int]:
+    """(t of the mean increment of block means, its degrees of freedom).
+
+    A linear drift (a ramp) makes every increment of the block means positive on average;
+    white, flicker and random-walk noise have zero-mean increments. The mean of the
+    DRIFT_BLOCKS - 1 increments is divided by its Newey-West standard error (Bartlett
+    weights, DRIFT_LAGS lags; Newey & West 1987, Econometrica 55, 703-708), so the test
+    normalises itself on the record: against a random walk of density K it has the
+    power ``R sqrt(T) / K`` of a drift R over the record length T, and for white noise
+    (negatively correlated increments) it is conservative. Student t with
+    ``DRIFT_BLOCKS - 2`` dof under no drift."""
+    n_block = max(1, len(y) // DRIFT_BLOCKS)
+    m = block_means_of(y, n_block)
+    d = np.diff(m[np.isfinite(m)])
+    if d.size < 8:
+        return float("nan"), 1
+    c = d - d.mean()
+    var = float(np.mean(c * c))
+    for lag in range(1, DRIFT_LAGS + 1):
+        var += 2.0 * (1.0 - lag / (DRIFT_LAGS + 1)) * float(np.mean(c[lag:] * c[:-lag]))
+    if not var > 0:
+        return float("nan"), d.size - 1
+    return float(d.mean() / math.sqrt(var / d.size)), d.size - 1

@@ -7,6 +7,10 @@ the best candidate removes against :data:`~imubench.gap.diagnose.MIN_CLOSURE`, a
 score against the runner-up's), how the issue's gap splits into the scatter a perfect
 model would also show and the systematic part, and what the held-out part and the
 replicates say. It reads only the JSON keys, so it explains a saved result as well.
+
+The first sentence is in plain words (:func:`headline`): what the sensor does that the
+model does not, its size, and how much of the gap modelling it closes on the held-out
+part; the numbers behind it follow.
 """
 
 from __future__ import annotations
@@ -70,10 +74,108 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
     return f"; the closest to its threshold is {n} (t {z:.1f} against {thr:.1f})"
 
 
+def describe(effect: str, p: dict[str, Any]) -> str:
+    """What an effect with parameters ``p`` does, in plain words (channel units)."""
+    g = lambda k: _f(p.get(k), 3)  # noqa: E731
+    return {
+        "temperature": f"the rate drifts with temperature, {g('temp_coeff')} per degC",
+        "sine": f"a sinusoidal disturbance of amplitude {g('sine_amplitude')} at "
+                f"{g('sine_freq')} Hz",
+        "random_walk": f"the bias wanders as a random walk (K = {g('random_walk')} per "
+                       "sqrt(s))",
+        "flicker": f"the bias instability (flicker) is larger than modelled (B = "
+                   f"{g('flicker')})",
+        "ramp": f"the rate drifts linearly in time, {g('ramp')} per s",
+        "quantization": f"quantization noise is larger than modelled (Q = "
+                        f"{g('quantization')})",
+        "markov": f"a correlated bias (Gauss-Markov) of sigma {g('markov_sigma')} with "
+                  f"correlation time {g('markov_tau')} s",
+        "telegraph": f"the bias jumps between two levels {g('telegraph_step')} apart "
+                     f"(telegraph noise), mean dwell {g('telegraph_dwell_s')} s",
+        "resonance": f"a narrowband resonance at {g('resonance_freq_hz')} Hz, width "
+                     f"{g('resonance_width_hz')} Hz, peak PSD {g('resonance_height')} "
+                     "per Hz above the model",
+        "outliers": f"impulsive outliers, {g('outlier_rate')} per s of amplitude "
+                    f"{g('outlier_amplitude')}",
+        "bias_step": f"the bias steps by {g('step_size')} at t = {g('step_time_s')} s",
+        "base_model": f"the base model is off (refit: white {g('white')} per sqrt(Hz), "
+                      f"output filter {g('bandwidth_hz')} Hz, order {g('filter_order')}); "
+                      "refit the model rather than add an effect",
+    }.get(effect, effect)
+
+
+def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
+    """'closes N % of the gap on the held-out half' (systematic part when it is there)."""
+    if not h or h.get("gap_before") is None:
+        return ""
+    eb = h.get("gap_excess_before")
+    if after is not None:
+        ea, ga = after.get("holdout_gap_excess_after"), after.get("holdout_gap_after")
+    else:
+        ea, ga = h.get("gap_excess_after"), h.get("gap_after")
+    if eb is not None and eb > 0.05 and ea is not None:
+        frac = 1.0 - ea / eb
+    elif ga is not None and h["gap_before"]:
+        frac = 1.0 - ga / h["gap_before"]
+    else:
+        return ""
+    return f"; modelling it closes {_pct(frac)} of the gap on the held-out part"
+
+
+def headline(c: dict[str, Any], realisations: int) -> str:
+    """The verdict in plain words, numbers after."""
+    verdict, reason = c["verdict"], c.get("reason", "")
+    kept = c.get("kept", [])
+    if verdict == "none":
+        bg = c.get("background") or {}
+        if reason == "replicate variation":
+            src = {"replicates": "its replicates"}.get(
+                str(bg.get("source")), "the two halves of the record")
+            return ("No unmodelled effect: the recording departs from the model at "
+                    f"{_f(bg.get('tau_min_s'))}-{_f(bg.get('tau_max_s'))} s by no more than "
+                    f"{src} differ (replicate variation).")
+        return (f"No unmodelled effect: the model explains the recording within the scatter "
+                f"of {realisations} realisations.")
+    if verdict == "unexplained":
+        return ("The model departs from the recording, but no candidate effect explains it "
+                "on both the fit and the held-out part.")
+    main = next((k for k in kept if k["effect"] == verdict), None)
+    ranked = next((e for e in c.get("effects", []) if e["effect"] == verdict), None)
+    text = describe(verdict, (main or ranked or {}).get("params", {}))
+    text = text[0].upper() + text[1:] + _closed(c.get("holdout"), main if len(kept) == 1
+                                                else None) + "."
+    others = [k for k in kept if k is not main]
+    if others:
+        text += " Also kept: " + "; ".join(describe(k["effect"], k["params"]) for k in others)
+        text += " (all kept effects together" + _closed(c.get("holdout"), None).replace(
+            "; modelling it closes", " close") + ")."
+    return text
+
+
+def _kept_lines(c: dict[str, Any]) -> list[str]:
+    kept = c.get("kept", [])
+    if not kept:
+        return []
+    h = c.get("holdout") or {}
+    parts = []
+    for i, k in enumerate(kept, 1):
+        params = ", ".join(f"{n} = {_f(v, 4)}" for n, v in k["params"].items())
+        txt = f"{i}. {k['effect']} ({params}): fit-part gap {_f(k['gap_after'])}"
+        if k.get("holdout_gap_after") is not None:
+            txt += f", held-out gap {_f(k['holdout_gap_after'])}"
+        parts.append(txt)
+    first = (f"Effects kept in order (held-out gap before: {_f(h.get('gap_before'))}): "
+             if h else "Effects kept in order: ")
+    out = [first + "; ".join(parts) + "."]
+    if c.get("residual_significant") and c["verdict"] not in ("none",):
+        out.append("A significant departure remains after the kept effects.")
+    return out
+
+
 def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
     """Sentences explaining the verdict of one channel's JSON entry."""
     dof = max(int(realisations) - 1, 1)
-    lines: list[str] = []
+    lines: list[str] = [headline(c, realisations)]
     found = _detections(c, dof)
     verdict = c["verdict"]
     if found:
@@ -84,31 +186,39 @@ def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
                      + _strongest(c, dof) + ".")
     effects = c["effects"]
     if verdict == "none":
-        lines.append("Verdict none: the model explains the recording within the scatter of "
-                     f"{realisations} realisations.")
+        lines.append("Verdict none: " + (
+            "the departure is within the recording's own variation."
+            if c.get("reason") == "replicate variation" else
+            f"the model explains the recording within the scatter of {realisations} "
+            "realisations."))
     elif verdict == "unexplained":
         best = effects[0] if effects else None
         if best is None:
             lines.append("Verdict unexplained: no candidate effect applies to this evidence.")
         else:
+            why = best.get("rejected_because") or (
+                f"removes {_pct(best.get('evidence_closed'))} of the significant excess "
+                f"chi-squared (the verdict needs {MIN_CLOSURE:.0%}, without raising the "
+                "total)")
             lines.append(
-                f"Verdict unexplained: the best candidate, {best['effect']}, removes "
-                f"{_pct(best.get('evidence_closed'))} of the significant excess chi-squared "
-                f"(the verdict needs {MIN_CLOSURE:.0%}, without raising the total); an "
-                "effect outside the candidate list, or two at once, is likely.")
+                f"Verdict unexplained: the best candidate, {best['effect']}, {why}; an "
+                "effect outside the candidate list is likely.")
     else:
-        w = effects[0]
+        w = next((e for e in effects if e["effect"] == verdict), None) or (
+            c.get("kept") or [{}])[0]
         params = ", ".join(f"{k} = {_f(v, 4)}" for k, v in w["params"].items())
         txt = (f"Verdict {verdict} ({params}):"
                f" it removes {_pct(w.get('evidence_closed'))} of the significant excess "
                f"chi-squared (the verdict needs {MIN_CLOSURE:.0%}; "
-               f"{_pct(w['chi2_closed'])} of the total) with score {w['score']:.1f}")
-        if len(effects) > 1:
-            r = effects[1]
+               f"{_pct(w.get('chi2_closed'))} of the total) with score "
+               f"{_f(w.get('score'), 3)}")
+        r = next((e for e in effects if e["effect"] != verdict), None)
+        if r is not None and "n_params" in w:
             txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
                     f"BIC penalty ln(n) per parameter, {w['n_params']} against "
                     f"{r['n_params']})")
         lines.append(txt + ".")
+    lines.extend(_kept_lines(c))
     g0, ge = c.get("gap_null"), c.get("gap_excess_before")
     if g0 is not None and ge is not None:
         lines.append(
@@ -134,6 +244,17 @@ def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
                     f"{'significant' if r.get('significant') else 'not significant'} "
                     "departures from the model)")
         lines.append(txt + ".")
+    lim = c.get("limits")
+    if lim:
+        parts = []
+        for eff, e in lim["effects"].items():
+            v = e.get("smallest_identified")
+            top = max(t["size"] for t in e["tried"])
+            parts.append(f"{eff} {e['key']} {_f(v)}" if v is not None
+                         else f"{eff} not identified up to {_f(top)}")
+        lines.append("Detection limits on this recording (smallest size identified in "
+                     f"{lim['rate_required']:.0%} of {lim['injections_per_size']} injections): "
+                     + "; ".join(parts) + ".")
     if verdict in ("none", "unexplained") and any(r.get("significant") for r in reps):
         lines.append("Replicates depart from the model beyond their scatter"
                      + (" although this recording does not" if verdict == "none" else "")

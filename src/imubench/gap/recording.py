@@ -51,8 +51,12 @@ def diagnose_recording(
     replicates: Sequence[Recording] = (),
     effects_requested: bool = False,
     progress: Callable[[str], None] | None = None,
+    limits: bool = False,
 ) -> tuple[dict[str, Any], dict[str, ChannelDiagnosis]]:
     """(JSON structure, per-channel diagnoses) for the channels of ``rec``.
+
+    ``limits``: also measure the detection limits on this recording
+    (:func:`imubench.gap.limits.detection_limits`, ``limits`` in each channel's entry).
 
     ``effects_requested``: the caller named the effects explicitly, so ``temperature``
     without a temperature column is an error instead of a skipped candidate.
@@ -81,9 +85,14 @@ def diagnose_recording(
         if progress is not None:
             progress(ch)
         reps = [series_of(r, ch) for r in replicates]
-        d = diagnose_channel(model, ch, series_of(rec, ch), opt, reps)
+        series = series_of(rec, ch)
+        d = diagnose_channel(model, ch, series, opt, reps)
         diags[ch] = d
         out["channels"][ch] = d.to_dict()
+        if limits:
+            from imubench.gap.limits import detection_limits
+
+            out["channels"][ch]["limits"] = detection_limits(model, ch, series, opt)
     return _clean(out), diags
 
 

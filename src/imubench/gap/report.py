@@ -43,7 +43,8 @@ def _adev_panel(ax: Any, title: str, before: Comparison, after: Comparison | Non
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_title(f"{title}: gap {before.gap:.3f}"
-                 + (f" -> {after.gap:.3f}" if after is not None else ""))
+                 + (f" -> {after.gap:.3f} with {label}" if after is not None
+                    else " (no effect kept)"), fontsize=9)
     ax.set_xlabel("tau (s)")
     ax.set_ylabel(f"Allan deviation ({unit})")
     ax.grid(True, which="both", alpha=0.3)
@@ -57,7 +58,9 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
     if eff == "temperature" and "temperature" in ev:
         tf = ev["temperature"]
         ax.plot(tf.block_temp_c, tf.block_rate, ".", ms=3, label="real (block means)")
-        p = d.candidates[0].params
+        w = d.winner
+        assert w is not None
+        p = w.params
         tt = np.linspace(tf.block_temp_c.min(), tf.block_temp_c.max(), 50)
         ref = float(np.mean(tf.block_rate) - np.mean(
             p["temp_coeff"] * (tf.block_temp_c - tf.block_temp_c.mean())))
@@ -82,16 +85,18 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         f, real, sim = ev["psd"]
         ax.loglog(f[1:], real[1:], "k-", lw=0.7, label="real")
         ax.loglog(f[1:], sim[1:], "b-", lw=1.0, label="model (mean of realisations)")
-        if eff == "sine":
-            ax.axvline(d.candidates[0].params["sine_freq"], color="r", ls="--",
-                       label=f"line {d.candidates[0].params['sine_freq']:.4g} Hz")
+        w = d.winner
+        if eff == "sine" and w is not None:
+            ax.axvline(w.params["sine_freq"], color="r", ls="--",
+                       label=f"line {w.params['sine_freq']:.4g} Hz")
         ax.set_xlabel("frequency (Hz)")
         ax.set_ylabel(f"PSD ({unit}^2/Hz)")
         ax.legend(fontsize=7)
         return "Welch spectrum (fit part)"
     ax.semilogx(d.before.tau_s, d.before.z, "o-", label="model")
-    if d.winner is not None and d.winner.fit is not None:
-        ax.semilogx(d.before.tau_s, d.winner.fit.z, "s--", label=f"model + {eff}")
+    if d.final_fit is not None:
+        ax.semilogx(d.before.tau_s, d.final_fit.z, "s--",
+                    label="model + " + " + ".join(c.effect for c in d.kept))
     ax.axhline(0, color="k", lw=0.5)
     for zz in (-3.5, 3.5):
         ax.axhline(zz, color="r", ls=":", lw=0.8)
@@ -110,19 +115,16 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
         raise GapError(f"--report {out_dir}: cannot create ({exc.strerror})") from exc
     rows = []
     for ch, d in diags.items():
-        w = d.winner
-        label = w.effect if w is not None else (d.candidates[0].effect if d.candidates
-                                                 else "")
-        best = w if w is not None else (d.candidates[0] if d.candidates else None)
+        label = " + ".join(c.effect for c in d.kept)
         n_pan = 2 if d.holdout_before is not None else 1
         fig, axes = plt.subplots(1, n_pan, figsize=(6 * n_pan, 4.5), squeeze=False)
         unit = UNITS.get(ch, "unit of the data")
-        _adev_panel(axes[0][0], f"{ch} fit part", d.before,
-                    best.fit if best is not None else None, label, unit)
+        _adev_panel(axes[0][0], f"{ch} fit part", d.before, d.final_fit, label, unit)
         if d.holdout_before is not None:
-            _adev_panel(axes[0][1], f"{ch} held out", d.holdout_before,
-                        best.holdout if best is not None else None, label, unit)
-        fig.suptitle(f"{ch}: verdict {d.verdict}")
+            _adev_panel(axes[0][1], f"{ch} held out", d.holdout_before, d.final_holdout,
+                        label, unit)
+        fig.suptitle(f"{ch}: verdict {d.verdict}" + (f" ({d.reason})" if d.reason else "")
+                     + (f"; kept {label}" if label else ""))
         fig.tight_layout()
         for ext in ("png", "svg"):
             fig.savefig(out_dir / f"{ch}_adev.{ext}", dpi=110)
@@ -139,7 +141,8 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
         eff_rows = "".join(
             f"<tr><td>{html.escape(e['effect'])}</td><td>{html.escape(_fmt(e['params']))}"
             f"</td><td>{_num(e['gap_after'])}</td><td>{_num(e.get('holdout_gap_after'))}"
-            f"</td><td>{_num(e['score'])}</td></tr>" for e in c["effects"])
+            f"</td><td>{_num(e['score'])}</td><td>{_kept_cell(e)}</td></tr>"
+            for e in c["effects"])
         hold = c.get("holdout") or {}
         rows.append(
             f"<h2>{ch}: verdict <b>{html.escape(c['verdict'])}</b></h2>"
@@ -150,7 +153,8 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
                              for s in explain_channel(c, result["realisations"])) + "</ul>"
             f"<img src='{ch}_adev.png'><img src='{ch}_evidence.png'>"
             "<table border=1><tr><th>effect</th><th>params</th><th>gap after</th>"
-            f"<th>held-out gap after</th><th>score</th></tr>{eff_rows}</table>"
+            f"<th>held-out gap after</th><th>score</th><th>kept?</th></tr>{eff_rows}</table>"
+            + _limits_table(c.get("limits"))
         )
     index = out_dir / "index.html"
     index.write_text(
@@ -176,3 +180,20 @@ def _regions(regs: list[dict[str, Any]]) -> str:
         return "none"
     return "; ".join(f"{r['tau_min_s']:.3g}-{r['tau_max_s']:.3g} s {r['direction']}"
                      for r in regs)
+
+
+def _kept_cell(e: dict[str, Any]) -> str:
+    return "kept" if e.get("accepted") else html.escape(e.get("rejected_because", ""))
+
+
+def _limits_table(lim: dict[str, Any] | None) -> str:
+    if not lim:
+        return ""
+    rows = "".join(
+        f"<tr><td>{html.escape(eff)}</td><td>{html.escape(e['key'])}</td>"
+        f"<td>{_num(e.get('smallest_identified'))}</td><td>"
+        + ", ".join(f"{t['size']:.3g}: {t['identified']}/{t['of']}" for t in e["tried"])
+        + "</td></tr>" for eff, e in lim["effects"].items())
+    return (f"<h3>Detection limits on this recording</h3><p>{html.escape(lim['note'])}</p>"
+            "<table border=1><tr><th>effect</th><th>key</th><th>smallest identified</th>"
+            f"<th>sizes tried (identified/injections)</th></tr>{rows}</table>")

@@ -1,0 +1,250 @@
+"""Candidate effects: fitted to the REAL fit part, realised on top of the current model.
+
+Each candidate is fitted with the evidence that suits it (:mod:`imubench.gap.evidence`,
+:mod:`imubench.gap.avarfit`) and realised with the same seeds as the current model
+(common random numbers): a term the simulator has and that adds linearly is drawn alone
+and added; the effects of :mod:`imubench.gap.extras` are added as increments; the rest
+(the base model's refit, a second Markov or sine term) is re-simulated in full.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from lsm6ds_sim.model import ChannelModel, NoiseModel
+
+from imubench.gap import avarfit, evidence, extras
+from imubench.gap.curves import Comparison, SimFeatures, line_segment, t_threshold
+from imubench.gap.parts import PartSetup, Series, simulate_channel
+
+EFFECTS: tuple[str, ...] = (
+    "flicker", "random_walk", "ramp", "quantization", "markov", "telegraph", "sine",
+    "resonance", "temperature", "outliers", "bias_step", "base_model",
+)
+"""Candidate effects, by the names the JSON uses. ``base_model`` is the refit of the
+model's own white level and output filter: a mismatch of the base model, reported as its
+own verdict, not as an unmodelled effect."""
+MAIN_PARAM: dict[str, str] = {
+    "flicker": "flicker", "random_walk": "random_walk", "ramp": "ramp",
+    "quantization": "quantization", "markov": "markov_sigma",
+    "telegraph": "telegraph_step", "sine": "sine_amplitude",
+    "resonance": "resonance_freq_hz", "temperature": "temp_coeff",
+    "outliers": "outlier_rate", "bias_step": "step_size", "base_model": "bandwidth_hz",
+}
+"""The key that measures each effect's size (used for parameter errors)."""
+MARKOV_SPAN = 15.0
+"""A Markov (or telegraph) candidate needs its tau_c at most the longest analysed tau /
+MARKOV_SPAN.
+
+Gauss-Markov ADEV peaks near 1.9 tau_c and falls as tau^-1/2 beyond ~3 tau_c (IEEE 952
+C.6); only that descent, seen over a factor 5 in tau (3 to 15 tau_c, a factor 2.2 in
+ADEV), tells it from flicker (flat) or random walk (rising), which have one parameter
+fewer. A longer tau_c is reported as those."""
+Z_TEMP_CANDIDATE = 2.5
+"""The temperature candidate needs |temp_z| (the correlation of the block means'
+INCREMENTS with the temperature's, against the realisations') above this normal-
+equivalent z (as Student t with K - 1 dof). A random walk or flicker level correlates
+with any slow temperature history in levels, and then a temperature coefficient closes
+a rising Allan curve as well as the random walk does; only a correlation of the
+prewhitened (differenced) series beyond the realisations' chance level is evidence."""
+Z_LINE_CANDIDATE = 3.0
+"""Line z above which the sine and resonance candidates are fitted."""
+
+
+@dataclass
+class Candidate:
+    effect: str
+    params: dict[str, float]
+    """Model-file keys with their values AFTER adding the effect (totals), or the
+    increment's parameters for the effects of :mod:`imubench.gap.extras`."""
+    n_params: int
+    fit: Comparison | None = None
+    holdout: Comparison | None = None
+    score: float = math.inf
+    closure: float = 0.0
+    """Share of the total excess chi-squared removed (all taus, bands, statistics)."""
+    evidence_closed: float = float("nan")
+    """Share of the significant excess chi-squared removed (the verdict's criterion)."""
+    step_z: float = float("nan")
+    """Whole-record bias-step statistic of the real record against these realisations."""
+    drift_t: float = float("nan")
+    """Whole-record drift t after removing this effect's deterministic part."""
+    shape_z: float = float("nan")
+    """Smoothed-kurtosis statistic (telegraph against Markov), NaN for other effects."""
+    holdout_dchi2: float = float("nan")
+    """Held-out chi-squared before minus after adding the effect."""
+    accepted: bool = False
+    note: str = ""
+    """Why the candidate was not accepted (empty when accepted or not examined)."""
+    replicates: list[Comparison] = field(default_factory=list)
+
+    def to_dict(self, before: Comparison) -> dict[str, Any]:
+        assert self.fit is not None
+        d: dict[str, Any] = {
+            "effect": self.effect,
+            "params": self.params,
+            "gap_after": self.fit.gap,
+            "n_params": self.n_params,
+            "score": self.score,
+            "chi2_closed": self.closure,
+            "evidence_closed": self.evidence_closed,
+            "gap_closed": 1.0 - self.fit.gap / before.gap if before.gap > 0 else 0.0,
+            "gap_excess_after": self.fit.gap_excess,
+            "accepted": self.accepted,
+        }
+        if self.note:
+            d["rejected_because"] = self.note
+        if self.holdout is not None:
+            d["holdout_gap_after"] = self.holdout.gap
+            d["holdout_gap_excess_after"] = self.holdout.gap_excess
+            d["holdout_chi2_drop"] = self.holdout_dchi2
+        return d
+
+
+def additive(cm: ChannelModel, effect: str) -> bool:
+    """True when the simulator's term for ``effect`` simulates alone and adds."""
+    if effect == "markov":
+        return cm.markov_sigma == 0.0
+    return effect != "base_model"
+
+
+def candidate_sims(model: NoiseModel, channel: str, effect: str, params: dict[str, float],
+                   series: Series, seeds: list[int], current: np.ndarray,
+                   local_sum: np.ndarray | float) -> np.ndarray:
+    """(K, n) realisations of the current model with ``effect`` added.
+
+    ``current``: the current realisations (model plus ``local_sum``, the increments of the
+    effects already kept that the simulator does not realise)."""
+    cm = model[channel]
+    n = len(series.y)
+    if effect in extras.LOCAL_EFFECTS:
+        return current + extras.increments(effect, params, n, series.rate_hz, seeds)
+    if additive(cm, effect):
+        keep = {"bandwidth_hz": cm.bandwidth_hz, "filter_order": cm.filter_order,
+                "temp_ref": cm.temp_ref}
+        inc = {k: v - getattr(cm, k) for k, v in params.items()}
+        inc_model = NoiseModel.single_term(channel, **keep, **inc)
+        return current + simulate_channel(inc_model, channel, series, seeds)
+    return simulate_channel(model.with_channel(channel, **params), channel, series,
+                            seeds) + local_sum
+
+
+MARKOV_DOMINANCE = 0.5
+"""A Markov (or telegraph) candidate's AVAR must reach this share of the model's at
+3 tau_c (:func:`markov_dominates`). Measured on ADIS16405 hours (tuning replicate 1):
+flicker B 0.009 dps mimicked by a Markov term of ratio 0.24; real Markov sigma 0.02 dps,
+tau_c 10 s over a model with a large flicker term: ratio 0.76; on a quieter axis 2.2."""
+
+
+def markov_dominates(sigma: float, tau_c_s: float, tau_s: np.ndarray,
+                     model_avar: np.ndarray) -> bool:
+    """Whether a fitted Gauss-Markov term's AVAR reaches MARKOV_DOMINANCE of the model's
+    at 3 tau_c.
+
+    Its descent beyond ~3 tau_c (IEEE 952 C.6) is what tells it from flicker; where the
+    model's own terms (white, random walk) are much larger there, the descent is hidden
+    and a Markov term with a short tau_c mimics a flat flicker floor over one decade
+    (measured: flicker B 0.009 dps on an ADIS16405 hour called markov with tau_c 1.8 s)."""
+    from lsm6ds_sim.noise import avar_markov
+
+    t3 = np.array([3.0 * tau_c_s])
+    base = float(np.exp(np.interp(np.log(t3), np.log(tau_s), np.log(model_avar)))[0])
+    return float(avar_markov(t3, sigma, tau_c_s)[0]) >= MARKOV_DOMINANCE * base
+
+
+def deterministic(effect: str, params: dict[str, float], cm: ChannelModel, series: Series
+                  ) -> np.ndarray | None:
+    """The deterministic part the effect ADDS to the record (ramp, bias step, temperature
+    response), for the whole-record drift test; None for stochastic effects."""
+    n = len(series.y)
+    if effect == "ramp":
+        return (params["ramp"] - cm.ramp) * np.arange(n) / series.rate_hz
+    if effect == "bias_step":
+        return extras.increment(effect, params, n, series.rate_hz, 0)
+    if effect == "temperature" and series.temp_c is not None:
+        dt = np.nan_to_num(series.temp_c - cm.temp_ref, nan=0.0)
+        return ((params["temp_coeff"] - cm.temp_coeff) * dt
+                + (params["temp_coeff2"] - cm.temp_coeff2) * dt * dt)
+    return None
+
+
+def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
+                   cur: SimFeatures, effects: tuple[str, ...], step_fired: bool
+                   ) -> tuple[list[Candidate], dict[str, Any]]:
+    """Each applicable effect with parameters fitted to the real fit part, and evidence.
+
+    ``whole``: the whole record (the bias step is located on it); ``cur``: features of the
+    current realisations on the fit part; ``step_fired``: the whole-record step test fired.
+    """
+    s = fit.series
+    cands: list[Candidate] = []
+    ev: dict[str, Any] = {}
+    model_avar = cur.avar.mean(axis=0)
+    sig = before.sigma
+    dof = cur.k - 1
+    for eff in effects:
+        if eff in avarfit.BASES:
+            p = avarfit.fit_single(eff, fit.tau_s, fit.real.avar, model_avar, sig)
+            p0 = getattr(cm, eff)
+            cands.append(Candidate(eff, {eff: math.sqrt(p0 * p0 + p * p)}, 1))
+        elif eff == "ramp":
+            cands.append(Candidate(eff, {"ramp": cm.ramp + fit.real.trend_slope
+                                         - float(np.nanmean(cur.trend_slope))}, 1))
+        elif eff == "base_model":
+            bw, order, white = avarfit.fit_base_model(cm, fit.tau_s, s.rate_hz, fit.real.avar,
+                                                      model_avar, sig)
+            cands.append(Candidate(eff, {"bandwidth_hz": bw, "filter_order": order,
+                                         "white": white}, 3))
+        elif eff in ("markov", "telegraph"):
+            sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
+            if tc * MARKOV_SPAN <= fit.tau_s[-1] and markov_dominates(
+                    sg, tc, fit.tau_s, model_avar):
+                ev["shape_window"] = max(1, round(0.5 * tc * s.rate_hz))
+                if eff == "markov":
+                    cands.append(Candidate(eff, {"markov_sigma": sg, "markov_tau": tc}, 2))
+                else:
+                    cands.append(Candidate(eff, {"telegraph_step": 2.0 * sg,
+                                                 "telegraph_dwell_s": 2.0 * tc}, 2))
+        elif eff == "sine":
+            if before.line_z > Z_LINE_CANDIDATE:
+                bin_hz = s.rate_hz / line_segment(len(s.y))
+                sf = evidence.fit_sine(s.y, s.rate_hz, before.line_f_hz, bin_hz)
+                cands.append(Candidate(eff, {"sine_amplitude": sf.sine_amplitude,
+                                             "sine_freq": sf.sine_freq}, 2))
+                ev["sine"] = sf
+        elif eff == "resonance":
+            above = any(b["direction"] == "real_above" for b in before.bands)
+            if above or before.line_z > Z_LINE_CANDIDATE:
+                rf = evidence.fit_resonance(fit.f_hz, fit.real.psd, cur.psd.mean(axis=0))
+                if rf is not None:
+                    cands.append(Candidate(eff, {
+                        "resonance_freq_hz": rf.resonance_freq_hz,
+                        "resonance_width_hz": rf.resonance_width_hz,
+                        "resonance_height": rf.resonance_height}, 3))
+        elif eff == "temperature":
+            if s.has_temperature and abs(before.temp_z) > t_threshold(Z_TEMP_CANDIDATE, dof):
+                assert s.temp_c is not None
+                tf = evidence.fit_temperature(s.y, s.temp_c, s.rate_hz, cm.temp_ref)
+                if tf is not None:
+                    ev["temperature"] = tf
+                    cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff
+                                                 + tf.temp_coeff_linear,
+                                                 "temp_coeff2": cm.temp_coeff2}, 1))
+                    cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + tf.temp_coeff,
+                                                 "temp_coeff2": cm.temp_coeff2
+                                                 + tf.temp_coeff2}, 2))
+        elif eff == "outliers":
+            of = evidence.fit_outliers(s.y, s.rate_hz, float(cur.impulses.mean()))
+            if of is not None:
+                ev["outliers"] = of
+                cands.append(Candidate(eff, {"outlier_rate": of.outlier_rate,
+                                             "outlier_amplitude": of.outlier_amplitude}, 2))
+        elif eff == "bias_step" and step_fired:
+            st = evidence.fit_bias_step(whole.y, whole.rate_hz)
+            cands.append(Candidate(eff, {"step_time_s": st.step_time_s,
+                                         "step_size": st.step_size}, 2))
+    return cands, ev
+

@@ -1,0 +1,129 @@
+"""One channel of a record, its parts (fit, held out, replicate) and the model's realisations.
+
+:class:`Series` is a channel with its temperature; :func:`simulate_channel` draws K
+realisations of the model over a series' length, rate and temperature history;
+:class:`PartSetup` holds the taus, bands and real features of one part and compares
+realisations with it (:mod:`imubench.gap.curves`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from lsm6ds_sim.model import ChannelModel, NoiseModel
+from lsm6ds_sim.physics import simulate
+from lsm6ds_sim.temperature import ReplayTemperature
+
+from imubench.gap.curves import (
+    Comparison,
+    SimFeatures,
+    analysis_afs,
+    band_edges,
+    compare,
+    features,
+    psd_segment,
+    stack,
+    welch_psd,
+)
+from imubench.gap.errors import GapError
+from imubench.noisefit.covariance import oavar_correlation
+from imubench.stats import oadev
+
+
+@dataclass
+class Series:
+    """One channel of one record: rate samples, temperature (or None), rate."""
+
+    y: np.ndarray
+    temp_c: np.ndarray | None
+    rate_hz: float
+    name: str = "<record>"
+
+    def part(self, start: int, stop: int) -> Series:
+        t = None if self.temp_c is None else self.temp_c[start:stop]
+        return Series(self.y[start:stop], t, self.rate_hz, self.name)
+
+    @property
+    def has_temperature(self) -> bool:
+        return self.temp_c is not None and bool(np.isfinite(self.temp_c).sum() > 1)
+
+
+
+def seeds_of(seed: int, k: int) -> list[int]:
+    return [int(s) for s in np.random.SeedSequence(int(seed)).generate_state(k)]
+
+
+def _profile(series: Series) -> ReplayTemperature | None:
+    if not series.has_temperature:
+        return None
+    assert series.temp_c is not None
+    t = np.arange(len(series.temp_c)) / series.rate_hz
+    return ReplayTemperature(t, series.temp_c, name=series.name)
+
+
+def simulate_channel(model: NoiseModel, channel: str, series: Series, seeds: list[int]
+                     ) -> np.ndarray:
+    """(K, n) realisations of ``channel`` over the series' length and temperature."""
+    prof = _profile(series)
+    n = len(series.y)
+    out = np.empty((len(seeds), n))
+    for i, s in enumerate(seeds):
+        out[i] = simulate(model, n, series.rate_hz, s, temperature=prof,
+                          channels=[channel])[channel]
+    nan = ~np.isfinite(series.y)
+    if nan.any():
+        out[:, nan] = np.nan
+    return out
+
+
+def tau_correlation(cm: ChannelModel, afs: np.ndarray, n: int, rate_hz: float) -> np.ndarray:
+    """Model correlation of the OAVAR estimates at averaging factors ``afs`` of n samples.
+
+    From the channel's stochastic terms (:func:`imubench.noisefit.covariance.
+    oavar_correlation`); the global test (:func:`imubench.gap.curves.global_chi2`) needs it.
+    """
+    amp2 = {"white": cm.white**2, "flicker": cm.flicker**2,
+            "random_walk": cm.random_walk**2, "quantization": cm.quantization**2,
+            "output_white": cm.output_white**2}
+    tau_c = 0.0
+    if cm.markov_sigma > 0 and cm.markov_tau > 0:
+        amp2["markov"] = cm.markov_sigma**2
+        tau_c = float(cm.markov_tau)
+    m = np.asarray(afs, dtype=np.int64)
+    return oavar_correlation(m, n - 2 * m, amp2, rate_hz, tau_c_s=tau_c,
+                             bandwidth_hz=float(cm.bandwidth_hz),
+                             filter_order=int(cm.filter_order))
+
+
+class PartSetup:
+    """Taus, bands and the real features of one part (fit, holdout or a replicate)."""
+
+    def __init__(self, series: Series, cm: ChannelModel | None = None) -> None:
+        n = len(series.y)
+        if np.isfinite(series.y).sum() < 64:
+            raise GapError(f"{series.name}: fewer than 64 valid samples to analyse")
+        self.series = series
+        self.afs = analysis_afs(n, series.rate_hz)
+        self.nperseg = psd_segment(n)
+        f, _ = welch_psd(series.y[:self.nperseg], series.rate_hz, self.nperseg)
+        self.f_hz = f
+        self.edges = band_edges(f)
+        full = oadev(series.y, series.rate_hz, "freq", afs=self.afs)
+        self.tau_s = np.asarray(full.tau_s)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.ci_s = 0.5 * np.log(np.asarray(full.ci_high) / np.asarray(full.ci_low))
+        self.real = features(series.y, series.rate_hz, self.afs, self.edges, self.nperseg,
+                             series.temp_c)
+        self.corr = (None if cm is None
+                     else tau_correlation(cm, self.afs, n, series.rate_hz)[:len(self.tau_s),
+                                                                           :len(self.tau_s)])
+
+    def sim_features(self, sims: np.ndarray) -> SimFeatures:
+        return stack([features(s, self.series.rate_hz, self.afs, self.edges, self.nperseg,
+                               self.series.temp_c) for s in sims])
+
+    def compare(self, sims: SimFeatures) -> Comparison:
+        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr)
+
+
