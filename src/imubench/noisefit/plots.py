@@ -197,8 +197,10 @@ def sigma_tau_figure(title: str, fits: dict[str, ChannelFit], curves: dict[str, 
             labels.append(ax.annotate(sym, (r.tau_s, r.dev), fontsize=8, color=color,
                                       fontweight="bold", textcoords="offset points",
                                       xytext=(6, 4)))
-        slopes = np.gradient(np.log(c.dev), np.log(c.tau_s)) if c.tau_s.size > 1 else []
-        for i in range(1, c.tau_s.size, 2):
+        positive = bool(np.all(c.dev > 0))  # a constant channel has ADEV 0: no slope
+        slopes = (np.gradient(np.log(c.dev), np.log(c.tau_s))
+                  if c.tau_s.size > 1 and positive else [])
+        for i in range(1, len(slopes), 2):
             slope_labels.append(ax.annotate(f"{slopes[i]:+.2f}", (c.tau_s[i], c.ci_low[i]),
                                             fontsize=6, color=color,
                                             textcoords="offset points", xytext=(0, -4),

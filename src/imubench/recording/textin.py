@@ -399,9 +399,11 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
     try:
         unit, scale = time_unit_from_spacing(t_raw, where)
     except RecordingError:
-        if rate is None:
+        steps = np.diff(t_raw)
+        steps = steps[np.isfinite(steps) & (steps > 0)]
+        if rate is None or not steps.size:
             raise
-        step = float(np.median(np.diff(t_raw)))  # the unit that matches the given rate
+        step = float(np.median(steps))  # the unit that matches the given rate
         options_s = {u: s for u, s in TIME_UNITS_S.items()}
         unit = min(options_s, key=lambda u: abs(math.log(max(step, 1e-300) * options_s[u]
                                                          * rate)))
