@@ -127,8 +127,14 @@ def test_csv_damaged_lines_are_skipped_counted_and_named(tmp_path: Path,
         ("t,bogus\n0,1\n0.1,2\n", ": no channel found among the columns t, bogus"),
         ("t,gx\n0,1\n", ": 1 row(s) are too few to infer the rate; give --rate"),
         ("t,gx\n" + "".join(f"{i * 0.5},{i}\n" for i in range(5)),
-         ": column t steps by 0.5: 2 Hz if in seconds (as imubench writes it), 2000 Hz if "
+         ": the time column's median step 0.5 is 2 Hz in seconds or 2000 Hz in "
+         "milliseconds; give --time-unit s|ms or --rate HZ"),
+        ("t,gx\n" + "".join(f"{i * 5},{i}\n" for i in range(5)),
+         ": column t steps by 5: 0.2 Hz if in seconds (as imubench writes it), 200 Hz if "
          "in ms; give --time-unit ms or --time-unit s"),
+        ("timestamp,gx\n" + "".join(f"{i},{i}\n" for i in range(5)),
+         ": the time column's median step 1 is 1 Hz in seconds or 1000 Hz in "
+         "milliseconds; give --time-unit s|ms or --rate HZ"),
         ("time,gx\n" + "".join(f"{i * 10**11},{i}\n" for i in range(5)),
          ": cannot tell the unit of the time column (median step 1e+11)"),
         ("".join(f"{i},{i},{i}\n" for i in range(5)),
@@ -220,3 +226,16 @@ def test_full_disk_cuts_the_failed_batch_off_and_keeps_whole_ones(tmp_path: Path
         np.testing.assert_array_equal(rec.index, Batch.concat(batches).index[:written])
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+@pytest.mark.parametrize(("t0", "step", "rate"), [(1.7e9, 0.2, 5.0), (1.7e12, 1000 / 104, 104.0),
+                                                  (1.7e18, 1e9, 1.0)])
+def test_absolute_unix_times_give_their_unit_by_magnitude(tmp_path: Path, t0: float,
+                                                          step: float, rate: float) -> None:
+    """Unix time stamps (s, ms, ns) give their unit by their size, so a slow logger in
+    seconds is not taken for a fast one in milliseconds."""
+    p = tmp_path / "abs.csv"
+    p.write_text("timestamp,gx\n" + "".join(f"{t0 + i * step:.17g},{i % 7}\n"
+                                            for i in range(50)))
+    rec = load_recording(p, InputOptions(gyro_unit="dps", accel_unit="g"))
+    assert rec.rate_hz == pytest.approx(rate, rel=1e-6)

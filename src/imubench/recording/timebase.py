@@ -37,6 +37,14 @@ not give it: the ODRs of the LSM6DS family (12.5 Hz to 6.66 kHz) and most IMU lo
 (10 Hz to 4 kHz); bounds away from round rates, so that printed times rounded either way
 land on the same side. The range spans a factor of 1000 with one end open, so at most
 one of s, ms, us, ns fits a given spacing."""
+SLOW_LOGGER_HZ = 1.0
+"""A spacing that reads as milliseconds in :data:`PLAUSIBLE_RATE_HZ` but as at least this
+rate in seconds (steps of 1/7 to 1 unit: 1-7 Hz in s, 1-7 kHz in ms) is ambiguous: a
+slow logger in seconds and a fast one in milliseconds write the same numbers, so it is
+refused (``--time-unit``) rather than guessed."""
+EPOCH_S = (1.0e9, 4.1e9)
+"""Unix times in seconds of 2001-2099: time stamps of this size (or 1e3, 1e6, 1e9 times
+it) are absolute, and their magnitude gives the unit (s, ms, us, ns)."""
 MJD_RANGE = (40_000.0, 100_000.0)
 """Modified Julian Dates (days) of 1968-2132: a time tag column in this range is MJD."""
 SECONDS_PER_DAY = 86_400.0
@@ -57,20 +65,33 @@ class Timebase:
 
 
 def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
-    """(unit, seconds per unit) of a time column from its spacing: the one unit in which
-    the median step gives a rate in :data:`PLAUSIBLE_RATE_HZ` (days when the values are
-    Modified Julian Dates). RecordingError (with the fix) when none does."""
+    """(unit, seconds per unit) of a time column: days when the values are Modified
+    Julian Dates, the unit of an absolute Unix time by its magnitude (:data:`EPOCH_S`),
+    else the one unit in which the median step gives a rate in
+    :data:`PLAUSIBLE_RATE_HZ`. RecordingError (with the fix) when none does, and when
+    seconds and milliseconds both read plausibly (:data:`SLOW_LOGGER_HZ`)."""
     step = _median_step(t, where)
     finite = t[np.isfinite(t)]
     if len(finite) and MJD_RANGE[0] <= float(np.median(finite)) <= MJD_RANGE[1] and (
             step < 1.0):
         return "d", SECONDS_PER_DAY
+    if len(finite):
+        level = float(np.median(np.abs(finite)))
+        for unit, scale in TIME_UNITS_S.items():
+            if EPOCH_S[0] <= level * scale <= EPOCH_S[1]:
+                return unit, scale
     lo, hi = PLAUSIBLE_RATE_HZ
     fits = [(u, s) for u, s in TIME_UNITS_S.items() if lo < 1.0 / (step * s) <= hi]
     if len(fits) != 1:
         raise RecordingError(
             f"{where}: cannot tell the unit of the time column (median step {step:.6g}); "
             "give --time-unit s|ms|us|ns or --rate HZ"
+        )
+    if fits[0][0] == "ms" and 1.0 / step >= SLOW_LOGGER_HZ:
+        raise RecordingError(
+            f"{where}: the time column's median step {step:.6g} is {1.0 / step:.4g} Hz in "
+            f"seconds or {1e3 / step:.4g} Hz in milliseconds; give --time-unit s|ms or "
+            "--rate HZ"
         )
     return fits[0]
 
