@@ -239,3 +239,22 @@ def test_absolute_unix_times_give_their_unit_by_magnitude(tmp_path: Path, t0: fl
                                             for i in range(50)))
     rec = load_recording(p, InputOptions(gyro_unit="dps", accel_unit="g"))
     assert rec.rate_hz == pytest.approx(rate, rel=1e-6)
+
+
+@pytest.mark.parametrize(("az", "units", "fix"), [
+    (9.81, ("dps", "g"), "m/s2 read as g (--units); give --units dps,m/s2"),
+    (1000.0, None, "mg read as g; give --units dps,mg"),
+    (1.0, ("dps", "m/s2"), "g read as m/s2 (--units); give --units dps,g"),
+])
+def test_accelerometer_unit_contradicted_by_gravity_is_refused(
+        tmp_path: Path, az: float, units: tuple[str, str] | None, fix: str) -> None:
+    """1 g at rest checks the accelerometer unit, also when --units gives it."""
+    p = tmp_path / "acc.csv"
+    rng = np.random.default_rng(1)
+    p.write_text("t,gx,gy,gz,ax,ay,az\n" + "".join(
+        f"{i / 104:.6f},0,0,0,{rng.normal() * 1e-3},0,{az}\n" for i in range(300)))
+    opts = InputOptions() if units is None else InputOptions(gyro_unit=units[0],
+                                                             accel_unit=units[1])
+    with pytest.raises(RecordingError, match="at rest") as err:
+        load_recording(p, opts)
+    assert str(err.value).startswith(f"{p}: ") and fix in str(err.value)

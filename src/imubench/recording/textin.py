@@ -376,15 +376,23 @@ def _channel_unit(ch: str, col: Column, options: InputOptions, si_format: bool,
 
 def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOptions,
                    where: str) -> None:
-    """A static accelerometer reads 1 g; a median |a| near 9.81 "g" is m/s^2 read as g."""
-    if options.accel_unit is not None or not all(a in units for a in ("ax", "ay", "az")):
+    """A static accelerometer reads about 1 g, whatever unit the file or ``--units``
+    claims: a median |a| of 5-15 "g" is m/s^2 read as g, 500-1500 is mg read as g, and
+    0.07-0.14 with a m/s^2 unit is g read as m/s^2 (refused with the fix)."""
+    if not all(a in units for a in ("ax", "ay", "az")):
         return
     norm = np.sqrt(np.nansum(values[:, 3:6] ** 2, axis=1))
     med = float(np.nanmedian(norm)) if len(norm) else math.nan
-    if 5.0 < med < 15.0:
+    said = units["ax"] + (" (--units)" if options.accel_unit is not None else "")
+    gyro = units.get("gx", "dps")
+    for lo, hi, really in ((5.0, 15.0, "m/s2"), (500.0, 1500.0, "mg")):
+        if lo < med < hi:
+            raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, "
+                                 f"which is {really} read as {said}; give --units "
+                                 f"{gyro},{really}")
+    if 0.07 < med < 0.14 and units["ax"] in ("m/s2", "m/s^2"):
         raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, which "
-                             f"is m/s^2 read as {units['ax']}; give --units "
-                             f"{units.get('gx', 'dps')},m/s2")
+                             f"is g read as {said}; give --units {gyro},g")
 
 
 def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
