@@ -190,3 +190,25 @@ def test_fit_shows_a_progress_bar_that_reaches_its_end(recording: Path, tmp_path
     assert rc == 0, captured.err
     assert set(json.loads(captured.out)["channels"]) == {"gx", "gy"}
     assert "fit:" in captured.err and "100%" in captured.err
+
+
+def test_kalibr_refused_when_nothing_states_the_units(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    """A one-column text file states no unit: it is read as dps with a warning, and the
+    Kalibr export (SI values) is refused until --units says what the numbers are; with
+    --units rad/s the values are converted."""
+    rec = tmp_path / "one.txt"
+    np.savetxt(rec, np.random.default_rng(1).normal(size=20000) * 0.01)
+    yaml = tmp_path / "imu.yaml"
+    assert main(["fit", str(rec), "--rate", "100", "-o", str(tmp_path / "m.toml"),
+                 "--kalibr", str(yaml)]) == 2
+    err = capsys.readouterr().err
+    assert "nothing states the unit of gx" in err and "--units" in err
+    assert not yaml.exists() and not (tmp_path / "m.toml").exists()
+    assert main(["fit", str(rec), "--rate", "100", "--units", "rad/s,m/s2", "-o",
+                 str(tmp_path / "m2.toml"), "--kalibr", str(yaml)]) == 0
+    # 0.01 rad/s per sample at 100 Hz: white 1e-3 rad/s/sqrt(Hz)
+    text = yaml.read_text()
+    density = float(text.split("gyroscope_noise_density:")[1].split()[0])
+    assert density == pytest.approx(1e-3, rel=0.03)

@@ -82,6 +82,11 @@ def run(args: argparse.Namespace) -> int:
             result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
                                    method=args.method, options=input_options(args),
                                    on_channel=lambda done, total: bar.fraction(done / total))
+        if args.kalibr is not None and result.units_assumed:
+            raise FitError(
+                f"{args.recording}: --kalibr writes SI values, but nothing states the "
+                f"unit of {', '.join(result.units_assumed)} (read as dps / g); give "
+                "--units GYRO,ACCEL (e.g. --units rad/s,m/s2)")
         model = result.noise_model()
         args.output.write_text(model.to_toml(), encoding="utf-8")
         if args.json is not None:

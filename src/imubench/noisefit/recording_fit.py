@@ -42,6 +42,8 @@ class RecordingFit:
     chip: str | None
     method: str
     fits: dict[str, ChannelFit]
+    units_assumed: tuple[str, ...] = ()
+    """Channels whose unit nothing in the recording stated (read as dps / g)."""
 
     def noise_model(self) -> NoiseModel:
         """A model file's content: fitted channels, others quiet; provenance in [meta]."""
@@ -147,7 +149,8 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
         if on_channel is not None:
             on_channel(k + 1, len(chans))
     chip = rec.metadata.get("chip")
-    return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits)
+    return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits,
+                        tuple(rec.metadata.get("units_assumed", ())))
 
 
 MODEL_FILE_METHOD: str = "model file"

@@ -274,12 +274,21 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                   raw.header is not None and is_euroc(raw.header))
     values = np.full((len(table), len(CHANNELS)), np.nan)
     used_units: dict[str, str] = {}
+    assumed: list[str] = []  # channels whose unit nothing stated
     for i, ch in enumerate(CHANNELS):
         if ch not in where_col:
             continue
         col = cols[where_col[ch]]
         factor, unit = _channel_unit(ch, col, options, ros or euroc, raw.header is None,
                                      where)
+        if raw.header is None and (options.gyro_unit if ch.startswith("g")
+                                   else options.accel_unit) is None:
+            stated = raw.meta.get("unit")  # imubench's Stable32 export states it
+            units_of = GYRO_UNITS_DPS if ch.startswith("g") else ACCEL_UNITS_G
+            if isinstance(stated, str) and stated in units_of:
+                factor, unit = units_of[stated], stated
+            else:
+                assumed.append(ch)
         values[:, i] = table[:, where_col[ch]] * factor
         used_units[ch] = unit
     _check_gravity(values, used_units, options, where)
@@ -330,10 +339,15 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     units = ", ".join(f"{ch} {u}" for ch, u in used_units.items())
     notes.append(f"{where}: read as {fmt}: {shown}; rate {tb.rate_hz:.6g} Hz ({how})"
                  + (f"; {time_note}" if time_note else "")
-                 + (f"; units {units}" if units else ""))
+                 + (f"; units {units}" if units else "")
+                 + (f" (assumed for {', '.join(assumed)}: nothing in the file states them; "
+                    "give --units GYRO,ACCEL if they differ)" if assumed else ""))
+    if assumed:
+        meta["units_assumed"] = assumed
     batch = Batch(index=tb.index, t_s=t_s[keep], values=values[keep], temp_c=temp[keep])
-    inferred = not ((fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
-                    or (raw.width == 1 and raw.header is None))  # allan's plain series
+    inferred = bool(assumed) or not (
+        (fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
+        or (raw.width == 1 and raw.header is None))  # allan's plain series
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
 
 
