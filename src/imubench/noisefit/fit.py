@@ -118,6 +118,8 @@ class ChannelFit:
     chi2: float = float("nan")
     dof: int = 0
     notes: tuple[str, ...] = field(default=())
+    reasons: dict[str, str] = field(default_factory=dict)
+    """Term name (:data:`TERM_NAMES`) -> why it was kept or dropped, in plain words."""
 
     def channel_model(self, base: ChannelModel | None = None) -> ChannelModel:
         """A ChannelModel with the fitted noise keys over ``base``.
@@ -170,6 +172,7 @@ class ChannelFit:
             "points": {"tau_s": self.tau_s.tolist(), "avar": self.avar.tolist(),
                        "edf": self.edf.tolist()},
             "notes": list(self.notes),
+            "reasons": dict(self.reasons),
         }
 
 
@@ -458,13 +461,15 @@ def _estimate_delta(st: Structure, pts: Points, corr: np.ndarray, n_nonlinear: i
 
 
 def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
-                       ) -> tuple[Structure, Points]:
+                       ) -> tuple[Structure, Points, dict[str, float]]:
     """Best subset of the nonlinear extensions (filter, Markov, sine).
 
     Every subset is fitted (settings by coordinate search with diagonal weights); the best
     fitting one (lowest chi2) is refined and gives the reference covariance (model
     correlation and discrepancy floor delta); all subsets are compared by their GLS
     chi-squared on that covariance, each charged :data:`EXTENSION_DCHI2` per extension.
+    Also returns each extension's chi2 drop against the chosen subset (the chosen subset
+    with the extension vs without it), for the reasons of :func:`_validate`.
     """
     from itertools import combinations
 
@@ -482,18 +487,19 @@ def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
     corr = _correlation(reference, sol_ref, pts)
     pts = replace(pts, delta=_estimate_delta(reference, pts, corr, 2 * len(ref_sub)))
     sigma = _fit_structure(reference, pts, corr).sigma
-    best: tuple[float, Structure] | None = None
-    for sub in subsets:
-        chi2, _ = _chi2_fixed_sigma(fitted[sub], pts, sigma)
-        score = chi2 + EXTENSION_DCHI2 * len(sub)
-        if best is None or score < best[0]:
-            best = (score, fitted[sub])
-    assert best is not None
-    chosen = best[1]
+    chi2s = {sub: _chi2_fixed_sigma(fitted[sub], pts, sigma)[0] for sub in subsets}
+    best_sub = min(subsets, key=lambda sb: chi2s[sb] + EXTENSION_DCHI2 * len(sb))
+    # chi2 drop of each extension against the chosen subset: with it vs without it
+    drops: dict[str, float] = {}
+    for k in kinds:
+        with_k = tuple(x for x in kinds if x in best_sub or x == k)
+        without_k = tuple(x for x in kinds if x in best_sub and x != k)
+        drops[k] = float(chi2s[without_k] - chi2s[with_k])
+    chosen = fitted[best_sub]
     chosen_kinds = tuple(k for k in kinds if (k == "filter" and chosen.bandwidth_hz > 0)
                          or (k == "markov" and "markov" in chosen.terms)
                          or (k == "sine" and "sine" in chosen.terms))
-    return _polish(chosen, chosen_kinds, pts, corr), pts
+    return _polish(chosen, chosen_kinds, pts, corr), pts, drops
 
 
 def _eliminate(st: Structure, pts: Points) -> tuple[Structure, _Solution]:
@@ -675,6 +681,138 @@ def _profile(st: Structure, kind: str, pts: Points, sigma: np.ndarray,
     return (math.exp(lo), math.exp(hi)), [at(lo), at(hi)]
 
 
+# ------------------------------------------------------------------------ selection
+_SETTING = {"markov": "tau_c_s", "sine": "f0_hz", "filter": "bandwidth_hz"}
+_SETTING_KEY = {"markov": "markov_tau", "sine": "sine_freq", "filter": "bandwidth_hz"}
+SINE_BAND: float = 1.25
+"""The spectral line is looked for within this factor of the fitted sine frequency
+(intersected with its profile interval)."""
+
+
+def _extensions_in(st: Structure) -> list[str]:
+    return [k for k in EXTENSIONS if getattr(st, _SETTING[k]) > 0]
+
+
+def _without(st: Structure, term: str) -> Structure:
+    """``st`` without one term (an extension takes its setting with it)."""
+    if term == "filter":
+        return replace(st, terms=tuple(t for t in st.terms if t != "output_white"),
+                       bandwidth_hz=0.0, filter_order=1)
+    return replace(st, terms=tuple(t for t in st.terms if t != term),
+                   tau_c_s=0.0 if term == "markov" else st.tau_c_s,
+                   f0_hz=0.0 if term == "sine" else st.f0_hz)
+
+
+def _intervals(st: Structure, sol: _Solution, pts: Points) -> dict[str, tuple[float, float]]:
+    """95 % intervals of the fitted structure (module docstring, step 4).
+
+    Amplitudes: score-type intervals (:func:`_endpoint_ci`); nonlinear settings: profile
+    intervals (:func:`_profile`); with nonlinear settings, every amplitude's interval is
+    the union of its intervals at the profile ends (projection).
+    """
+    ci: dict[str, tuple[float, float]] = {}
+    corr = _correlation(st, sol, pts)
+    x = design(st, pts)
+    for j, term in enumerate(st.terms):
+        ci[AMPLITUDE_KEY[term]] = _endpoint_ci(x, sol.theta, j, pts, corr)
+    profiled: list[Structure] = []
+    for kind in _extensions_in(st):
+        ci[_SETTING_KEY[kind]], ends = _profile(st, kind, pts, sol.sigma, sol.chi2)
+        profiled.extend(ends)
+    for end in profiled:
+        _, s_end = _chi2_fixed_sigma(end, pts, sol.sigma)
+        se_end = np.sqrt(np.maximum(np.diag(s_end.cov_theta), 0.0))
+        for j, term in enumerate(end.terms):
+            key = AMPLITUDE_KEY[term]
+            if key in ci:
+                lo, hi = _theta_ci(s_end.theta[j], se_end[j])
+                ci[key] = (min(ci[key][0], lo), max(ci[key][1], hi))
+    return ci
+
+
+def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, float]],
+                       pts: Points, arr: np.ndarray, drop: float) -> tuple[bool, str]:
+    """Is extension ``kind`` of ``st`` backed by the data? (kept, reason in plain words).
+
+    Markov: tau_c's profile interval must lie within the AVAR points' tau range (else the
+    data do not say where the correlation time is: a slope change of white/flicker/random
+    walk in disguise). Filter: the bandwidth's profile interval must end inside the
+    searched range (1e-3 to 0.49 x the rate). Sine: a spectral line must back it
+    (:func:`imubench.noisefit.spectral_line.line_test`).
+    """
+    from imubench.noisefit.spectral_line import line_test
+
+    value = float(getattr(st, _SETTING[kind]))
+    lo, hi = ci[_SETTING_KEY[kind]]
+    head = f"chi2 drop {drop:.1f} > {EXTENSION_DCHI2:g}"
+    if kind == "markov":
+        t0, t1 = float(pts.tau_s[0]), float(pts.tau_s[-1])
+        where = f"tau_c {value:.3g} s, profile 95 % interval [{lo:.3g}, {hi:.3g}] s"
+        if lo >= t0 and hi <= t1:
+            return True, f"kept, {head}, {where} within the data's taus [{t0:.3g}, {t1:.3g}] s"
+        return False, (f"dropped, tau_c not identified ({where} not within the data's "
+                       f"taus [{t0:.3g}, {t1:.3g}] s)")
+    if kind == "filter":
+        b0, b1 = 1e-3 * pts.rate_hz, 0.49 * pts.rate_hz
+        where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
+        if lo > 1.001 * b0 and hi < 0.999 * b1:
+            return True, f"kept, {head}, {where}"
+        return False, (f"dropped, bandwidth not identified ({where} reaches the searched "
+                       f"range's end [{b0:.3g}, {b1:.3g}] Hz)")
+    band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
+    test = line_test(arr, pts.rate_hz, *band)
+    if test.present:
+        return True, f"kept, {head}, {test.describe()}"
+    return False, f"dropped, {test.describe()}"
+
+
+def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, float]
+              ) -> tuple[Structure, _Solution, dict[str, tuple[float, float]], dict[str, str]]:
+    """Drop, one at a time, the terms the data do not back; the reason for every term.
+
+    A term stays only when (1) extensions: it passed the chi2 criterion of
+    :func:`_select_extensions` and :func:`_extension_verdict`; (2) every amplitude
+    (extensions' included; ``output_white`` belongs to the filter) has a 95 % interval
+    excluding 0. Extensions are judged first (they change the linear fit), then the
+    linear term with the smallest z = theta / se among those whose interval includes 0;
+    the structure is refitted after each drop.
+    """
+    reasons: dict[str, str] = {}
+    for kind in EXTENSIONS:
+        if kind not in _extensions_in(st):
+            d = drops.get(kind, 0.0)
+            reasons[kind] = (f"dropped, chi2 drop {d:.1f} < {EXTENSION_DCHI2:g} needed (its "
+                             "null distribution's 99.9 % point with the search accounted for)")
+    while True:
+        sol, _ = _fit_gls(st, pts)
+        ci = _intervals(st, sol, pts)
+        failed: str | None = None
+        for kind in _extensions_in(st):
+            ok, why = _extension_verdict(kind, st, ci, pts, arr, drops.get(kind, math.nan))
+            reasons[kind] = why
+            if not ok:
+                failed = kind
+                break
+        if failed is None and len(st.terms) > 1:
+            se = np.sqrt(np.maximum(np.diag(sol.cov_theta), 0.0))
+            worst: tuple[float, str] | None = None
+            for j, term in enumerate(st.terms):
+                lo, hi = ci[AMPLITUDE_KEY[term]]
+                if term == "output_white" or lo > 0:
+                    continue
+                z = sol.theta[j] / se[j] if se[j] > 0 else 0.0
+                if worst is None or z < worst[0]:
+                    worst = (float(z), term)
+            if worst is not None:
+                failed = worst[1]
+                name = "amplitude" if failed in ("markov", "sine") else "95 %"
+                reasons[failed] = (f"dropped, {name} interval includes 0 "
+                                   f"(upper limit {ci[AMPLITUDE_KEY[failed]][1]:.3g})")
+        if failed is None:
+            return st, sol, ci, reasons
+        st = _without(st, failed)
+
+
 # ------------------------------------------------------------------------ public
 def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto",
             channel: str = "gx", taus: Sequence[float] | None = None) -> ChannelFit:
@@ -684,11 +822,11 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     pts = avar_points(arr, rate_hz, taus, channel)
     notes: list[str] = []
     if wanted is None:
-        st, pts = _select_extensions(Structure(BASE_TERMS), pts, EXTENSIONS)
-        full = st
+        st, pts, drops = _select_extensions(Structure(BASE_TERMS), pts, EXTENSIONS)
         st, sol = _eliminate(st, pts)
         if pts.delta > 0:
             st, sol = _cross_validate(st, sol, arr, pts)
+        st, sol, ci, reasons = _validate(st, pts, arr, drops)
     else:
         st = Structure(tuple(t for t in wanted if t in BASE_TERMS))
         kinds = [k for k in EXTENSIONS if k in wanted]
@@ -698,39 +836,17 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
         sol0 = _fit_structure(st, pts, None)
         pts = replace(pts, delta=_estimate_delta(st, pts, _correlation(st, sol0, pts),
                                                  2 * len(kinds)))
-        full = st
         sol, _ = _fit_gls(st, pts)
+        ci = _intervals(st, sol, pts)
+        reasons = {t: "fitted as asked (terms list, no selection)" for t in wanted}
     params = dict.fromkeys(PARAM_KEYS, 0.0)
     params["filter_order"] = 1
-    ci: dict[str, tuple[float, float]] = {}
     present: list[str] = []
-    corr = _correlation(st, sol, pts)
-    x = design(st, pts)
     for j, term in enumerate(st.terms):
         key = AMPLITUDE_KEY[term]
         params[key] = math.sqrt(max(sol.theta[j], 0.0))
-        ci[key] = _endpoint_ci(x, sol.theta, j, pts, corr)
         if sol.theta[j] > 0:
             present.append(key)
-    profiled: list[Structure] = []
-    for kind, key, ci_key in (("markov", "markov_sigma", "markov_tau"),
-                              ("sine", "sine_amplitude", "sine_freq"),
-                              ("filter", "bandwidth_hz", "bandwidth_hz")):
-        if kind == "filter" and st.bandwidth_hz <= 0:
-            continue
-        if kind != "filter" and key not in present:
-            continue
-        ci[ci_key], ends = _profile(st, kind, pts, sol.sigma, sol.chi2)
-        profiled.extend(ends)
-    # amplitudes: union of their intervals over the profile ends (projection)
-    for end in profiled:
-        _, s_end = _chi2_fixed_sigma(end, pts, sol.sigma)
-        se_end = np.sqrt(np.maximum(np.diag(s_end.cov_theta), 0.0))
-        for j, term in enumerate(end.terms):
-            key = AMPLITUDE_KEY[term]
-            if key in ci:
-                lo, hi = _theta_ci(s_end.theta[j], se_end[j])
-                ci[key] = (min(ci[key][0], lo), max(ci[key][1], hi))
     if "markov_sigma" in present:
         params["markov_tau"] = st.tau_c_s
         present.append("markov_tau")
@@ -752,14 +868,21 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     # upper limits for the base terms judged absent (fit with them included)
     absent = [t for t in BASE_TERMS if AMPLITUDE_KEY[t] not in present]
     if absent:
-        withall = replace(full, terms=tuple(dict.fromkeys((*st.terms, *absent))),
-                          tau_c_s=st.tau_c_s, f0_hz=st.f0_hz)
+        withall = replace(st, terms=tuple(dict.fromkeys((*st.terms, *absent))))
         sol_all = _solve(design(withall, pts), pts.avar, sol.sigma)
         se_all = np.sqrt(np.maximum(np.diag(sol_all.cov_theta), 0.0))
         for term in absent:
             j = withall.terms.index(term)
             ci[AMPLITUDE_KEY[term]] = (0.0, math.sqrt(max(sol_all.theta[j], 0.0)
                                                    + Z_PRESENT * se_all[j]))
+    if wanted is None:
+        for term in BASE_TERMS:
+            lo, hi = ci[AMPLITUDE_KEY[term]]
+            if AMPLITUDE_KEY[term] in present:
+                reasons[term] = f"kept, 95 % interval [{lo:.3g}, {hi:.3g}] excludes 0"
+            else:
+                reasons[term] = (f"dropped, its interval includes 0 (one-sided 95 % upper "
+                                 f"limit {hi:.3g})")
     dof = int(pts.avar.size - len(st.terms) - 2 * sum(
         1 for v in (st.tau_c_s, st.f0_hz, st.bandwidth_hz) if v > 0))
     bias = float(np.nanmean(arr))
@@ -767,7 +890,7 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
         notes.append(f"model discrepancy floor delta = {pts.delta:.3g} (relative std added "
                      "to every AVAR point so that chi2 = dof)")
     return ChannelFit(channel, float(rate_hz), "wls", params, ci, tuple(present), pts.tau_s,
-                      pts.avar, pts.edf, bias, sol.chi2, dof, tuple(notes))
+                      pts.avar, pts.edf, bias, sol.chi2, dof, tuple(notes), reasons)
 
 
 def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
