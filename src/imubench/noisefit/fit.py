@@ -50,7 +50,11 @@ BASE_TERMS: tuple[str, ...] = ("white", "flicker", "random_walk", "ramp", "quant
 EXTENSIONS: tuple[str, ...] = ("filter", "markov", "sine")
 TERM_NAMES: tuple[str, ...] = BASE_TERMS + EXTENSIONS
 Z_PRESENT: float = 1.645
-"""One-sided z (5 %) a linear term's squared amplitude must reach to be reported present."""
+"""One-sided z (5 %) of the upper limit reported for a term judged absent."""
+LINEAR_DCHI2: float = 9.55
+"""GLS chi-squared drop a base term must give to enter: for theta >= 0 on the boundary
+the likelihood-ratio statistic is distributed as (chi2_0 + chi2_1) / 2 (Self & Liang 1987),
+so 9.55 = chi2_1 at 0.998 is a 0.1 % test per term (0.5 % over the five base terms)."""
 EXTENSION_DCHI2: float = 13.8
 """GLS chi-squared drop an extension (2 parameters) must give: chi2_2 at 0.999, which
 covers the look-elsewhere effect of the grid search better than BIC's 2 ln(n)."""
@@ -502,25 +506,59 @@ def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
     return _polish(chosen, chosen_kinds, pts, corr), pts, drops
 
 
-def _eliminate(st: Structure, pts: Points) -> tuple[Structure, _Solution]:
-    """Backward elimination of linear terms whose z = theta/se < Z_PRESENT."""
-    current = st
-    sol, corr = _fit_gls(current, pts)
-    while current.terms:
-        se = np.sqrt(np.maximum(np.diag(sol.cov_theta), 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = np.where(se > 0, sol.theta / se, np.where(sol.theta > 0, np.inf, 0.0))
-        i = int(np.argmin(z))
-        if z[i] >= Z_PRESENT or len(current.terms) == 1:
+def _stepwise(st: Structure, pts: Points
+              ) -> tuple[Structure, _Solution, dict[str, float]]:
+    """Stepwise choice of the base terms by their likelihood ratio.
+
+    On the covariance of the GLS fit of ``st`` (all base terms and the chosen
+    extensions; held fixed, so chi2 differences are likelihood-ratio statistics of a
+    Gaussian model with known covariance), base terms are added one at a time, the one
+    with the largest chi2 drop first, while that drop exceeds :data:`LINEAR_DCHI2`; then
+    any term whose removal raises chi2 by less than :data:`LINEAR_DCHI2` is removed
+    (smallest rise first) and the forward step resumes, until neither step changes the
+    set. Forward from the extensions alone (rather than backward from every term) keeps,
+    of two terms the data cannot tell apart (flicker and random walk in a short record),
+    the one that explains more; backward elimination by z dropped whichever was weaker
+    in the joint fit and then reported the other. Also returns each base term's chi2
+    change at the end: the drop it gives when added, or the rise its removal gives.
+    """
+    sigma = _fit_gls(st, pts)[0].sigma
+    fixed = tuple(t for t in st.terms if t not in BASE_TERMS)
+    chosen: list[str] = []
+
+    def chi2_of(base: Sequence[str]) -> float:
+        terms = tuple(t for t in BASE_TERMS if t in base) + fixed
+        if not terms:
+            return float(pts.avar @ np.linalg.solve(sigma, pts.avar))
+        return _chi2_fixed_sigma(replace(st, terms=terms), pts, sigma)[0]
+
+    for _ in range(4 * len(BASE_TERMS)):
+        changed = False
+        now = chi2_of(chosen)
+        gains = {t: now - chi2_of([*chosen, t]) for t in BASE_TERMS
+                 if t in st.terms and t not in chosen}
+        if gains:
+            best = max(gains, key=lambda t: gains[t])
+            if gains[best] > LINEAR_DCHI2:
+                chosen.append(best)
+                changed = True
+        if len(chosen) > 1:
+            now = chi2_of(chosen)
+            rises = {t: chi2_of([c for c in chosen if c != t]) - now for t in chosen}
+            worst = min(rises, key=lambda t: rises[t])
+            if rises[worst] < LINEAR_DCHI2:
+                chosen.remove(worst)
+                changed = True
+        if not changed:
             break
-        dropped = current.terms[i]
-        terms = tuple(t for t in current.terms if t != dropped)
-        current = replace(current, terms=terms,
-                          tau_c_s=0.0 if dropped == "markov" else current.tau_c_s,
-                          f0_hz=0.0 if dropped == "sine" else current.f0_hz)
-        sol = _fit_structure(current, pts, corr)
-    corr = _correlation(current, sol, pts)
-    return current, _fit_structure(current, pts, corr)
+    if not chosen and not fixed:  # nothing is significant: keep the largest term
+        chosen = [max((t for t in BASE_TERMS if t in st.terms),
+                      key=lambda t: chi2_of([]) - chi2_of([t]))]
+    current = replace(st, terms=tuple(t for t in BASE_TERMS if t in chosen) + fixed)
+    now = chi2_of(chosen)
+    change = {t: (chi2_of([c for c in chosen if c != t]) - now if t in chosen
+                  else now - chi2_of([*chosen, t])) for t in BASE_TERMS if t in st.terms}
+    return current, _fit_gls(current, pts)[0], change
 
 
 # ------------------------------------------------------------------------ cross-validation
@@ -731,14 +769,18 @@ def _intervals(st: Structure, sol: _Solution, pts: Points) -> dict[str, tuple[fl
 
 
 def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, float]],
-                       pts: Points, arr: np.ndarray, drop: float) -> tuple[bool, str]:
-    """Is extension ``kind`` of ``st`` backed by the data? (kept, reason in plain words).
+                       pts: Points, arr: np.ndarray, drop: float
+                       ) -> tuple[bool, str, float | None]:
+    """Is extension ``kind`` of ``st`` backed by the data? (kept, reason in plain words,
+    for a sine the frequency of the spectral line found, else None).
 
     Markov: tau_c's profile interval must lie within the AVAR points' tau range (else the
     data do not say where the correlation time is: a slope change of white/flicker/random
-    walk in disguise). Filter: the bandwidth's profile interval must end inside the
-    searched range (1e-3 to 0.49 x the rate). Sine: a spectral line must back it
-    (:func:`imubench.noisefit.spectral_line.line_test`).
+    walk in disguise). Filter: the bandwidth's profile interval must end below the
+    highest bandwidth searched (0.49 x the rate), i.e. exclude "no filter"; its lower end
+    may reach the lowest (a slow filter on part of the white noise with ``output_white``
+    is a degenerate direction, not a sign that there is no filter). Sine: a spectral line
+    must back it (:func:`imubench.noisefit.spectral_line.line_test`).
     """
     from imubench.noisefit.spectral_line import line_test
 
@@ -749,21 +791,22 @@ def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, floa
         t0, t1 = float(pts.tau_s[0]), float(pts.tau_s[-1])
         where = f"tau_c {value:.3g} s, profile 95 % interval [{lo:.3g}, {hi:.3g}] s"
         if lo >= t0 and hi <= t1:
-            return True, f"kept, {head}, {where} within the data's taus [{t0:.3g}, {t1:.3g}] s"
+            return (True, f"kept, {head}, {where} within the data's taus "
+                    f"[{t0:.3g}, {t1:.3g}] s", None)
         return False, (f"dropped, tau_c not identified ({where} not within the data's "
-                       f"taus [{t0:.3g}, {t1:.3g}] s)")
+                       f"taus [{t0:.3g}, {t1:.3g}] s)"), None
     if kind == "filter":
-        b0, b1 = 1e-3 * pts.rate_hz, 0.49 * pts.rate_hz
+        b1 = 0.49 * pts.rate_hz
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
-        if lo > 1.001 * b0 and hi < 0.999 * b1:
-            return True, f"kept, {head}, {where}"
-        return False, (f"dropped, bandwidth not identified ({where} reaches the searched "
-                       f"range's end [{b0:.3g}, {b1:.3g}] Hz)")
+        if hi < 0.999 * b1:
+            return True, f"kept, {head}, {where} below the highest searched {b1:.3g} Hz", None
+        return False, (f"dropped, bandwidth not identified ({where} reaches the highest "
+                       f"searched {b1:.3g} Hz: no filter fits as well)"), None
     band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
     test = line_test(arr, pts.rate_hz, *band)
     if test.present:
-        return True, f"kept, {head}, {test.describe()}"
-    return False, f"dropped, {test.describe()}"
+        return True, f"kept, {head}, {test.describe()}", test.freq_hz
+    return False, f"dropped, {test.describe()}", None
 
 
 def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, float]
@@ -775,29 +818,38 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
     (extensions' included; ``output_white`` belongs to the filter) has a 95 % interval
     excluding 0. Extensions are judged first (they change the linear fit), then the
     linear term with the smallest z = theta / se among those whose interval includes 0;
-    the structure is refitted after each drop.
+    the structure is refitted after each drop. A sine backed by a line is moved once to
+    the line's periodogram frequency (the Allan variance locates it only roughly).
     """
     reasons: dict[str, str] = {}
     for kind in EXTENSIONS:
         if kind not in _extensions_in(st):
             d = drops.get(kind, 0.0)
-            reasons[kind] = (f"dropped, chi2 drop {d:.1f} < {EXTENSION_DCHI2:g} needed (its "
-                             "null distribution's 99.9 % point with the search accounted for)")
+            reasons[kind] = f"dropped, chi2 drop {d:.1f} < {EXTENSION_DCHI2:g} needed"
+    line_moved = False
     while True:
         sol, _ = _fit_gls(st, pts)
         ci = _intervals(st, sol, pts)
         failed: str | None = None
         for kind in _extensions_in(st):
-            ok, why = _extension_verdict(kind, st, ci, pts, arr, drops.get(kind, math.nan))
+            ok, why, line_hz = _extension_verdict(kind, st, ci, pts, arr,
+                                                  drops.get(kind, math.nan))
             reasons[kind] = why
             if not ok:
                 failed = kind
                 break
+            if line_hz is not None and not line_moved:
+                # the periodogram locates a line to fs/L; the AVAR's bump only roughly
+                st, line_moved = _with(st, "sine", line_hz), True
+                failed = ""
+                break
+        if failed == "":
+            continue
         if failed is None and len(st.terms) > 1:
             se = np.sqrt(np.maximum(np.diag(sol.cov_theta), 0.0))
             worst: tuple[float, str] | None = None
             for j, term in enumerate(st.terms):
-                lo, hi = ci[AMPLITUDE_KEY[term]]
+                lo = ci[AMPLITUDE_KEY[term]][0]
                 if term == "output_white" or lo > 0:
                     continue
                 z = sol.theta[j] / se[j] if se[j] > 0 else 0.0
@@ -823,7 +875,8 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     notes: list[str] = []
     if wanted is None:
         st, pts, drops = _select_extensions(Structure(BASE_TERMS), pts, EXTENSIONS)
-        st, sol = _eliminate(st, pts)
+        st, sol, changes = _stepwise(st, pts)
+        drops.update(changes)
         if pts.delta > 0:
             st, sol = _cross_validate(st, sol, arr, pts)
         st, sol, ci, reasons = _validate(st, pts, arr, drops)
@@ -878,11 +931,16 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     if wanted is None:
         for term in BASE_TERMS:
             lo, hi = ci[AMPLITUDE_KEY[term]]
+            d = drops.get(term, math.nan)
             if AMPLITUDE_KEY[term] in present:
-                reasons[term] = f"kept, 95 % interval [{lo:.3g}, {hi:.3g}] excludes 0"
-            else:
-                reasons[term] = (f"dropped, its interval includes 0 (one-sided 95 % upper "
+                reasons[term] = (f"kept, chi2 drop {d:.1f} > {LINEAR_DCHI2:g}, 95 % interval "
+                                 f"[{lo:.3g}, {hi:.3g}] excludes 0")
+            elif term in reasons:  # dropped by _validate: interval includes 0
+                reasons[term] = (f"dropped, 95 % interval includes 0 (one-sided 95 % upper "
                                  f"limit {hi:.3g})")
+            else:
+                reasons[term] = (f"dropped, chi2 drop {d:.1f} < {LINEAR_DCHI2:g} needed "
+                                 f"(one-sided 95 % upper limit {hi:.3g})")
     dof = int(pts.avar.size - len(st.terms) - 2 * sum(
         1 for v in (st.tau_c_s, st.f0_hz, st.bandwidth_hz) if v > 0))
     bias = float(np.nanmean(arr))

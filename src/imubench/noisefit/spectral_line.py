@@ -87,7 +87,7 @@ class LineTest:
 def segment_length(n: int, rate_hz: float, f_hz: float) -> int | None:
     """Welch segment length L (power of two) for a line near ``f_hz``, None if too short."""
     need = MIN_BIN * rate_hz / f_hz  # L >= MIN_BIN fs / f puts f at bin >= MIN_BIN
-    length = 2 ** int(math.floor(math.log2(max(n // MIN_SEGMENTS, 2))))
+    length = 2 ** math.floor(math.log2(max(n // MIN_SEGMENTS, 2)))
     while length < need:
         length *= 2
     if n // length < 8 or length < 2 * (MIN_BIN + HALF_WIDTH):
@@ -114,8 +114,8 @@ def line_test(y: np.ndarray, rate_hz: float, f_lo_hz: float, f_hi_hz: float,
     freq, p = welch(arr[: k * length], fs=rate_hz, window="hann", nperseg=length,
                     noverlap=0, detrend="constant", scaling="density")
     df = rate_hz / length
-    j_lo = max(int(math.floor(f_lo / df)) - 2, 1 + HALF_WIDTH)
-    j_hi = min(int(math.ceil(f_hi / df)) + 2, p.size - 1 - HALF_WIDTH)
+    j_lo = max(math.floor(f_lo / df) - 2, 1 + HALF_WIDTH)
+    j_hi = min(math.ceil(f_hi / df) + 2, p.size - 1 - HALF_WIDTH)
     if j_hi < j_lo:
         return LineTest(f_mid, math.nan, math.nan, k, 0, testable=False)
     offsets = np.r_[np.arange(-HALF_WIDTH, -GUARD), np.arange(GUARD + 1, HALF_WIDTH + 1)]
