@@ -155,10 +155,13 @@ def test_round_trip_recovers_white_flicker_random_walk(short_fits: list[ChannelF
     for f in short_fits:
         assert f.params["white"] == pytest.approx(TRUTH["white"], rel=0.02)
         assert f.params["flicker"] == pytest.approx(TRUTH["flicker"], rel=0.4)
-        assert f.params["random_walk"] == pytest.approx(TRUTH["random_walk"], rel=0.6)
+        if "random_walk" in f.present:
+            assert f.params["random_walk"] == pytest.approx(TRUTH["random_walk"], rel=0.6)
         for key, v in TRUTH.items():
             lo, hi = f.ci[key]
             covered += lo <= v <= hi
+    # the walk is near detection in 30 min (chi2 drop ~9-16 for the 9.55 needed)
+    assert sum("random_walk" in f.present for f in short_fits) >= 2
     assert covered >= 7  # of 9 intervals (95 % each; P(<= 6) < 0.1 %)
 
 

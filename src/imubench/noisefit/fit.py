@@ -725,6 +725,13 @@ _SETTING_KEY = {"markov": "markov_tau", "sine": "sine_freq", "filter": "bandwidt
 SINE_BAND: float = 1.25
 """The spectral line is looked for within this factor of the fitted sine frequency
 (intersected with its profile interval)."""
+SINE_LINE_SHARE: float = 0.5
+"""The line must carry at least this fraction of the fitted sine's amplitude (a quarter
+of its power): a significant but weak line under a broad bump the Allan variance took
+for a sine does not back it."""
+EDGE_MARGIN: float = 0.1
+"""A setting within this relative distance of its search range's end is pinned there,
+not estimated."""
 
 
 def _extensions_in(st: Structure) -> list[str]:
@@ -769,7 +776,7 @@ def _intervals(st: Structure, sol: _Solution, pts: Points) -> dict[str, tuple[fl
 
 
 def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, float]],
-                       pts: Points, arr: np.ndarray, drop: float
+                       pts: Points, arr: np.ndarray, drop: float, amplitude: float
                        ) -> tuple[bool, str, float | None]:
     """Is extension ``kind`` of ``st`` backed by the data? (kept, reason in plain words,
     for a sine the frequency of the spectral line found, else None).
@@ -777,10 +784,13 @@ def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, floa
     Markov: tau_c's profile interval must lie within the AVAR points' tau range (else the
     data do not say where the correlation time is: a slope change of white/flicker/random
     walk in disguise). Filter: the bandwidth's profile interval must end below the
-    highest bandwidth searched (0.49 x the rate), i.e. exclude "no filter"; its lower end
-    may reach the lowest (a slow filter on part of the white noise with ``output_white``
-    is a degenerate direction, not a sign that there is no filter). Sine: a spectral line
-    must back it (:func:`imubench.noisefit.spectral_line.line_test`).
+    highest bandwidth searched (0.49 x the rate), i.e. exclude "no filter", and the
+    estimate must not sit at the lowest searched (:data:`FILTER_MIN_FRACTION` x the rate:
+    then the optimum is the search's edge); the interval's lower end may reach below it
+    (a slow filter on part of the white noise with ``output_white`` is a degenerate
+    direction, not a sign that there is no filter). Sine: a spectral line must back it
+    (:func:`imubench.noisefit.spectral_line.line_test`) and carry at least
+    :data:`SINE_LINE_SHARE` of the fitted amplitude (``amplitude``, unit).
     """
     from imubench.noisefit.spectral_line import line_test
 
@@ -796,20 +806,28 @@ def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, floa
         return False, (f"dropped, tau_c not identified ({where} not within the data's "
                        f"taus [{t0:.3g}, {t1:.3g}] s)"), None
     if kind == "filter":
-        b1 = 0.49 * pts.rate_hz
+        b0, b1 = FILTER_MIN_FRACTION * pts.rate_hz, 0.49 * pts.rate_hz
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
-        if hi < 0.999 * b1:
+        if value <= b0 * (1 + EDGE_MARGIN):
+            return False, (f"dropped, bandwidth not identified ({value:.3g} Hz is the lowest "
+                           "searched: the optimum is the search's edge, not the data's)"), None
+        if hi < (1 - EDGE_MARGIN) * b1:
             return True, f"kept, {head}, {where} below the highest searched {b1:.3g} Hz", None
         return False, (f"dropped, bandwidth not identified ({where} reaches the highest "
                        f"searched {b1:.3g} Hz: no filter fits as well)"), None
     band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
     test = line_test(arr, pts.rate_hz, *band)
-    if test.present:
-        return True, f"kept, {head}, {test.describe()}", test.freq_hz
-    return False, f"dropped, {test.describe()}", None
+    if not test.present:
+        return False, f"dropped, {test.describe()}", None
+    if test.amplitude < SINE_LINE_SHARE * amplitude:
+        return False, (f"dropped, the {test.describe()} carries amplitude "
+                       f"{test.amplitude:.3g}, less than {SINE_LINE_SHARE:g} x the "
+                       f"{amplitude:.3g} fitted"), None
+    return True, f"kept, {head}, {test.describe()}", test.freq_hz
 
 
-def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, float]
+def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, float],
+              amplitudes: bool = True, reasons: dict[str, str] | None = None
               ) -> tuple[Structure, _Solution, dict[str, tuple[float, float]], dict[str, str]]:
     """Drop, one at a time, the terms the data do not back; the reason for every term.
 
@@ -820,10 +838,12 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
     linear term with the smallest z = theta / se among those whose interval includes 0;
     the structure is refitted after each drop. A sine backed by a line is moved once to
     the line's periodogram frequency (the Allan variance locates it only roughly).
+    ``amplitudes=False`` judges the extensions only (before the base terms are chosen);
+    ``reasons`` are those of an earlier call (kept for the terms already dropped).
     """
-    reasons: dict[str, str] = {}
+    reasons = {} if reasons is None else dict(reasons)
     for kind in EXTENSIONS:
-        if kind not in _extensions_in(st):
+        if kind not in _extensions_in(st) and kind not in reasons:
             d = drops.get(kind, 0.0)
             reasons[kind] = f"dropped, chi2 drop {d:.1f} < {EXTENSION_DCHI2:g} needed"
     line_moved = False
@@ -832,8 +852,10 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
         ci = _intervals(st, sol, pts)
         failed: str | None = None
         for kind in _extensions_in(st):
+            amp = math.sqrt(max(sol.theta[st.terms.index("sine")], 0.0)) if kind == "sine" \
+                else math.nan
             ok, why, line_hz = _extension_verdict(kind, st, ci, pts, arr,
-                                                  drops.get(kind, math.nan))
+                                                  drops.get(kind, math.nan), amp)
             reasons[kind] = why
             if not ok:
                 failed = kind
@@ -845,7 +867,7 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
                 break
         if failed == "":
             continue
-        if failed is None and len(st.terms) > 1:
+        if failed is None and amplitudes and len(st.terms) > 1:
             se = np.sqrt(np.maximum(np.diag(sol.cov_theta), 0.0))
             worst: tuple[float, str] | None = None
             for j, term in enumerate(st.terms):
@@ -865,6 +887,28 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
         st = _without(st, failed)
 
 
+def _backed_extensions(pts: Points, arr: np.ndarray
+                       ) -> tuple[Structure, Points, dict[str, float], dict[str, str]]:
+    """The best subset of extensions (:func:`_select_extensions`) among those the data
+    back (:func:`_extension_verdict`): an extension that fails is excluded and the
+    subsets without it compared again, so that a failed filter does not leave a Markov
+    term that the comparison had passed over unconsidered. Returns the structure (all
+    base terms and the backed extensions), its points, the chi2 drops and the reasons
+    of the extensions excluded."""
+    banned: list[str] = []
+    reasons: dict[str, str] = {}
+    while True:
+        allowed = [k for k in EXTENSIONS if k not in banned]
+        st, sel_pts, drops = _select_extensions(Structure(BASE_TERMS), pts, allowed)
+        backed, _, _, why = _validate(st, sel_pts, arr, drops, amplitudes=False,
+                                      reasons=reasons)
+        failed = [k for k in _extensions_in(st) if k not in _extensions_in(backed)]
+        if not failed:
+            return backed, sel_pts, drops, reasons
+        reasons.update({k: why[k] for k in failed})
+        banned.extend(failed)
+
+
 # ------------------------------------------------------------------------ public
 def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto",
             channel: str = "gx", taus: Sequence[float] | None = None) -> ChannelFit:
@@ -874,12 +918,12 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     pts = avar_points(arr, rate_hz, taus, channel)
     notes: list[str] = []
     if wanted is None:
-        st, pts, drops = _select_extensions(Structure(BASE_TERMS), pts, EXTENSIONS)
+        st, pts, drops, reasons = _backed_extensions(pts, arr)
         st, sol, changes = _stepwise(st, pts)
         drops.update(changes)
         if pts.delta > 0:
             st, sol = _cross_validate(st, sol, arr, pts)
-        st, sol, ci, reasons = _validate(st, pts, arr, drops)
+        st, sol, ci, reasons = _validate(st, pts, arr, drops, reasons=reasons)
     else:
         st = Structure(tuple(t for t in wanted if t in BASE_TERMS))
         kinds = [k for k in EXTENSIONS if k in wanted]

@@ -57,8 +57,10 @@ class LineTest:
 
     ``freq_hz`` the bin with the largest ratio, ``ratio`` its periodogram over the local
     continuum, ``threshold`` the ratio a line needs, ``segments`` K, ``bins`` the number
-    of bins checked; ``testable`` False when the record holds too few periods for the
-    test (then ``ratio`` and ``threshold`` are NaN).
+    of bins checked; ``amplitude`` the peak amplitude of a sine carrying the line's
+    power (sqrt(2 sum (P_j - continuum_j) df) over the main lobe, bins j* +- 2; unit of
+    the series); ``testable`` False when the record holds too few periods for the test
+    (then ``ratio``, ``threshold`` and ``amplitude`` are NaN).
     """
 
     freq_hz: float
@@ -67,6 +69,7 @@ class LineTest:
     segments: int
     bins: int
     testable: bool = True
+    amplitude: float = math.nan
 
     @property
     def present(self) -> bool:
@@ -127,7 +130,11 @@ def line_test(y: np.ndarray, rate_hz: float, f_lo_hz: float, f_hi_hz: float,
     i = int(np.argmax(ratios))
     se_continuum = 1.2533 / math.sqrt(offsets.size * k)
     threshold = chi2.ppf(1.0 - alpha / bins.size, 2 * k) / (2 * k) * math.exp(2.33 * se_continuum)
-    return LineTest(float(freq[bins[i]]), float(ratios[i]), float(threshold), k, int(bins.size))
+    lobe = bins[i] + np.arange(-2, 3)
+    lobe = lobe[(lobe > 0) & (lobe < p.size)]
+    excess = float(np.sum(p[lobe] - continuum[i]) * df)
+    return LineTest(float(freq[bins[i]]), float(ratios[i]), float(threshold), k, int(bins.size),
+                    amplitude=math.sqrt(2.0 * max(excess, 0.0)))
 
 
 __all__ = ["LINE_ALPHA", "LineTest", "line_test", "segment_length"]
