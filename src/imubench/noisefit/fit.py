@@ -14,11 +14,20 @@ Method ``wls`` (default), in four steps:
    AVAR estimate, SP 1065 eq. 44) at the *model* AVAR A_i (iterated: weights from the data
    bias the fit low), and r_ij the correlation of overlapping estimates from the model
    (:mod:`.covariance`).
-3. **Model selection** (``terms="auto"``). Nonlinear extensions (output filter, Gauss-
-   Markov, sine) are searched on log grids (then refined) and kept when they lower the GLS
-   chi-squared by more than :data:`EXTENSION_DCHI2`; then backward elimination drops the
-   least significant linear term while its one-sided z = theta/se < :data:`Z_PRESENT`
-   (5 % level), refitting each time.
+3. **Model selection** (``terms="auto"``; every term gets a reason in
+   :attr:`ChannelFit.reasons` and its statistic in :attr:`ChannelFit.chi2_drop`).
+   (a) Nonlinear extensions (output filter, Gauss-Markov, sine) are searched on log
+   grids (then refined); a subset of them is chosen by GLS chi-squared charged
+   :data:`EXTENSION_DCHI2` per extension (:func:`_select_extensions`). (b) Each chosen
+   extension must be backed by the data (:func:`_extension_verdict`): Markov tau_c's
+   profile interval within the data's taus, the filter's bandwidth interval excluding
+   "no filter" and its estimate off the search's lower edge, a sine backed by a
+   significant spectral line carrying half its amplitude (:mod:`.spectral_line`); one
+   that fails is excluded and the subsets compared again (:func:`_backed_extensions`).
+   (c) Base terms enter by stepwise likelihood ratio, a term entering when it lowers
+   chi2 by more than :data:`LINEAR_DCHI2` (:func:`_stepwise`). (d) Finally every
+   reported amplitude's 95 % interval must exclude 0; the weakest term failing that is
+   dropped and the rest refitted (:func:`_validate`).
 4. **Intervals.** 95 % intervals on theta from the GLS covariance (X' Sigma^-1 X)^-1,
    mapped to amplitudes by the square root (clipped at 0); absent terms get
    (0, sqrt(theta + 1.645 se)) from a fit that includes them. Markov time, sine frequency
@@ -124,6 +133,10 @@ class ChannelFit:
     notes: tuple[str, ...] = field(default=())
     reasons: dict[str, str] = field(default_factory=dict)
     """Term name (:data:`TERM_NAMES`) -> why it was kept or dropped, in plain words."""
+    chi2_drop: dict[str, float] = field(default_factory=dict)
+    """Term name -> its likelihood-ratio statistic in the selection (GLS chi2 without it
+    minus with it; extensions: best setting of the search), compared with
+    :data:`LINEAR_DCHI2` or :data:`EXTENSION_DCHI2`."""
 
     def channel_model(self, base: ChannelModel | None = None) -> ChannelModel:
         """A ChannelModel with the fitted noise keys over ``base``.
@@ -177,6 +190,8 @@ class ChannelFit:
                        "edf": self.edf.tolist()},
             "notes": list(self.notes),
             "reasons": dict(self.reasons),
+            "chi2_drop": {k: (float(v) if math.isfinite(v) else None)
+                          for k, v in self.chi2_drop.items()},
         }
 
 
@@ -897,14 +912,16 @@ def _backed_extensions(pts: Points, arr: np.ndarray
     of the extensions excluded."""
     banned: list[str] = []
     reasons: dict[str, str] = {}
+    all_drops: dict[str, float] = {}
     while True:
         allowed = [k for k in EXTENSIONS if k not in banned]
         st, sel_pts, drops = _select_extensions(Structure(BASE_TERMS), pts, allowed)
-        backed, _, _, why = _validate(st, sel_pts, arr, drops, amplitudes=False,
+        all_drops.update(drops)
+        backed, _, _, why = _validate(st, sel_pts, arr, all_drops, amplitudes=False,
                                       reasons=reasons)
         failed = [k for k in _extensions_in(st) if k not in _extensions_in(backed)]
         if not failed:
-            return backed, sel_pts, drops, reasons
+            return backed, sel_pts, all_drops, reasons
         reasons.update({k: why[k] for k in failed})
         banned.extend(failed)
 
@@ -936,6 +953,7 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
         sol, _ = _fit_gls(st, pts)
         ci = _intervals(st, sol, pts)
         reasons = {t: "fitted as asked (terms list, no selection)" for t in wanted}
+        drops = {}
     params = dict.fromkeys(PARAM_KEYS, 0.0)
     params["filter_order"] = 1
     present: list[str] = []
@@ -992,7 +1010,8 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
         notes.append(f"model discrepancy floor delta = {pts.delta:.3g} (relative std added "
                      "to every AVAR point so that chi2 = dof)")
     return ChannelFit(channel, float(rate_hz), "wls", params, ci, tuple(present), pts.tau_s,
-                      pts.avar, pts.edf, bias, sol.chi2, dof, tuple(notes), reasons)
+                      pts.avar, pts.edf, bias, sol.chi2, dof, tuple(notes), reasons,
+                      {k: float(v) for k, v in drops.items()})
 
 
 def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
