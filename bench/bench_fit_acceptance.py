@@ -9,7 +9,10 @@ at 104 Hz, constant 25 degC so the temperature coefficient adds nothing) and fit
 term (white, flicker, random_walk, ramp, quantization, markov, sine, filter) whose
 amplitude in the truth is zero. Target: at most 2 % of channel fits. The rate is given
 with its Clopper-Pearson 95 % interval. ``--log`` appends one JSON line per channel fit
-(truth, terms reported, reasons), so a long run that is stopped still counts.
+(truth, terms reported, reasons, chi2 drops), so a long run that is stopped still counts
+(``--summarize LOG`` prints its tables); seeds are the outer loop. The run also prints
+the null distribution of the selection statistic: for each term, the chi2 drops of the
+fits whose truth lacks it, against the threshold (the calibration by simulation).
 
 Part 2 (round trip with an independent generator, ``--method``) is not in this module;
 ``PARTS`` below is where it registers.
@@ -89,56 +92,69 @@ def false_terms(fit: ChannelFit, truth: dict[str, float]) -> list[str]:
             if key in fit.present and not truth.get(key, 0.0)]
 
 
-def part1(args: argparse.Namespace) -> None:
-    seeds = 2 if args.quick else args.seeds
-    n = round(args.minutes * 60 * RATE_HZ)
-    log = open(args.log, "a", encoding="utf-8") if args.log else None  # noqa: SIM115
-    print(f"\n### Part 1: false terms, {seeds} seeds x 6 channels, "
-          f"{args.minutes:g} min at {RATE_HZ:g} Hz per record")
-    print("| chip | variant | channel fits | with a false term | terms |")
-    print("|---|---|---|---|---|")
-    total = bad = 0
-    per_term: dict[str, int] = {}
-    null_drops: dict[str, list[float]] = {t: [] for t in TERM_KEY}
+def fit_rows(seeds: range, minutes: float, log: Path | None) -> list[dict[str, object]]:
+    """Simulate and fit every (seed, chip, variant, channel); one row per channel fit.
+
+    Seeds are the outer loop, so that a run stopped early covers every model evenly.
+    """
+    n = round(minutes * 60 * RATE_HZ)
+    rows: list[dict[str, object]] = []
+    models = {chip: variants(chip) for chip in CHIPS}
     t_start = time.perf_counter()
-    for chip in CHIPS:
-        for name, model in variants(chip).items():
-            k = m = 0
-            terms: dict[str, int] = {}
-            for seed in range(1, seeds + 1):
+    for seed in seeds:
+        for chip, vs in models.items():
+            for name, model in vs.items():
                 data = simulate(model, n, RATE_HZ, seed + 1000 * CHIPS.index(chip))
                 for ch in CHANNELS:
                     truth = model.channels[ch].to_dict()
                     fit = fit_channel(data[ch], RATE_HZ, channel=ch)
-                    wrong = false_terms(fit, truth)
-                    for t, key in TERM_KEY.items():
-                        if not truth.get(key, 0.0) and t in fit.chi2_drop:
-                            null_drops[t].append(fit.chi2_drop[t])
-                    m += 1
-                    k += bool(wrong)
-                    for t in wrong:
-                        terms[t] = terms.get(t, 0) + 1
-                        per_term[t] = per_term.get(t, 0) + 1
+                    row = {"chip": chip, "variant": name, "seed": seed, "channel": ch,
+                           "false": false_terms(fit, truth), "present": list(fit.present),
+                           "absent_in_truth": [t for t, key in TERM_KEY.items()
+                                               if not truth.get(key, 0.0)],
+                           "reasons": fit.reasons, "chi2_drop": fit.chi2_drop}
+                    rows.append(row)
                     if log is not None:
-                        log.write(json.dumps({
-                            "chip": chip, "variant": name, "seed": seed, "channel": ch,
-                            "false": wrong, "present": list(fit.present),
-                            "reasons": fit.reasons, "chi2_drop": fit.chi2_drop}) + "\n")
-                        log.flush()
-            total += m
-            bad += k
-            listed = ", ".join(f"{t} {c}" for t, c in sorted(terms.items())) or "-"
-            print(f"| {chip} | {name} | {m} | {k} | {listed} |", flush=True)
+                        with open(log, "a", encoding="utf-8") as fh:
+                            fh.write(json.dumps(row) + "\n")
+        bad = sum(bool(r["false"]) for r in rows)
+        print(f"seed {seed}: {len(rows)} channel fits so far, {bad} with a false term "
+              f"({time.perf_counter() - t_start:.0f} s)", flush=True)
+    return rows
+
+
+def summarize(rows: list[dict[str, object]]) -> None:
+    """Tables of part 1 from its rows (a run's, or a ``--log`` file's)."""
+    groups: dict[tuple[str, str], list[dict[str, object]]] = {}
+    for r in rows:
+        groups.setdefault((str(r["chip"]), str(r["variant"])), []).append(r)
+    print("| chip | variant | channel fits | with a false term | false terms |")
+    print("|---|---|---|---|---|")
+    per_term: dict[str, int] = {}
+    for (chip, name), rs in groups.items():
+        terms: dict[str, int] = {}
+        for r in rs:
+            for t in r["false"]:  # type: ignore[attr-defined]
+                terms[t] = terms.get(t, 0) + 1
+                per_term[t] = per_term.get(t, 0) + 1
+        listed = ", ".join(f"{t} {c}" for t, c in sorted(terms.items())) or "-"
+        print(f"| {chip} | {name} | {len(rs)} | {sum(bool(r['false']) for r in rs)} | "
+              f"{listed} |")
+    total, bad = len(rows), sum(bool(r["false"]) for r in rows)
     lo, hi = clopper_pearson(bad, total)
+    seeds = len({r["seed"] for r in rows})
     print(f"\nfalse-term rate: {bad}/{total} = {100 * bad / total:.2f} % "
-          f"(95 % CI {100 * lo:.2f}-{100 * hi:.2f} %; target <= 2 %); by term: "
-          + (", ".join(f"{t} {c}" for t, c in sorted(per_term.items())) or "none")
-          + f"; {time.perf_counter() - t_start:.0f} s")
+          f"(95 % CI {100 * lo:.2f}-{100 * hi:.2f} %; target <= 2 %) over {seeds} seeds; "
+          "by term: " + (", ".join(f"{t} {c}" for t, c in sorted(per_term.items()))
+                         or "none"))
     print("\nNull distribution of the selection statistic (chi2 drop) over the fits whose "
           "truth lacks the term:")
     print("| term | fits | median | 99 % | 99.9 % | max | threshold | share above |")
     print("|---|---|---|---|---|---|---|---|")
-    for t, vals in null_drops.items():
+    for t in TERM_KEY:
+        vals = [float(r["chi2_drop"][t]) for r in rows  # type: ignore[index]
+                if t in r["absent_in_truth"] and t in r["chi2_drop"]  # type: ignore[operator]
+                and r["chi2_drop"][t] is not None]  # type: ignore[index]
         if not vals:
             continue
         v = np.asarray(vals)
@@ -146,8 +162,20 @@ def part1(args: argparse.Namespace) -> None:
         print(f"| {t} | {v.size} | {np.median(v):.2f} | {np.quantile(v, 0.99):.2f} | "
               f"{np.quantile(v, 0.999):.2f} | {v.max():.2f} | {thr:g} | "
               f"{100 * np.mean(v > thr):.2f} % |")
-    if log is not None:
-        log.close()
+
+
+def part1(args: argparse.Namespace) -> None:
+    if args.summarize is not None:
+        with open(args.summarize, encoding="utf-8") as fh:
+            rows = [json.loads(line) for line in fh if line.strip()]
+        print(f"\n### Part 1 from {args.summarize}: {len(rows)} channel fits")
+        summarize(rows)
+        return
+    seeds = 2 if args.quick else args.seeds
+    print(f"\n### Part 1: false terms, {seeds} seeds x {len(CHIPS)} chips x "
+          f"{1 + len(NOISE_TERMS)} variants x 6 channels, {args.minutes:g} min at "
+          f"{RATE_HZ:g} Hz per record")
+    summarize(fit_rows(range(1, seeds + 1), args.minutes, args.log))
 
 
 def _adis(rep: int) -> dict[str, np.ndarray]:
@@ -222,6 +250,8 @@ def main() -> None:
                     help=f"part 1 record length (default {MINUTES:g} min)")
     ap.add_argument("--log", type=Path, default=None,
                     help="part 1: append one JSON line per channel fit to this file")
+    ap.add_argument("--summarize", type=Path, default=None, metavar="LOG",
+                    help="part 1: print the tables from a --log file (no fitting)")
     args = ap.parse_args()
     print(f"# bench_fit_acceptance  {platform.node()} "
           f"{platform.processor() or platform.machine()} cpus={os.cpu_count()}  "

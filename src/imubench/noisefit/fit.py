@@ -72,6 +72,11 @@ SEARCH_DELTA: float = 0.02
 landscape that points with EDF ~1e6 make rugged (final fits use the estimated delta)."""
 FILTER_MIN_FRACTION: float = 0.02
 """Lowest output-filter bandwidth searched, as a fraction of the sample rate."""
+FILTER_FLOOR_STEP: float = 4.0
+"""A filter pinned at the lowest bandwidth searched is searched again above this factor
+times it (:func:`_backed_extensions`) ..."""
+FILTER_FLOOR_MAX: float = 0.2
+"""... while that floor stays below this fraction of the rate."""
 DELTA_LEVEL: float = 0.99
 """Quantile of chi2(n - p) the GLS chi2 must exceed before a discrepancy floor is added."""
 Z95: float = 1.959964
@@ -107,6 +112,13 @@ class Points:
     n_samples: int
     delta: float = 0.0
     """Relative model-discrepancy std added to every point (see :func:`_estimate_delta`)."""
+    filter_min_hz: float = 0.0
+    """Lowest output-filter bandwidth searched (Hz); 0: :data:`FILTER_MIN_FRACTION` x rate."""
+
+    @property
+    def filter_floor_hz(self) -> float:
+        """Lowest output-filter bandwidth searched (Hz)."""
+        return self.filter_min_hz or FILTER_MIN_FRACTION * self.rate_hz
 
 
 @dataclass(frozen=True)
@@ -359,7 +371,7 @@ def _grid(kind: str, pts: Points) -> np.ndarray:
         return np.geomspace(2.0 * tau0, span / 30.0, 20)
     if kind == "sine":  # ... and a sine many periods, else it is low-frequency noise
         return np.geomspace(30.0 / span, 0.45 * pts.rate_hz, 160)
-    return np.geomspace(FILTER_MIN_FRACTION * pts.rate_hz, 0.45 * pts.rate_hz, 14)
+    return np.geomspace(pts.filter_floor_hz, 0.45 * pts.rate_hz, 14)
 
 
 def _with(st: Structure, kind: str, value: float, order: int = 1) -> Structure:
@@ -435,7 +447,7 @@ def _polish(st: Structure, kinds: Sequence[str], pts: Points,
             v = float(np.exp(lv))
             if k == "filter":
                 # the output filter shapes the shortest taus: keep it in its grid's range
-                v = min(max(v, FILTER_MIN_FRACTION * pts.rate_hz), 0.49 * pts.rate_hz)
+                v = min(max(v, pts.filter_floor_hz), 0.49 * pts.rate_hz)
             cand = _with(cand, k, v, st.filter_order)
         return cand
 
@@ -749,8 +761,14 @@ EDGE_MARGIN: float = 0.1
 not estimated."""
 
 
+VERDICT_ORDER: tuple[str, ...] = ("markov", "sine", "filter")
+"""Order in which extensions are judged and, when several fail, the one excluded first:
+a Markov term with tau_c below the shortest tau competes with the output filter and can
+pin it at the search's edge; without it the filter is searched again."""
+
+
 def _extensions_in(st: Structure) -> list[str]:
-    return [k for k in EXTENSIONS if getattr(st, _SETTING[k]) > 0]
+    return [k for k in VERDICT_ORDER if getattr(st, _SETTING[k]) > 0]
 
 
 def _without(st: Structure, term: str) -> Structure:
@@ -800,8 +818,8 @@ def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, floa
     data do not say where the correlation time is: a slope change of white/flicker/random
     walk in disguise). Filter: the bandwidth's profile interval must end below the
     highest bandwidth searched (0.49 x the rate), i.e. exclude "no filter", and the
-    estimate must not sit at the lowest searched (:data:`FILTER_MIN_FRACTION` x the rate:
-    then the optimum is the search's edge); the interval's lower end may reach below it
+    estimate must not sit at the lowest searched (:attr:`Points.filter_floor_hz`: then
+    the optimum is the search's edge); the interval's lower end may reach below it
     (a slow filter on part of the white noise with ``output_white`` is a degenerate
     direction, not a sign that there is no filter). Sine: a spectral line must back it
     (:func:`imubench.noisefit.spectral_line.line_test`) and carry at least
@@ -821,7 +839,7 @@ def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, floa
         return False, (f"dropped, tau_c not identified ({where} not within the data's "
                        f"taus [{t0:.3g}, {t1:.3g}] s)"), None
     if kind == "filter":
-        b0, b1 = FILTER_MIN_FRACTION * pts.rate_hz, 0.49 * pts.rate_hz
+        b0, b1 = pts.filter_floor_hz, 0.49 * pts.rate_hz
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
         if value <= b0 * (1 + EDGE_MARGIN):
             return False, (f"dropped, bandwidth not identified ({value:.3g} Hz is the lowest "
@@ -905,8 +923,9 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
 def _backed_extensions(pts: Points, arr: np.ndarray
                        ) -> tuple[Structure, Points, dict[str, float], dict[str, str]]:
     """The best subset of extensions (:func:`_select_extensions`) among those the data
-    back (:func:`_extension_verdict`): an extension that fails is excluded and the
-    subsets without it compared again, so that a failed filter does not leave a Markov
+    back (:func:`_extension_verdict`): the first extension that fails (in
+    :data:`VERDICT_ORDER`) is excluded and the subsets without it searched and compared
+    again, so that a failed filter does not leave a Markov
     term that the comparison had passed over unconsidered. Returns the structure (all
     base terms and the backed extensions), its points, the chi2 drops and the reasons
     of the extensions excluded."""
@@ -922,8 +941,16 @@ def _backed_extensions(pts: Points, arr: np.ndarray
         failed = [k for k in _extensions_in(st) if k not in _extensions_in(backed)]
         if not failed:
             return backed, sel_pts, all_drops, reasons
-        reasons.update({k: why[k] for k in failed})
-        banned.extend(failed)
+        # one at a time: the others were judged with settings searched alongside it
+        reasons[failed[0]] = why[failed[0]]
+        floor = pts.filter_floor_hz * FILTER_FLOOR_STEP
+        if failed[0] == "filter" and "lowest searched" in why["filter"] \
+                and floor < FILTER_FLOOR_MAX * pts.rate_hz:
+            # pinned at the search's edge: search above it (a local optimum, or a slow
+            # "filter" standing in for a term that is not there)
+            pts = replace(pts, filter_min_hz=floor)
+            continue
+        banned.append(failed[0])
 
 
 # ------------------------------------------------------------------------ public
