@@ -774,8 +774,10 @@ def _extensions_in(st: Structure) -> list[str]:
 def _without(st: Structure, term: str) -> Structure:
     """``st`` without one term (an extension takes its setting with it)."""
     if term == "filter":
-        return replace(st, terms=tuple(t for t in st.terms if t != "output_white"),
-                       bandwidth_hz=0.0, filter_order=1)
+        # without the filter, white noise after it is white noise
+        terms = tuple("white" if t == "output_white" else t for t in st.terms)
+        return replace(st, terms=tuple(dict.fromkeys(terms)), bandwidth_hz=0.0,
+                       filter_order=1)
     return replace(st, terms=tuple(t for t in st.terms if t != term),
                    tau_c_s=0.0 if term == "markov" else st.tau_c_s,
                    f0_hz=0.0 if term == "sine" else st.f0_hz)
@@ -829,7 +831,8 @@ def _extension_verdict(kind: str, st: Structure, ci: dict[str, tuple[float, floa
 
     value = float(getattr(st, _SETTING[kind]))
     lo, hi = ci[_SETTING_KEY[kind]]
-    head = f"chi2 drop {drop:.1f} > {EXTENSION_DCHI2:g}"
+    head = (f"chi2 drop {drop:.1f} > {EXTENSION_DCHI2:g}" if math.isfinite(drop) else
+            "added by the two-fold cross-validation (the model does not fit: delta > 0)")
     if kind == "markov":
         t0, t1 = float(pts.tau_s[0]), float(pts.tau_s[-1])
         where = f"tau_c {value:.3g} s, profile 95 % interval [{lo:.3g}, {hi:.3g}] s"
@@ -962,12 +965,24 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     pts = avar_points(arr, rate_hz, taus, channel)
     notes: list[str] = []
     if wanted is None:
-        st, pts, drops, reasons = _backed_extensions(pts, arr)
-        st, sol, changes = _stepwise(st, pts)
-        drops.update(changes)
-        if pts.delta > 0:
-            st, sol = _cross_validate(st, sol, arr, pts)
-        st, sol, ci, reasons = _validate(st, pts, arr, drops, reasons=reasons)
+        backed, pts, drops, reasons = _backed_extensions(pts, arr)
+        for _ in range(len(EXTENSIONS) + 1):
+            st, sol, changes = _stepwise(backed, pts)
+            drops.update(changes)
+            if pts.delta > 0:
+                before = st.terms
+                st, sol = _cross_validate(st, sol, arr, pts)
+                for term in st.terms:
+                    if term not in before:
+                        drops[term] = math.nan  # chosen by cross-validation, not by chi2
+            st, sol, ci, reasons = _validate(st, pts, arr, drops, reasons=reasons)
+            lost = [k for k in _extensions_in(backed) if k not in _extensions_in(st)]
+            if not lost:
+                break
+            # an extension failed once the base terms were chosen: choose them again
+            # without it (they were chosen alongside it)
+            for k in lost:
+                backed = _without(backed, k)
     else:
         st = Structure(tuple(t for t in wanted if t in BASE_TERMS))
         kinds = [k for k in EXTENSIONS if k in wanted]
@@ -1022,8 +1037,10 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
             lo, hi = ci[AMPLITUDE_KEY[term]]
             d = drops.get(term, math.nan)
             if AMPLITUDE_KEY[term] in present:
-                reasons[term] = (f"kept, chi2 drop {d:.1f} > {LINEAR_DCHI2:g}, 95 % interval "
-                                 f"[{lo:.3g}, {hi:.3g}] excludes 0")
+                how = (f"chi2 drop {d:.1f} > {LINEAR_DCHI2:g}" if math.isfinite(d) else
+                       "added by the two-fold cross-validation (the model does not fit: "
+                       "delta > 0)")
+                reasons[term] = f"kept, {how}, 95 % interval [{lo:.3g}, {hi:.3g}] excludes 0"
             elif term in reasons:  # dropped by _validate: interval includes 0
                 reasons[term] = (f"dropped, 95 % interval includes 0 (one-sided 95 % upper "
                                  f"limit {hi:.3g})")
