@@ -49,7 +49,7 @@ from lsm6ds_sim.physics import simulate
 from scipy.stats import beta
 
 from imubench.noisefit import ChannelFit, fit_channel
-from imubench.noisefit.fit import EXTENSION_DCHI2, EXTENSIONS, LINEAR_DCHI2
+from imubench.noisefit.fit import EXTENSION_DCHI2, EXTENSIONS, entry_dchi2
 from imubench.stats import oadev
 
 CHIPS: tuple[str, ...] = ("lsm6ds3h", "lsm6dsl", "lsm6dsm")
@@ -154,11 +154,12 @@ def summarize(rows: list[dict[str, object]]) -> None:
     for t in TERM_KEY:
         vals = [float(r["chi2_drop"][t]) for r in rows  # type: ignore[index]
                 if t in r["absent_in_truth"] and t in r["chi2_drop"]  # type: ignore[operator]
-                and r["chi2_drop"][t] is not None]  # type: ignore[index]
+                and r["chi2_drop"][t] is not None  # type: ignore[index]
+                and math.isfinite(r["chi2_drop"][t])]  # type: ignore[index]
         if not vals:
             continue
         v = np.asarray(vals)
-        thr = EXTENSION_DCHI2 if t in EXTENSIONS else LINEAR_DCHI2
+        thr = EXTENSION_DCHI2 if t in EXTENSIONS else entry_dchi2(t)
         print(f"| {t} | {v.size} | {np.median(v):.2f} | {np.quantile(v, 0.99):.2f} | "
               f"{np.quantile(v, 0.999):.2f} | {v.max():.2f} | {thr:g} | "
               f"{100 * np.mean(v > thr):.2f} % |")
