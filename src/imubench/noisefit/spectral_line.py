@@ -70,6 +70,8 @@ class LineTest:
     bins: int
     testable: bool = True
     amplitude: float = math.nan
+    resolution_hz: float = math.nan
+    """Bin width fs / L of the periodogram."""
 
     @property
     def present(self) -> bool:
@@ -134,7 +136,7 @@ def line_test(y: np.ndarray, rate_hz: float, f_lo_hz: float, f_hi_hz: float,
     lobe = lobe[(lobe > 0) & (lobe < p.size)]
     excess = float(np.sum(p[lobe] - continuum[i]) * df)
     return LineTest(float(freq[bins[i]]), float(ratios[i]), float(threshold), k, int(bins.size),
-                    amplitude=math.sqrt(2.0 * max(excess, 0.0)))
+                    amplitude=math.sqrt(2.0 * max(excess, 0.0)), resolution_hz=df)
 
 
 __all__ = ["LINE_ALPHA", "LineTest", "line_test", "segment_length"]
