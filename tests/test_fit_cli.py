@@ -190,3 +190,16 @@ def test_fit_shows_a_progress_bar_that_reaches_its_end(recording: Path, tmp_path
     assert rc == 0, captured.err
     assert set(json.loads(captured.out)["channels"]) == {"gx", "gy"}
     assert "fit:" in captured.err and "100%" in captured.err
+
+
+def test_fit_prints_and_writes_the_reasons(recording: Path, tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    js = tmp_path / "fit.json"
+    assert main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m.toml"),
+                 "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "kept: white" in out and "dropped: " in out and "sine (" in out
+    gx = json.loads(js.read_text())["channels"]["gx"]
+    assert gx["reasons"]["white"].startswith("kept")
+    assert gx["reasons"]["sine"].startswith("dropped")
+    assert set(gx["chi2_drop"]) >= {"white", "flicker", "sine"}
