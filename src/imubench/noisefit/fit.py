@@ -68,8 +68,8 @@ CORE_TERMS: tuple[str, ...] = ("white", "random_walk")
 """Terms tested at 1 % (:data:`CORE_DCHI2`); flicker, ramp and quantization at 0.1 %.
 
 Calibrated by simulation (bench/bench_fit_acceptance.py, shipped chip models, 30 min at
-104 Hz, seeds 1-16): the null distribution of the drop of white and random walk stays
-below chi2_1's (largest 6.1 and 3.3 in about 270 fits each), while flicker's, where the
+104 Hz, seeds 1-16): where the truth lacks them, white's drop exceeded 5.41 in 0.4 %
+of about 270 fits and random walk's never (largest 3.3), while flicker's, where the
 truth has a weak random walk instead, exceeded 5.41 in 4.4 % and 9.55 in 1 % of fits (the
 two are nearly collinear over a short record). Flicker is strong wherever it is present
 (drops of 50-400), so the stricter level costs it little."""
