@@ -212,3 +212,16 @@ def test_kalibr_refused_when_nothing_states_the_units(tmp_path: Path,
     text = yaml.read_text()
     density = float(text.split("gyroscope_noise_density:")[1].split()[0])
     assert density == pytest.approx(1e-3, rel=0.03)
+
+
+def test_fit_prints_and_writes_the_reasons(recording: Path, tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    js = tmp_path / "fit.json"
+    assert main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m.toml"),
+                 "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "kept: white" in out and "dropped: " in out and "sine (" in out
+    gx = json.loads(js.read_text())["channels"]["gx"]
+    assert gx["reasons"]["white"].startswith("kept")
+    assert gx["reasons"]["sine"].startswith("dropped")
+    assert set(gx["chi2_drop"]) >= {"white", "flicker", "sine"}

@@ -55,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def format_summary(result: RecordingFit) -> str:
-    """One line per channel: present terms with value and 95 % interval."""
+    """Per channel: present terms with value and 95 % interval, then why each term was
+    kept or dropped (:func:`short_reasons`)."""
     lines = [f"# {result.source}  rate={result.rate_hz:g} Hz  method={result.method}"]
     for ch, f in result.fits.items():
         parts = []
@@ -66,7 +67,27 @@ def format_summary(result: RecordingFit) -> str:
             unit = param_units(ch)[key]
             parts.append(f"{key}={f.params[key]:.4g} {unit} [{lo:.3g}, {hi:.3g}]")
         lines.append(f"{ch}: " + ("  ".join(parts) if parts else "(no term found)"))
+        if f.reasons:
+            lines.append("    " + short_reasons(f.reasons))
     return "\n".join(lines)
+
+
+def short_reasons(reasons: dict[str, str]) -> str:
+    """The model-selection reasons in one line: kept terms by name, dropped ones with
+    their reason (without the upper limit, which ``--json`` carries)."""
+    kept = [t for t, why in reasons.items() if why.startswith("kept")]
+    dropped = [f"{t} ({why.removeprefix('dropped, ').split(' (one-sided')[0]})"
+               for t, why in reasons.items() if why.startswith("dropped")]
+    other = [f"{t} ({why})" for t, why in reasons.items()
+             if not why.startswith(("kept", "dropped"))]
+    parts = []
+    if kept:
+        parts.append("kept: " + ", ".join(kept))
+    if dropped:
+        parts.append("dropped: " + ", ".join(dropped))
+    if other:
+        parts.append(", ".join(other))
+    return "; ".join(parts)
 
 
 def run(args: argparse.Namespace) -> int:
