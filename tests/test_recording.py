@@ -258,3 +258,21 @@ def test_accelerometer_unit_contradicted_by_gravity_is_refused(
     with pytest.raises(RecordingError, match="at rest") as err:
         load_recording(p, opts)
     assert str(err.value).startswith(f"{p}: ") and fix in str(err.value)
+
+
+def test_options_that_contradict_the_header_warn_or_refuse(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """--units against a header unit is obeyed with a warning naming both; a
+    --time-unit that turns the header's ns stamps into an impossible rate is refused."""
+    import logging
+
+    p = tmp_path / "data.csv"
+    p.write_text("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1]\n"
+                 + "".join(f"{1403636579758555392 + i * 5_000_000},{i % 3},0,0\n"
+                           for i in range(200)))
+    with caplog.at_level(logging.WARNING, logger="imubench.recording"):
+        rec = load_recording(p, InputOptions(gyro_unit="dps", accel_unit="g"))
+    assert rec.rate_hz == pytest.approx(200.0)
+    assert "column 'w_RS_S_x [rad s^-1]' says rad/s, read as dps (--units)" in caplog.text
+    with pytest.raises(RecordingError, match=r"gives 0\.0002 Hz with t in ms"):
+        load_recording(p, InputOptions(time_unit="ms"))

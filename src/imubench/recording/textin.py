@@ -275,14 +275,18 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     values = np.full((len(table), len(CHANNELS)), np.nan)
     used_units: dict[str, str] = {}
     assumed: list[str] = []  # channels whose unit nothing stated
+    overridden: list[str] = []  # header units an option contradicts
     for i, ch in enumerate(CHANNELS):
         if ch not in where_col:
             continue
         col = cols[where_col[ch]]
         factor, unit = _channel_unit(ch, col, options, ros or euroc, raw.header is None,
                                      where)
-        if raw.header is None and (options.gyro_unit if ch.startswith("g")
-                                   else options.accel_unit) is None:
+        given = options.gyro_unit if ch.startswith("g") else options.accel_unit
+        if given is not None and col.unit is not None and col.unit != given:
+            overridden.append(f"column {col.text.strip()!r} says {col.unit}, read as {given} "
+                              "(--units)")
+        if raw.header is None and given is None:
             stated = raw.meta.get("unit")  # imubench's Stable32 export states it
             units_of = GYRO_UNITS_DPS if ch.startswith("g") else ACCEL_UNITS_G
             if isinstance(stated, str) and stated in units_of:
@@ -308,6 +312,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         unit_name, scale = _time_unit(cols[where_col["t"]], options, ros, t_raw, rate, where)
         t_s = t_raw * scale
         time_note = f"t in {unit_name}"
+        if "the header says" in unit_name:
+            overridden.append(f"t {unit_name}")
     if raw.header is None and raw.width == 2 and options.rate_hz is not None:
         t_s = None  # evenly spaced values at the given rate: the tags are not needed
         time_note = "time tags ignored (--rate)"
@@ -318,6 +324,11 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         tb = timebase_from_index(index_col, t_s, where, rate)
     elif t_s is not None:
         tb = timebase_from_times(t_s, where, rate)
+        if rate is None and not TIME_RATE_HZ[0] <= tb.rate_hz <= TIME_RATE_HZ[1]:
+            raise RecordingError(
+                f"{where}: the time column gives {tb.rate_hz:.4g} Hz with t in "
+                f"{unit_name.split(' (')[0]}, not a rate an IMU records at; check "
+                "--time-unit s|ms|us|ns or give --rate HZ")
     else:
         rate = rate if rate is not None else options.default_rate_hz
         if rate is None:
@@ -344,8 +355,10 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                     "give --units GYRO,ACCEL if they differ)" if assumed else ""))
     if assumed:
         meta["units_assumed"] = assumed
+    if overridden:
+        notes.append(f"{where}: the options override the header: " + "; ".join(overridden))
     batch = Batch(index=tb.index, t_s=t_s[keep], values=values[keep], temp_c=temp[keep])
-    inferred = bool(assumed) or not (
+    inferred = bool(assumed or overridden) or not (
         (fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
         or (raw.width == 1 and raw.header is None))  # allan's plain series
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
@@ -409,10 +422,18 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
                              f"is g read as {said}; give --units {gyro},g")
 
 
+TIME_RATE_HZ = (1e-3, 1e6)
+"""Rates (Hz) a time column may give: outside, its unit (often a ``--time-unit`` that
+contradicts the file) is wrong, and the file is refused rather than read at that rate."""
+
+
 def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
                rate: float | None, where: str) -> tuple[str, float]:
     """(unit name, seconds per unit) of the time column."""
     if options.time_unit is not None:
+        if col.unit in TIME_UNITS_S and col.unit != options.time_unit:
+            return (f"{options.time_unit} (--time-unit; the header says {col.unit})",
+                    TIME_UNITS_S[options.time_unit])
         return options.time_unit, TIME_UNITS_S[options.time_unit]
     if col.unit in TIME_UNITS_S:
         return f"{col.unit} (header)", TIME_UNITS_S[col.unit]
