@@ -68,7 +68,7 @@ def test_kalibr_never_writes_a_zero_random_walk(recording: Path, tmp_path: Path,
     is checked against an independent figure: white noise of std sigma at rate f has the
     density sigma / sqrt(f) (dps/sqrt(Hz)), in rad/s/sqrt(Hz) times pi/180."""
     kal, js = tmp_path / "imu.yaml", tmp_path / "f.json"
-    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m.toml"),
+    rc = main(["fit", str(recording), "--channels", "gx,ax", "-o", str(tmp_path / "m.toml"),
                "--kalibr", str(kal), "--json", str(js)])
     err = capsys.readouterr().err
     assert rc == 0, err
@@ -83,7 +83,10 @@ def test_kalibr_never_writes_a_zero_random_walk(recording: Path, tmp_path: Path,
     assert value == pytest.approx(upper * np.pi / 180, rel=1e-6) and value > 0
     assert "upper 95 % limit: not detected" in line
     assert "below detection, written as the upper 95 % confidence limit" in text
-    assert "gyroscope_random_walk was not detected; wrote its upper 95 % confidence" in err
+    assert ("gyroscope_random_walk (random_walk) was not detected on gx; wrote the largest "
+            "value over the axes, the upper 95 % confidence limit of gx: ") in err
+    assert "rad/s^2/sqrt(Hz) (marked in the file)" in err
+    assert text.endswith("\n")
     from imubench.recording import load_recording
 
     data = load_recording(recording).channel("gx")
@@ -91,7 +94,7 @@ def test_kalibr_never_writes_a_zero_random_walk(recording: Path, tmp_path: Path,
     nd = float(next(ln for ln in text.splitlines()
                     if ln.startswith("gyroscope_noise_density:")).split()[1])
     assert nd == pytest.approx(density, rel=0.03)
-    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m2.toml"),
+    rc = main(["fit", str(recording), "--channels", "gx,ax", "-o", str(tmp_path / "m2.toml"),
                "--kalibr", str(tmp_path / "x2.yaml"), "--kalibr-inflate", "10"])
     assert rc == 0
     inflated = (tmp_path / "x2.yaml").read_text()
@@ -190,3 +193,18 @@ def test_fit_shows_a_progress_bar_that_reaches_its_end(recording: Path, tmp_path
     assert rc == 0, captured.err
     assert set(json.loads(captured.out)["channels"]) == {"gx", "gy"}
     assert "fit:" in captured.err and "100%" in captured.err
+
+
+def test_kalibr_refuses_a_gyro_only_fit(recording: Path, tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Kalibr cannot load an imu.yaml without the accelerometer keys: one-line error
+    naming them, exit 2, and no file written."""
+    kal = tmp_path / "imu.yaml"
+    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m.toml"),
+               "--kalibr", str(kal)])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert len(err.strip().splitlines()) == 1, err
+    assert "accelerometer_noise_density, accelerometer_random_walk" in err
+    assert "no accelerometer (ax ay az) axis was fitted" in err
+    assert not kal.exists() and not (tmp_path / "m.toml").exists()

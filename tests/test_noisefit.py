@@ -384,3 +384,35 @@ def test_filtered_markov_column_is_exact_far_beyond_the_filter():
         got = term_avar("markov", m, 104.0, tau_c_s=tc, bandwidth_hz=46.8, filter_order=2)
         np.testing.assert_allclose(direct, exact, rtol=1e-9)
         np.testing.assert_allclose(got, exact, rtol=1e-9)
+
+
+def test_kalibr_mixed_detection_names_the_axes_and_units() -> None:
+    """ay detected the accelerometer random walk, ax and az did not: the value written is
+    the largest over the axes (here az's upper limit), and the note names the axes, says
+    which value was written and carries Kalibr's unit; the file ends with a newline."""
+    from imubench.noisefit.units import kalibr_limit_message
+
+    params = {"gx": {"white": 0.004, "random_walk": 1e-4},
+              "ax": {"white": 8e-5}, "ay": {"white": 8e-5, "random_walk": 1e-6},
+              "az": {"white": 8e-5}}
+    limits = {"ax": {"random_walk": 2e-6}, "ay": {}, "az": {"random_walk": 3e-6}}
+    k = kalibr_imu(params, 104.0, upper_limits=limits)
+    assert k["upper_limits"] == ["accelerometer_random_walk"]
+    assert k["not_detected"] == {"accelerometer_random_walk": ["ax", "az"]}
+    assert k["detected"] == {"accelerometer_random_walk": ["ay"]}
+    assert k["accelerometer_random_walk"] == pytest.approx(3e-6 * 9.80665)
+    msg = kalibr_limit_message("imu.yaml", k, "accelerometer_random_walk")
+    assert "not detected on ax, az (detected on ay)" in msg
+    assert "largest value over the axes, the upper 95 % confidence limit of az" in msg
+    assert "m/s^3/sqrt(Hz)" in msg and "\n" not in msg
+    assert kalibr_yaml(k).endswith("\n")
+    gyro = kalibr_imu({"gx": {"white": 0.004}, "ax": {"white": 8e-5, "random_walk": 1e-6}},
+                      104.0, upper_limits={"gx": {"random_walk": 5e-5}})
+    assert "rad/s^2/sqrt(Hz)" in kalibr_limit_message("k.yaml", gyro, "gyroscope_random_walk")
+
+
+def test_kalibr_refuses_one_sensor_only() -> None:
+    with pytest.raises(FitError, match="accelerometer_noise_density, accelerometer_random_walk"):
+        kalibr_imu({"gx": {"white": 0.004, "random_walk": 1e-4}}, 104.0)
+    with pytest.raises(FitError, match=r"no gyro \(gx gy gz\) axis was fitted"):
+        kalibr_imu({"az": {"white": 8e-5, "random_walk": 1e-6}}, 104.0)
