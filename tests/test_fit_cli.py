@@ -68,7 +68,7 @@ def test_kalibr_never_writes_a_zero_random_walk(recording: Path, tmp_path: Path,
     is checked against an independent figure: white noise of std sigma at rate f has the
     density sigma / sqrt(f) (dps/sqrt(Hz)), in rad/s/sqrt(Hz) times pi/180."""
     kal, js = tmp_path / "imu.yaml", tmp_path / "f.json"
-    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m.toml"),
+    rc = main(["fit", str(recording), "--channels", "gx,ax", "-o", str(tmp_path / "m.toml"),
                "--kalibr", str(kal), "--json", str(js)])
     err = capsys.readouterr().err
     assert rc == 0, err
@@ -83,7 +83,10 @@ def test_kalibr_never_writes_a_zero_random_walk(recording: Path, tmp_path: Path,
     assert value == pytest.approx(upper * np.pi / 180, rel=1e-6) and value > 0
     assert "upper 95 % limit: not detected" in line
     assert "below detection, written as the upper 95 % confidence limit" in text
-    assert "gyroscope_random_walk was not detected; wrote its upper 95 % confidence" in err
+    assert ("gyroscope_random_walk (random_walk) was not detected on gx; wrote the largest "
+            "value over the axes, the upper 95 % confidence limit of gx: ") in err
+    assert "rad/s^2/sqrt(Hz) (marked in the file)" in err
+    assert text.endswith("\n")
     from imubench.recording import load_recording
 
     data = load_recording(recording).channel("gx")
@@ -91,7 +94,7 @@ def test_kalibr_never_writes_a_zero_random_walk(recording: Path, tmp_path: Path,
     nd = float(next(ln for ln in text.splitlines()
                     if ln.startswith("gyroscope_noise_density:")).split()[1])
     assert nd == pytest.approx(density, rel=0.03)
-    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m2.toml"),
+    rc = main(["fit", str(recording), "--channels", "gx,ax", "-o", str(tmp_path / "m2.toml"),
                "--kalibr", str(tmp_path / "x2.yaml"), "--kalibr-inflate", "10"])
     assert rc == 0
     inflated = (tmp_path / "x2.yaml").read_text()
@@ -196,8 +199,7 @@ def test_kalibr_refused_when_nothing_states_the_units(tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]
                                                       ) -> None:
     """A one-column text file states no unit: it is read as dps with a warning, and the
-    Kalibr export (SI values) is refused until --units says what the numbers are; with
-    --units rad/s the values are converted."""
+    Kalibr export (SI values) is refused until --units says what the numbers are."""
     rec = tmp_path / "one.txt"
     np.savetxt(rec, np.random.default_rng(1).normal(size=20000) * 0.01)
     yaml = tmp_path / "imu.yaml"
@@ -206,12 +208,6 @@ def test_kalibr_refused_when_nothing_states_the_units(tmp_path: Path,
     err = capsys.readouterr().err
     assert "nothing states the unit of gx" in err and "--units" in err
     assert not yaml.exists() and not (tmp_path / "m.toml").exists()
-    assert main(["fit", str(rec), "--rate", "100", "--units", "rad/s,m/s2", "-o",
-                 str(tmp_path / "m2.toml"), "--kalibr", str(yaml)]) == 0
-    # 0.01 rad/s per sample at 100 Hz: white 1e-3 rad/s/sqrt(Hz)
-    text = yaml.read_text()
-    density = float(text.split("gyroscope_noise_density:")[1].split()[0])
-    assert density == pytest.approx(1e-3, rel=0.03)
 
 
 def test_fit_prints_and_writes_the_reasons(recording: Path, tmp_path: Path,
@@ -225,3 +221,18 @@ def test_fit_prints_and_writes_the_reasons(recording: Path, tmp_path: Path,
     assert gx["reasons"]["white"].startswith("kept")
     assert gx["reasons"]["sine"].startswith("dropped")
     assert set(gx["chi2_drop"]) >= {"white", "flicker", "sine"}
+
+
+def test_kalibr_refuses_a_gyro_only_fit(recording: Path, tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Kalibr cannot load an imu.yaml without the accelerometer keys: one-line error
+    naming them, exit 2, and no file written."""
+    kal = tmp_path / "imu.yaml"
+    rc = main(["fit", str(recording), "--channels", "gx", "-o", str(tmp_path / "m.toml"),
+               "--kalibr", str(kal)])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert len(err.strip().splitlines()) == 1, err
+    assert "accelerometer_noise_density, accelerometer_random_walk" in err
+    assert "no accelerometer (ax ay az) axis was fitted" in err
+    assert not kal.exists() and not (tmp_path / "m.toml").exists()

@@ -402,3 +402,85 @@ def test_reasons_cover_every_term_and_reach_the_json() -> None:
     assert f.to_dict()["reasons"] == f.reasons
     explicit = fit_channel(y, RATE, terms="white,random_walk")
     assert set(explicit.reasons) == {"white", "random_walk"}
+
+
+def _sim_recording(tmp_path):
+    import subprocess
+    import sys
+
+    src = tmp_path / "a.imbr"
+    subprocess.run([sys.executable, "-m", "imubench", "sim", "--chip", "lsm6dsl",
+                    "--duration-s", "300", "--model", "datasheet:lsm6dsl", "--out", str(src)],
+                   check=True, capture_output=True)
+    return src
+
+
+def test_fit_does_not_depend_on_last_bits_or_format(tmp_path):
+    """1-ulp changes of the samples (and the CSV round trip) leave the fit unchanged to
+    1e-6: the filtered Gauss-Markov column of the model search used to divide FFT
+    round-off by G(k1) ~ 1e-90, a column ~1e60 off that made chi2 jump between settings."""
+    from imubench.recording import convert, load_recording
+
+    src = _sim_recording(tmp_path)
+    convert(src, tmp_path / "a.csv")
+    rec = load_recording(src)
+    csv = load_recording(tmp_path / "a.csv")
+    for ch in ("gy", "gz", "az"):  # the channels whose fits moved by 0.1-1 % before
+        y = rec.channel(ch)
+        variants = (np.nextafter(y, np.inf), csv.channel(ch))
+        ref = fit_channel(y, rec.rate_hz, channel=ch)
+        for other in variants:
+            got = fit_channel(other, rec.rate_hz, channel=ch)
+            assert got.present == ref.present, ch
+            for key, value in ref.params.items():
+                assert got.params[key] == pytest.approx(value, rel=1e-6, abs=1e-300), (ch, key)
+
+
+def test_filtered_markov_column_is_exact_far_beyond_the_filter():
+    """term_avar of a filtered Gauss-Markov term equals the direct convolution even where
+    G(k) = phi^k is far below round-off (tau_c of a few samples, long filter)."""
+    rho = filter_autocorrelation(46.8, 2, 104.0)
+    m = np.array([1, 4, 64, 1024, 4096])
+    for tc in (0.0323, 0.0338, 0.3):
+        g = gacv_unit("markov", 2 * 4096 + rho.size + 1, 1 / 104.0, tau_c_s=tc)
+        direct = avar_from_gacv(apply_filter(g, rho, multiplicative=True), m)
+        # the exact convolution at every lag (no tail rule)
+        j = rho.size - 1
+        full = np.convolve(np.concatenate([g[j:0:-1], g]),
+                           np.concatenate([rho[:0:-1], rho]), mode="valid")
+        exact = avar_from_gacv(full, m)
+        got = term_avar("markov", m, 104.0, tau_c_s=tc, bandwidth_hz=46.8, filter_order=2)
+        np.testing.assert_allclose(direct, exact, rtol=1e-9)
+        np.testing.assert_allclose(got, exact, rtol=1e-9)
+
+
+def test_kalibr_mixed_detection_names_the_axes_and_units() -> None:
+    """ay detected the accelerometer random walk, ax and az did not: the value written is
+    the largest over the axes (here az's upper limit), and the note names the axes, says
+    which value was written and carries Kalibr's unit; the file ends with a newline."""
+    from imubench.noisefit.units import kalibr_limit_message
+
+    params = {"gx": {"white": 0.004, "random_walk": 1e-4},
+              "ax": {"white": 8e-5}, "ay": {"white": 8e-5, "random_walk": 1e-6},
+              "az": {"white": 8e-5}}
+    limits = {"ax": {"random_walk": 2e-6}, "ay": {}, "az": {"random_walk": 3e-6}}
+    k = kalibr_imu(params, 104.0, upper_limits=limits)
+    assert k["upper_limits"] == ["accelerometer_random_walk"]
+    assert k["not_detected"] == {"accelerometer_random_walk": ["ax", "az"]}
+    assert k["detected"] == {"accelerometer_random_walk": ["ay"]}
+    assert k["accelerometer_random_walk"] == pytest.approx(3e-6 * 9.80665)
+    msg = kalibr_limit_message("imu.yaml", k, "accelerometer_random_walk")
+    assert "not detected on ax, az (detected on ay)" in msg
+    assert "largest value over the axes, the upper 95 % confidence limit of az" in msg
+    assert "m/s^3/sqrt(Hz)" in msg and "\n" not in msg
+    assert kalibr_yaml(k).endswith("\n")
+    gyro = kalibr_imu({"gx": {"white": 0.004}, "ax": {"white": 8e-5, "random_walk": 1e-6}},
+                      104.0, upper_limits={"gx": {"random_walk": 5e-5}})
+    assert "rad/s^2/sqrt(Hz)" in kalibr_limit_message("k.yaml", gyro, "gyroscope_random_walk")
+
+
+def test_kalibr_refuses_one_sensor_only() -> None:
+    with pytest.raises(FitError, match="accelerometer_noise_density, accelerometer_random_walk"):
+        kalibr_imu({"gx": {"white": 0.004, "random_walk": 1e-4}}, 104.0)
+    with pytest.raises(FitError, match=r"no gyro \(gx gy gz\) axis was fitted"):
+        kalibr_imu({"az": {"white": 8e-5, "random_walk": 1e-6}}, 104.0)

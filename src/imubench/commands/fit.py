@@ -17,7 +17,7 @@ from imubench.commands import write_json
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
-from imubench.noisefit.units import kalibr_yaml, param_units
+from imubench.noisefit.units import kalibr_limit_message, kalibr_yaml, param_units
 from imubench.progress import progress
 from imubench.recording.options import add_input_arguments, input_options
 
@@ -108,17 +108,16 @@ def run(args: argparse.Namespace) -> int:
                 f"{args.recording}: --kalibr writes SI values, but nothing states the "
                 f"unit of {', '.join(result.units_assumed)} (read as dps / g); give "
                 "--units GYRO,ACCEL (e.g. --units rad/s,m/s2)")
+        # before any file is written: a Kalibr file that cannot be complete is an error
+        kalibr = result.kalibr(args.kalibr_inflate) if args.kalibr is not None else None
         model = result.noise_model()
         args.output.write_text(model.to_toml(), encoding="utf-8")
         if args.json is not None:
             write_json(result.to_dict(), args.json)
-        if args.kalibr is not None:
-            kalibr = result.kalibr(args.kalibr_inflate)
+        if args.kalibr is not None and kalibr is not None:
             args.kalibr.write_text(kalibr_yaml(kalibr), encoding="utf-8")
             for key in kalibr["upper_limits"]:
-                print(f"imubench fit: {args.kalibr}: {key} was not detected; wrote its upper "
-                      f"95 % confidence limit {kalibr[key]:.3e} (marked in the file), not "
-                      "zero", file=sys.stderr)
+                print(kalibr_limit_message(args.kalibr, kalibr, key), file=sys.stderr)
         if args.json != "-":
             print(format_summary(result))
     except OSError as exc:

@@ -85,6 +85,9 @@ def entry_dchi2(term: str) -> float:
 EXTENSION_DCHI2: float = 13.8
 """GLS chi-squared drop an extension (2 parameters) must give: chi2_2 at 0.999, which
 covers the look-elsewhere effect of the grid search better than BIC's 2 ln(n)."""
+MIN_SPARE_DOF: int = 3
+"""Degrees of freedom (AVAR points less parameters) the reference subset of the
+extension search must leave."""
 SEARCH_DELTA: float = 0.02
 """Relative floor used while searching the nonlinear settings only: it smooths the chi2
 landscape that points with EDF ~1e6 make rugged (final fits use the estimated delta)."""
@@ -527,7 +530,13 @@ def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
     coarse = replace(pts, delta=SEARCH_DELTA)
     fitted = {sub: _optimise(st, sub, coarse) for sub in subsets}
     chi2_diag = {sub: _fit_structure(fitted[sub], coarse, None).chi2 for sub in subsets}
-    ref_sub = min(subsets, key=lambda sb: chi2_diag[sb])
+    # the reference must leave degrees of freedom for the discrepancy floor: a subset
+    # with as many parameters as points fits anything and makes every drop look small
+    def spare(sb: tuple[str, ...]) -> int:
+        return int(pts.avar.size - len(fitted[sb].terms) - 2 * len(sb))
+
+    usable = [sb for sb in subsets if spare(sb) >= MIN_SPARE_DOF] or [()]
+    ref_sub = min(usable, key=lambda sb: chi2_diag[sb])
     reference = _polish(_polish(fitted[ref_sub], ref_sub, coarse), ref_sub, pts)
     fitted[ref_sub] = reference
     sol_ref = _fit_structure(reference, pts, None, iterations=3)

@@ -155,11 +155,28 @@ def apply_filter(g: np.ndarray, rho: np.ndarray, *, multiplicative: bool = False
     out[: k1 + 1] = head
     if k1 + 1 < n_out:
         if multiplicative:
-            ref = g[k1]
-            out[k1 + 1:] *= head[-1] / ref if abs(ref) > 1e-300 else 1.0
+            # G geometric (G(k) = phi^k, k >= 0): G_f(k) = s phi^(k-J) for k >= J exactly,
+            # s = sum_l rho(|l|) phi^(J-l), l = -J..J (every power <= 1: no overflow). The
+            # ratio head[-1] / G(k1) instead divides the convolution's round-off by a G(k1)
+            # that can be ~1e-90, which gave a Markov column ~1e60 too large and a
+            # chi-squared that jumped with 1-ulp changes of the data.
+            out[k1 + 1:] = _geometric_tail_sum(g, rho) * g[k1 + 1 - j: n_out - j]
         else:
             out[k1 + 1:] += head[-1] - g[k1]
     return out
+
+
+def _geometric_tail_sum(g: np.ndarray, rho: np.ndarray) -> float:
+    """s = sum_{l=-J..J} rho(|l|) phi^(J-l) for a geometric G (G(k) = G(1)^k, G(0) = 1).
+
+    Then G_f(k) = s G(k - J) for every k >= J: the filtered Gauss-Markov autocovariance
+    beyond the filter's length, exact and without dividing by a vanishing G(k).
+    """
+    j = rho.size - 1
+    full_rho = np.concatenate([rho[:0:-1], rho])  # rho(|l|), l = -J..J
+    powers = g[: 2 * j + 1][::-1] if g.size > 2 * j else (
+        float(g[1]) ** np.arange(2 * j, -1, -1, dtype=np.float64))
+    return float(full_rho @ powers)
 
 
 def avar_from_gacv(g: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -218,8 +235,14 @@ def _filtered_avar(term: str, m: np.ndarray, rate_hz: float, rho: np.ndarray, *,
     g = gacv_unit(term, k1 + j + 2, 1.0 / rate_hz, tau_c_s=tau_c_s, f0_hz=f0_hz)
     head = apply_filter(g, rho, multiplicative=term == "markov")[: k1 + 1]
     if term == "markov":
-        ref = g[k1]
-        r, c = (head[-1] / ref if abs(ref) > 1e-300 else 1.0), 0.0
+        # G_f(k) = r G(k) for k >= J with r = sum_l rho(|l|) phi^(-l) (see apply_filter);
+        # from rho and phi, not head[-1] / G(k1) (round-off over a tiny G(k1))
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = _geometric_tail_sum(g, rho) / g[j] if g[j] > 0 else math.inf
+        if not math.isfinite(r):  # phi^J underflows: the direct form
+            g = _gacv_cached(term, kmax, 1.0 / rate_hz, tau_c_s, f0_hz)
+            return avar_from_gacv(apply_filter(g, rho, multiplicative=True), m)
+        c = 0.0
     else:
         r, c = 1.0, head[-1] - g[k1]
     d = head - r * g[: k1 + 1] - c

@@ -140,36 +140,58 @@ def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: fl
     detected on an axis (absent from ``params_by_channel``, or zero) contributes its
     upper 95 % confidence limit from ``upper_limits`` instead, and the key is listed in
     ``upper_limits`` of the result: a zero random walk would make Kalibr and every VIO
-    filter that reads the file trust the bias forever. ``inflate`` multiplies every
-    noise value (a safety factor for real-world use; recorded as ``inflate``).
+    filter that reads the file trust the bias forever. ``not_detected`` / ``detected`` of
+    the result map each such key to the axes that gave an upper limit / their estimate,
+    and ``axis`` maps every key to the axis whose value was written.
+    ``inflate`` multiplies every noise value (a safety factor for real-world use; recorded
+    as ``inflate``).
+
+    Kalibr needs all four densities: when no gyro or no accelerometer axis was fitted,
+    :class:`FitError` names the missing keys (no placeholder values are made up).
     """
     if not (math.isfinite(inflate) and inflate >= 1.0):
         raise FitError(f"--kalibr-inflate {inflate}: must be a number >= 1")
+    missing = [key for key, (sensor, _) in KALIBR_TERMS.items()
+               if not any(ch in params_by_channel
+                          for ch in (GYRO if sensor == "gyro" else ACCEL))]
+    if missing:
+        sensors = sorted({KALIBR_TERMS[k][0] for k in missing})
+        names = " and ".join("accelerometer (ax ay az)" if s == "accel" else "gyro (gx gy gz)"
+                             for s in sensors)
+        raise FitError(f"Kalibr imu.yaml needs {', '.join(missing)}, but no {names} axis "
+                       "was fitted; fit both sensors")
     limits = upper_limits or {}
     out: dict[str, Any] = {"rostopic": rostopic, "update_rate": float(rate_hz)}
     marked: list[str] = []
+    not_detected: dict[str, list[str]] = {}
+    detected: dict[str, list[str]] = {}
+    axis: dict[str, str] = {}
     for key, (sensor, term) in KALIBR_TERMS.items():
         chans = GYRO if sensor == "gyro" else ACCEL
         scale = DEG if sensor == "gyro" else G0
-        values: list[tuple[float, bool]] = []  # (value, is an upper limit)
+        values: list[tuple[float, bool, str]] = []  # (value, is an upper limit, axis)
         for ch in chans:
             if ch not in params_by_channel:
                 continue
             v = float(params_by_channel[ch].get(term, 0.0))
             if v <= 0.0 and term in limits.get(ch, {}):
-                values.append((float(limits[ch][term]), True))
+                values.append((float(limits[ch][term]), True, ch))
             else:
-                values.append((v, False))
-        if not values:
-            continue
-        worst, limited = max(values)
+                values.append((v, False, ch))
+        worst, limited, worst_ch = max(values)
         if worst <= 0.0:
             raise FitError(f"Kalibr {key}: no axis has a value or an upper limit for "
                            f"{term}; refusing to write zero")
         out[key] = worst * scale * inflate
+        axis[key] = worst_ch
         if limited:
             marked.append(key)
+            not_detected[key] = [ch for _, lim, ch in values if lim]
+            detected[key] = [ch for _, lim, ch in values if not lim]
     out["upper_limits"] = marked
+    out["not_detected"] = not_detected
+    out["detected"] = detected
+    out["axis"] = axis
     out["inflate"] = float(inflate)
     return out
 
@@ -206,6 +228,23 @@ def kalibr_yaml(values: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def kalibr_limit_message(path: object, values: Mapping[str, Any], key: str) -> str:
+    """The one-line stderr note for a Kalibr key written as an upper confidence limit:
+    the axes that did not detect the term, those that did, and that the value written is
+    the largest over the axes (estimates where detected, upper limits elsewhere), in
+    Kalibr's unit."""
+    term = KALIBR_TERMS[key][1]
+    missed = list(values.get("not_detected", {}).get(key, []))
+    detected = list(values.get("detected", {}).get(key, []))
+    axis = values.get("axis", {}).get(key, "?")
+    where = f"on {', '.join(missed) or '?'}"
+    if detected:
+        where += f" (detected on {', '.join(detected)})"
+    return (f"imubench fit: {path}: {key} ({term}) was not detected {where}; wrote the "
+            f"largest value over the axes, the upper 95 % confidence limit of {axis}: "
+            f"{float(values[key]):.3e} {KALIBR_UNITS[key]} (marked in the file), not zero")
+
+
 def datasheet_comparison(chip: str | None,
                          params_by_channel: Mapping[str, Mapping[str, float]]
                          ) -> dict[str, dict[str, Any]]:
@@ -240,6 +279,7 @@ __all__ = [
     "datasheet_comparison",
     "datasheet_units",
     "kalibr_imu",
+    "kalibr_limit_message",
     "kalibr_yaml",
     "param_units",
     "quantities",
