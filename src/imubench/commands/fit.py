@@ -95,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
                       "zero", file=sys.stderr)
         if args.json != "-":
             print(format_summary(result))
+    except BrokenPipeError:
+        raise  # stdout's reader went away: cli.main exits 141, no message
     except OSError as exc:
         print(f"imubench fit: error: cannot write {exc.filename}: {exc.strerror}",
               file=sys.stderr)

@@ -399,6 +399,8 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
     try:
         unit, scale = time_unit_from_spacing(t_raw, where)
     except RecordingError:
+        if rate is not None and col.name == "t" and col.text.strip() == "t":
+            return "s (imubench's t)", 1.0  # its own column is in seconds
         steps = np.diff(t_raw)
         steps = steps[np.isfinite(steps) & (steps > 0)]
         if rate is None or not steps.size:
@@ -410,7 +412,8 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
         return f"{unit} (from the rate)", options_s[unit]
     if col.name == "t" and unit != "s" and col.text.strip() == "t":
         # imubench's own column is in seconds: a spacing that says otherwise is refused
-        step = float(np.median(np.diff(t_raw)))
+        steps = np.diff(t_raw[np.isfinite(t_raw)])
+        step = float(np.median(steps[steps > 0]))  # > 0: time_unit_from_spacing found one
         raise RecordingError(
             f"{where}: column t steps by {step:.6g}: {1 / step:.6g} Hz if in seconds (as "
             f"imubench writes it), {1 / (step * scale):.6g} Hz if in {unit}; give "
