@@ -79,6 +79,31 @@ def test_closed_pipe_is_quiet(tmp_path: Path) -> None:
     assert err.read_text() == ""
 
 
+@pytest.mark.parametrize("command", ["allan", "fit", "gap"])
+def test_json_to_a_closed_pipe_exits_141_quietly(tmp_path: Path, command: str) -> None:
+    """``--json -`` into a pipe whose reader is gone (``| head -1`` after its line): exit
+    141 and no message, for every command (fit said "cannot write None", exit 2)."""
+    import os
+
+    data = one_column(tmp_path)
+    model = tmp_path / "m.toml"
+    assert cli.main(["fit", str(data), "--rate", "100", "-o", str(model)]) == 0
+    args = {"allan": ["allan", str(data), "--stat", "adev", "--json", "-"],
+            "fit": ["fit", str(data), "--rate", "100", "-o", str(tmp_path / "m2.toml"),
+                    "--json", "-"],
+            "gap": ["gap", str(data), "--rate", "100", "--model", str(model), "--json",
+                    "-"]}[command]
+    r, w = os.pipe()
+    os.close(r)  # the reader went away before the JSON came
+    try:
+        proc = subprocess.run(imubench(*args), stdout=w, stderr=subprocess.PIPE, text=True,
+                              timeout=300)
+    finally:
+        os.close(w)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == ""
+
+
 INTERRUPTED = (130, -signal.SIGINT)
 """Exit 130, or death by SIGINT (which a shell reports as 130 too): CPython ends that way
 when a KeyboardInterrupt crossed one of its C-level code runners, even if caught later."""

@@ -185,6 +185,22 @@ def test_prepare_errors_stop_before_the_source_opens(tmp_path: Path) -> None:
         pipeline.prepare()
 
 
+def test_recorder_creates_its_directory_only_when_asked(tmp_path: Path) -> None:
+    """The daemon's log.path makes its directories (make_dirs); acquire's OUT does not."""
+    out = tmp_path / "new" / "r.imbr"
+    pipeline = Pipeline(open_source("sim://lsm6dsl?odr_hz=104&duration_s=1"),
+                        [Recorder(out, {})])
+    with pytest.raises(Exception, match="does not exist"):
+        pipeline.prepare()
+    assert not out.parent.exists()
+    pipeline = Pipeline(open_source("sim://lsm6dsl?odr_hz=104&duration_s=1"),
+                        [Recorder(out, {}, make_dirs=True)])
+    pipeline.prepare()
+    pipeline.start()
+    assert pipeline.join(60)
+    assert len(load_recording(out)) == 104
+
+
 def test_a_failing_consumer_is_reported_and_the_others_continue() -> None:
     class Boom(Consumer):
         name = "boom"

@@ -155,7 +155,7 @@ def test_never_overwrites_and_rejects_unknown_suffix(tmp_path: Path) -> None:
     open_writer(p, meta()).close()
     with pytest.raises(RecordingError, match="exists already"):
         open_writer(p, meta())
-    with pytest.raises(RecordingError, match="unknown recording suffix"):
+    with pytest.raises(RecordingError, match="cannot write this format"):
         open_writer(tmp_path / "x.xyz", meta())
 
 
@@ -276,3 +276,98 @@ def test_options_that_contradict_the_header_warn_or_refuse(
     assert "column 'w_RS_S_x [rad s^-1]' says rad/s, read as dps (--units)" in caplog.text
     with pytest.raises(RecordingError, match=r"gives 0\.0002 Hz with t in ms"):
         load_recording(p, InputOptions(time_unit="ms"))
+
+
+def test_convert_prints_the_gaps_it_writes_for_a_damaged_input(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A damaged .imbr's skipped records become holes: the summary counts the ``# gap``
+    lines written, not the (zero) gap records of the input."""
+    src = tmp_path / "flip.imbr"
+    with open_writer(src, meta(storage="raw_int16")) as w:
+        for b in make_batches(hole_at=999, lost=0):
+            w.write(b)
+    data = bytearray(src.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    src.write_bytes(bytes(data))
+    out = tmp_path / "out.csv"
+    assert main(["convert", str(src), str(out)]) == 0
+    written = [ln for ln in out.read_text().splitlines() if ln.startswith("# gap")]
+    assert written
+    lost = sum(int(ln.split("lost=")[1].split()[0]) for ln in written)
+    assert f"{len(written)} gaps ({lost} samples lost)" in capsys.readouterr().out
+
+
+def test_convert_refuses_a_missing_output_directory(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    src = tmp_path / "a.imbr"
+    with open_writer(src, meta(storage="raw_int16")) as w:
+        for b in make_batches():
+            w.write(b)
+    for name in ("x.csv", "x.imbr", "x.h5"):
+        out = tmp_path / "nodir" / name
+        assert main(["convert", str(src), str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"{tmp_path / 'nodir'} does not exist" in err and len(err.splitlines()) == 1
+        assert not (tmp_path / "nodir").exists()
+    assert main(["convert", str(src), str(tmp_path / "nodir" / "x.dat"), "--channel",
+                 "gx"]) == 2
+    assert not (tmp_path / "nodir").exists()
+
+
+@pytest.mark.parametrize("name", ["x.mcap", "x.txt", "x.xyz", "x.db3"])
+def test_convert_bad_output_suffix_lists_writable_formats_only(
+        tmp_path: Path, name: str, capsys: pytest.CaptureFixture) -> None:
+    src = tmp_path / "a.imbr"
+    with open_writer(src, meta(storage="raw_int16")) as w:
+        for b in make_batches():
+            w.write(b)
+    assert main(["convert", str(src), str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert ".imbr, .csv, .csv.gz or .h5" in err and ".dat with --channel" in err
+    assert "mcap" not in err.replace(name, "") and "ROS" not in err
+
+
+def test_csv_keeps_epoch_time_stamps_exactly(tmp_path: Path) -> None:
+    """EuRoC / ROS exports stamp in epoch seconds (~1.4e9): ``t`` must survive a CSV round
+    trip (it was cut to 9 significant digits: one stamp per 10 s, step 0)."""
+    src = tmp_path / "euroc.csv"
+    t_ns = 1403636579758555392 + np.arange(3000, dtype=np.int64) * 5_000_000
+    lines = ["#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+             "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"]
+    lines += [f"{t},0.01,0.02,0.03,0.1,0.2,9.81" for t in t_ns.tolist()]
+    src.write_text("\n".join(lines) + "\n")
+    a = load_recording(src)
+    out = tmp_path / "out.csv"
+    assert main(["convert", str(src), str(out)]) == 0
+    b = load_recording(out)
+    assert b.rate_hz == pytest.approx(200.0, rel=1e-9)
+    np.testing.assert_array_equal(b.t_s, a.t_s)
+    np.testing.assert_array_equal(b.index, a.index)
+    # a 30-day log at 1 kHz: the last stamps keep sub-sample resolution
+    last = 30 * 86400.0 - np.arange(3)[::-1] * 1e-3
+    w_path = tmp_path / "long.csv"
+    with open_writer(w_path, meta()) as w:
+        n = len(last)
+        w.write(Batch(np.arange(n, dtype=np.int64) + 2_592_000_000 - n, last,
+                      np.zeros((n, 6)), np.full(n, 25.0)))
+    rows = [ln.split(",") for ln in w_path.read_text().splitlines()
+            if ln[:1].isdigit()]
+    assert [float(r[0]) for r in rows] == last.tolist()
+    assert [int(r[-1]) for r in rows] == list(range(2_592_000_000 - 3, 2_592_000_000))
+
+
+def test_repeated_time_stamps_are_a_clear_error(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture) -> None:
+    """A file written by the old 9-digit writer: most stamps repeat (step 0). One line
+    naming the file and --rate, exit 2 (was a ZeroDivisionError traceback, exit 70)."""
+    p = tmp_path / "old.csv"
+    rows = [f"{1403636579.758555 + i * 0.005:.9g},0.1,0.2,0.3,0,0,1,25,{i}"
+            for i in range(5000)]
+    p.write_text("t,gx,gy,gz,ax,ay,az,temp,index\n" + "\n".join(rows) + "\n")
+    assert main(["convert", str(p), str(tmp_path / "o.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(p) in err[0] and "--rate HZ" in err[0], err
+    with pytest.raises(RecordingError, match="--rate HZ"):
+        load_recording(p)
+    rec = load_recording(p, InputOptions(rate_hz=200.0))  # the fix the message names
+    assert len(rec) == 5000 and rec.rate_hz == 200.0

@@ -77,7 +77,8 @@ class Recorder(Consumer):
 
     def __init__(self, path: Path, metadata: dict[str, Any], *, fsync_interval_s: float = 1.0,
                  retry_s: float = 5.0,
-                 on_state: Callable[[str], None] | None = None) -> None:
+                 on_state: Callable[[str], None] | None = None,
+                 make_dirs: bool = False) -> None:
         if recording_kind(path) not in LIVE_KINDS:
             raise RecordingError(
                 f"{path}: a live recording must be .imbr, .csv or .csv.gz (written batch by "
@@ -87,6 +88,9 @@ class Recorder(Consumer):
         self.fsync_interval_s = fsync_interval_s
         self.retry_s = retry_s
         self.on_state = on_state
+        self.make_dirs = make_dirs
+        """Create the directory of the recording (the daemon's ``log.path``); without it a
+        missing directory is an error (``acquire``'s OUT given on the command line)."""
         self.state = "starting"
         self.segments: list[Path] = []
         self.samples = 0
@@ -133,6 +137,10 @@ class Recorder(Consumer):
             meta["segment"] = segment
             meta["previous_segment"] = str(self.segments[-1]) if self.segments else None
         try:
+            if self.make_dirs:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            elif segment > 1 and not path.parent.is_dir():  # gone while recording: retry
+                raise FileNotFoundError(errno.ENOENT, "no such directory", str(path.parent))
             writer = open_writer(path, meta, fsync_interval_s=self.fsync_interval_s)
         except OSError:
             with contextlib.suppress(OSError):  # a header cut by a full disk is no file

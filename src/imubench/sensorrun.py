@@ -73,6 +73,7 @@ class SensorRun:
                  "calibration": recording_header(self.calibration)},
                 fsync_interval_s=cfg.log.fsync_interval_s,
                 on_state=lambda state: on_recorder_state(self, state),
+                make_dirs=True,  # log.path may name directories per station / day
             )
         self.engine_consumer: AllanConsumer | None = None
         self.pipeline: Pipeline | None = None

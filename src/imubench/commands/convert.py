@@ -39,15 +39,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     with progress(100, "convert", unit="%") as bar:
-        rec = convert(args.input, args.output, input_options(args), channel=args.channel,
-                      calibration=args.calibration,
-                      on_progress=lambda done, total: bar.fraction(done / max(total, 1)))
+        done = convert(args.input, args.output, input_options(args), channel=args.channel,
+                       calibration=args.calibration,
+                       on_progress=lambda done, total: bar.fraction(done / max(total, 1)))
+    rec = done.recording
     note = f"; input was damaged: {rec.damage}" if rec.damage else ""
     if args.calibration is not None:
         note += f"; calibration {args.calibration} applied (raw counts unchanged)"
     what = (f"Stable32 data file of {args.channel} in {UNITS[args.channel]}, "
             f"{len(rec)} values, tau0 {1.0 / rec.rate_hz:.6g} s"
             if args.output.lower().endswith(STABLE32_SUFFIX)
-            else f"{len(rec)} samples, {len(rec.gaps)} gaps")
+            else f"{len(rec)} samples, {done.gaps} gaps"
+            + (f" ({done.lost_samples} samples lost)" if done.lost_samples else ""))
     print(f"{args.input} -> {args.output}: {what}{note}")
     return 0

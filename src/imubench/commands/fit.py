@@ -120,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
                 print(kalibr_limit_message(args.kalibr, kalibr, key), file=sys.stderr)
         if args.json != "-":
             print(format_summary(result))
+    except BrokenPipeError:
+        raise  # stdout's reader went away: cli.main exits 141, no message
     except OSError as exc:
         print(f"imubench fit: error: cannot write {exc.filename}: {exc.strerror}",
               file=sys.stderr)

@@ -46,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         files = write_report(args.recording, args.out, terms=args.terms, method=args.method,
                              options=input_options(args), model_file=args.model)
+    except BrokenPipeError:
+        raise  # stdout's reader went away: cli.main exits 141, no message
     except OSError as exc:
         print(f"imubench report: error: {exc}", file=sys.stderr)
         return 2

@@ -38,9 +38,9 @@ from imubench.recording.stable32 import write_stable32
 from imubench.recording.textin import read_text
 
 __all__ = [
-    "STABLE32_SUFFIX", "STORAGE_FLOAT", "STORAGE_RAW", "CsvWriter", "Gap", "Hdf5Writer",
-    "InputOptions", "NativeReader", "NativeWriter", "Recording", "convert", "load_recording",
-    "open_writer", "recording_kind",
+    "STABLE32_SUFFIX", "STORAGE_FLOAT", "STORAGE_RAW", "Converted", "CsvWriter", "Gap",
+    "Hdf5Writer", "InputOptions", "NativeReader", "NativeWriter", "Recording", "convert",
+    "load_recording", "open_writer", "recording_kind", "writer_kind",
 ]
 
 log = logging.getLogger(__name__)
@@ -48,6 +48,16 @@ TEXT_SUFFIXES = (".csv", ".txt", ".dat", ".tsv")
 """Text tables (each also as ``.gz``)."""
 
 Writer = NativeWriter | CsvWriter | Hdf5Writer
+
+
+@dataclass(frozen=True)
+class Converted:
+    """What :func:`convert` read and what it wrote: ``gaps`` / ``lost_samples`` count the
+    gap records in the output (the writer's counts: a damaged input's holes included)."""
+
+    recording: Recording
+    gaps: int
+    lost_samples: int
 HDF5_SUFFIXES = (".h5", ".hdf5")
 STABLE32_SUFFIX = ".dat"
 """What ``convert`` writes as a Stable32 data file (one channel)."""
@@ -220,23 +230,35 @@ def _load_native(path: Path, opts: InputOptions) -> Recording:
 
 def open_writer(path: str | Path, metadata: dict[str, Any], **kwargs: Any) -> Writer:
     """Writer for a new recording, native, CSV or HDF5 by suffix."""
-    kind = recording_kind(path)
+    kind = writer_kind(path)
     if kind == "csv":
         return CsvWriter(path, metadata, **kwargs)
     if kind == "hdf5":
         return Hdf5Writer(path, metadata, **kwargs)
-    if kind in ("text", "ros"):
-        raise RecordingError(f"{path}: imubench writes .imbr, .csv / .csv.gz or .h5 "
-                             "recordings (and one channel to a Stable32 .dat with convert "
-                             "--channel)")
     return NativeWriter(path, metadata, **kwargs)
+
+
+def writer_kind(path: str | Path) -> str:
+    """``native``, ``csv`` or ``hdf5``: the kind of recording :func:`open_writer` writes
+    to ``path``; RecordingError listing the writable formats otherwise (the input-only
+    ones, .mcap, ROS 2 bags and other text tables, are not offered)."""
+    try:
+        kind = recording_kind(path)
+    except RecordingError:
+        kind = "unknown"
+    if kind not in ("native", "csv", "hdf5"):
+        raise RecordingError(f"{path}: imubench cannot write this format; use .imbr, .csv, "
+                             ".csv.gz or .h5 (or .dat with --channel for one channel as "
+                             "Stable32 data)")
+    return kind
 
 
 def convert(src: str | Path, dst: str | Path, options: InputOptions | None = None,
             channel: str | None = None, calibration: str | Path | None = None,
-            on_progress: Callable[[int, int], None] | None = None) -> Recording:
+            on_progress: Callable[[int, int], None] | None = None) -> Converted:
     """Convert ``src`` to ``dst`` (by suffix), keeping metadata, gaps and raw counts; a
-    ``.dat`` destination is a Stable32 data file of ``channel``.
+    ``.dat`` destination is a Stable32 data file of ``channel``. The directory ``dst``
+    goes into must exist (writers never create one).
 
     ``calibration``: a calibration file applied to the values (raw counts stay as they
     are; the header states it, as ``acquire --calibration`` does); refused when the
@@ -251,6 +273,7 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
     if not is_dat and channel is not None:
         raise RecordingError(f"{dst}: --channel is for a Stable32 .dat export; other "
                              "formats keep every channel")
+    kind = "dat" if is_dat else writer_kind(dst)  # before reading: a bad OUT fails fast
     rec = load_recording(src, options)
     if calibration is not None:
         rec = _calibrated(rec, calibration)
@@ -259,13 +282,13 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
         log.info("%s", write_stable32(rec, channel, dst))
         if on_progress is not None:
             on_progress(len(rec), len(rec))
-        return rec
+        return Converted(rec, 0, 0)
     meta, dropped = drop_secrets(dict(rec.metadata))
     if dropped:
         log.warning("%s: dropped %d secret(s) from the header: %s (not copied to %s)", src,
                     len(dropped), ", ".join(dropped), dst)
     meta["converted_from"] = str(src)
-    if recording_kind(dst) == "native":
+    if kind == "native":
         meta["storage"] = STORAGE_RAW if rec.raw is not None else STORAGE_FLOAT
     else:
         meta.pop("storage", None)
@@ -287,7 +310,7 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
                 on_progress(min(start + CONVERT_BLOCK, len(rec)), len(rec))
         if j < len(gaps):  # the recording ended in a gap
             writer.write(Batch.empty(with_raw=rec.raw is not None, gaps=gaps[j:]))
-    return rec
+    return Converted(rec, writer.gaps, writer.lost_samples)
 
 
 def _calibrated(rec: Recording, path: str | Path) -> Recording:

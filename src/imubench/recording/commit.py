@@ -19,6 +19,17 @@ from typing import IO, Any
 log = logging.getLogger(__name__)
 
 
+def need_parent(path: Path) -> None:
+    """RecordingError unless the directory ``path`` goes into exists: writers never create
+    directories; a caller that means to (the daemon's ``log.path``) creates it first."""
+    parent = path.parent
+    if not parent.is_dir():
+        from imubench.errors import RecordingError
+
+        raise RecordingError(f"{path}: the directory {parent} does not exist; create it "
+                             "first (or give another output path)")
+
+
 def cut_back(path: Path, fh: IO[Any], size: int) -> None:
     """Close ``fh`` without writing its buffer further, and cut ``path`` to ``size`` bytes.
 

@@ -1,12 +1,24 @@
 """CSV interchange written by imubench: header ``t,gx,gy,gz,ax,ay,az,temp,index``.
 
-Units: ``t`` seconds since the start, ``gx gy gz`` dps, ``ax ay az`` g, ``temp`` degC,
+Units: ``t`` seconds (since the start; a converted file keeps its source's origin),
+``gx gy gz`` dps, ``ax ay az`` g, ``temp`` degC,
 ``index`` the sample index (ODR periods since the start). Lines starting with ``#``
 before the header carry metadata as ``# key: <JSON value>`` (``odr_hz``, ``chip``, ... as
 in the native header; ``# units:`` the columns' units, :data:`COLUMN_UNITS`). Lines
 ``# gap at_index=N lost=M reason=TEXT`` record a declared gap before the sample after
 them. An empty field is a missing value (NaN). Files ending
-in ``.gz`` are gzip-compressed. Reading (of these files and of CSV from elsewhere):
+in ``.gz`` are gzip-compressed.
+
+Number formats (what a round trip keeps): ``t`` is written exactly, as the shortest text
+that reads back as the same float64 (Python's ``repr``; up to 17 significant digits), so
+absolute epoch stamps that a converted file keeps (EuRoC, ROS exports: ~1.7e9 s) keep all
+the precision the reader holds (float64: 0.24 us at 1.7e9 s), and a 30-day log at 1 kHz
+(2.6e6 s: 0.5 ns) keeps sub-sample resolution. ``index`` is an exact integer. The values
+(``gx`` .. ``az``, ``temp``) are written with 9 significant digits: exact for float32
+samples, and for float64 values from elsewhere a relative error below 5e-9, far finer
+than the resolution of a MEMS sensor (a 24-bit converter's step is 6e-8 of full scale).
+
+Reading (of these files and of CSV from elsewhere):
 :mod:`imubench.recording.textin`.
 """
 
@@ -26,7 +38,7 @@ import numpy as np
 
 from imubench.batch import CHANNELS, UNITS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
-from imubench.recording.commit import cut_back
+from imubench.recording.commit import cut_back, need_parent
 
 COLUMNS: tuple[str, ...] = ("t", *CHANNELS, "temp")
 COLUMN_UNITS: dict[str, str] = {"t": "s", **UNITS, "index": "samples"}
@@ -42,12 +54,18 @@ def _open_text(path: Path, mode: str) -> IO[str]:
     return open(path, mode, encoding="utf-8", newline="")
 
 
+def _time_text(t: float) -> str:
+    """``t`` exactly: the shortest text that reads back as the same float64 (``repr``);
+    empty for NaN."""
+    return "" if math.isnan(t) else repr(t)
+
+
 class CsvWriter:
-    """Writes Batches as CSV rows (values as printed with 9 significant digits)."""
+    """Writes Batches as CSV rows (number formats: the module docstring)."""
 
     def __init__(self, path: str | Path, metadata: dict[str, Any], **_: Any) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        need_parent(self.path)
         if self.path.exists():
             raise RecordingError(f"{self.path}: exists already; recordings are never overwritten")
         self.metadata = dict(metadata)
@@ -97,16 +115,18 @@ class CsvWriter:
             self._fh.write(buf.getvalue())
             self._fh.flush()
             return
-        table = np.column_stack([batch.t_s, batch.values, batch.temp_c, batch.index])
+        table = np.column_stack([batch.values, batch.temp_c])
         last = int(batch.index[-1])
         for at in [a for a in holes if a <= int(batch.index[0]) or a > last]:
             for g in holes.pop(at):
                 self._gap_line(buf, g.at, g.lost, g.reason)
-        for idx, row in zip(batch.index, table, strict=True):
-            if holes and int(idx) in holes:
-                for g in holes.pop(int(idx)):
+        for idx, t, row in zip(batch.index.tolist(), batch.t_s.tolist(), table, strict=True):
+            if holes and idx in holes:
+                for g in holes.pop(idx):
                     self._gap_line(buf, g.at, g.lost, g.reason)
-            buf.write(",".join("" if math.isnan(v) else f"{v:.9g}" for v in row) + "\n")
+            buf.write(_time_text(t) + ","
+                      + ",".join("" if math.isnan(v) else f"{v:.9g}" for v in row)
+                      + f",{idx}\n")
         self._fh.write(buf.getvalue())
         self._fh.flush()
         self.samples += len(batch)

@@ -39,6 +39,7 @@ import numpy as np
 
 from imubench.batch import CHANNELS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
+from imubench.recording.commit import need_parent
 
 FORMAT = "imubench-hdf5"
 VERSION = 1
@@ -88,7 +89,7 @@ class Hdf5Writer:
         import h5py
 
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        need_parent(self.path)
         self.metadata = dict(metadata)
         self.metadata.pop("storage", None)  # values are stored as float64, raw alongside
         self.samples = 0

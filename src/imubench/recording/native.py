@@ -55,7 +55,7 @@ import numpy as np
 
 from imubench.batch import CHANNELS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
-from imubench.recording.commit import cut_back
+from imubench.recording.commit import cut_back, need_parent
 
 MAGIC = b"IMBR"
 VERSION = 1
@@ -102,7 +102,7 @@ class NativeWriter:
         self.lost_samples = 0
         self._last_index: int | None = None
         self._last_sync = time.monotonic()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        need_parent(self.path)
         try:
             self._fh: BinaryIO | None = open(self.path, "xb")  # noqa: SIM115
         except FileExistsError:

@@ -31,6 +31,7 @@ import numpy as np
 
 from imubench.batch import UNITS
 from imubench.errors import RecordingError
+from imubench.recording.commit import need_parent
 from imubench.recording.timebase import SECONDS_PER_DAY
 
 if TYPE_CHECKING:
@@ -82,7 +83,7 @@ def write_stable32(rec: Recording, channel: str, path: str | Path) -> str:
         if start is None:
             meta["time_tag_epoch"] = "MJD 51544 (2000-01-01): the recording states no start"
             start = FALLBACK_MJD
-    path.parent.mkdir(parents=True, exist_ok=True)
+    need_parent(path)
     with open(path, "x", encoding="ascii", newline="\n") as fh:
         fh.write(f"# imubench Stable32 data file: frequency data ({channel} in "
                  f"{UNITS[channel]}), {layout}\n")

@@ -358,7 +358,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if overridden:
         notes.append(f"{where}: the options override the header: " + "; ".join(overridden))
     batch = Batch(index=tb.index, t_s=t_s[keep], values=values[keep], temp_c=temp[keep])
-    inferred = bool(assumed or overridden) or not (
+    inferred = bool(overridden) or not (
         (fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
         or (raw.width == 1 and raw.header is None))  # allan's plain series
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
@@ -442,6 +442,8 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
     try:
         unit, scale = time_unit_from_spacing(t_raw, where)
     except RecordingError:
+        if rate is not None and col.name == "t" and col.text.strip() == "t":
+            return "s (imubench's t)", 1.0  # its own column is in seconds
         steps = np.diff(t_raw)
         steps = steps[np.isfinite(steps) & (steps > 0)]
         if rate is None or not steps.size:
@@ -453,7 +455,8 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
         return f"{unit} (from the rate)", options_s[unit]
     if col.name == "t" and unit != "s" and col.text.strip() == "t":
         # imubench's own column is in seconds: a spacing that says otherwise is refused
-        step = float(np.median(np.diff(t_raw)))
+        steps = np.diff(t_raw[np.isfinite(t_raw)])
+        step = float(np.median(steps[steps > 0]))  # > 0: time_unit_from_spacing found one
         raise RecordingError(
             f"{where}: column t steps by {step:.6g}: {1 / step:.6g} Hz if in seconds (as "
             f"imubench writes it), {1 / (step * scale):.6g} Hz if in {unit}; give "

@@ -97,10 +97,17 @@ def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
 
 
 def _median_step(t: np.ndarray, where: str) -> float:
-    d = np.diff(t[np.isfinite(t)])
-    d = d[d > 0]
+    """Median of the increasing steps; RecordingError (with the fix) when there are none
+    or when most stamps repeat (median step 0: stamps written with too few digits, e.g.
+    epoch seconds cut to 9 significant digits, so that no rate can be read from them)."""
+    steps = np.diff(t[np.isfinite(t)])
+    d = steps[steps > 0]
     if not len(d):
         raise RecordingError(f"{where}: the time column never increases; give --rate HZ")
+    if float(np.median(steps)) <= 0:
+        raise RecordingError(
+            f"{where}: most time stamps repeat the one before (median step 0; written with "
+            f"too few digits?); give --rate HZ")
     return float(np.median(d))
 
 
