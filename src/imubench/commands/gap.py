@@ -48,7 +48,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("real", type=Path, metavar="REAL", help="recording (.imbr/.csv)")
+    p.add_argument("real", type=Path, metavar="REAL",
+                   help="recording (.imbr, CSV, .h5, MCAP, ...: docs/recordings.md)")
     p.add_argument("--model", type=Path, required=True, metavar="MODEL.toml|datasheet:CHIP",
                    help="noise model file, or datasheet:CHIP for a shipped one")
     p.add_argument("--channels", type=_list, default=None,

@@ -25,7 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "report", help="noise report of a recording: plots, fit, HTML summary",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("recording", type=Path, help="recording (.imbr or .csv)")
+    p.add_argument("recording", type=Path,
+                   help="recording (.imbr, CSV, .h5, MCAP, ...: docs/recordings.md)")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--model", type=Path, default=None, metavar="MODEL.toml",
                    help="use this model file (imubench fit -o output) instead of fitting")
