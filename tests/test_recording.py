@@ -83,6 +83,8 @@ def test_csv_round_trip_and_convert_cli(tmp_path: Path, capsys: pytest.CaptureFi
     assert [(g.at, g.lost) for g in c.gaps] == [(407, 7)]
     header = (tmp_path / "a.csv").read_text().splitlines()
     assert "t,gx,gy,gz,ax,ay,az,temp,index" in header
+    assert not any(line.startswith("# format:") for line in header)  # not the source's
+    assert b.metadata["format"] == "imubench-native"
     assert "1000 samples, 1 gaps" in capsys.readouterr().out
 
 

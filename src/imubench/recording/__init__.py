@@ -288,6 +288,7 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
         log.warning("%s: dropped %d secret(s) from the header: %s (not copied to %s)", src,
                     len(dropped), ", ".join(dropped), dst)
     meta["converted_from"] = str(src)
+    meta.pop("format", None)  # the source's container format; the writer states its own
     if kind == "native":
         meta["storage"] = STORAGE_RAW if rec.raw is not None else STORAGE_FLOAT
     else:
