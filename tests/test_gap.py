@@ -274,7 +274,7 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
     assert "Verdict temperature (temp_coeff = " in index  # the reasons, not only plots
     assert "Verdict none: the model explains the recording" in index
     assert "Held-out part (never used for the fit)" in index
-    assert "  Verdict temperature (temp_coeff = " in r.stderr  # and on the terminal
+    assert "  Verdict temperature (temp_coeff = " in r.stdout  # and on the terminal
 
 
 def test_cli_replicate_holdout(csv_rec: tuple[Path, Path], tmp_path: Path,

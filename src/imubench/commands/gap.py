@@ -122,9 +122,10 @@ def run(args: argparse.Namespace) -> int:
 
         out["report"] = str(write_report(args.report, out, diags, rec.rate_hz))
     write_json(out, args.json)
+    summary = sys.stderr if args.json == "-" else sys.stdout  # stdout: the JSON's, if "-"
     for ch, c in out["channels"].items():
         print(f"{ch}: verdict {c['verdict']}, gap {c['gap_before']:.3f} -> "
-              f"{c['gap_after']:.3f}", file=sys.stderr)
+              f"{c['gap_after']:.3f}", file=summary)
         for line in explain_channel(c, out["realisations"]):
-            print(f"  {line}", file=sys.stderr)
+            print(f"  {line}", file=summary)
     return 0
