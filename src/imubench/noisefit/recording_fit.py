@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import datetime as _dt
+import logging
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,6 +22,7 @@ from imubench.noisefit.fit import (
     fit_channel,
 )
 from imubench.noisefit.kernels import AMPLITUDE_KEY
+from imubench.noisefit.temperature import temperature_warning
 from imubench.noisefit.units import (
     KALIBR_UNITS,
     datasheet_comparison,
@@ -28,6 +30,8 @@ from imubench.noisefit.units import (
     kalibr_imu,
     param_units,
 )
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from imubench.recording import InputOptions, Recording
@@ -146,6 +150,10 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
                                    channel=ch)
         except FitError as exc:
             raise FitError(f"{source}: {exc}") from None
+        warning = temperature_warning(ch, UNITS[ch], rec.channel(ch), rec.temp_c, rec.rate_hz)
+        if warning is not None:
+            log.warning("%s: %s", source, warning)
+            fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, warning))
         if on_channel is not None:
             on_channel(k + 1, len(chans))
     chip = rec.metadata.get("chip")
