@@ -44,6 +44,7 @@ from imubench.recording.options import (
 from imubench.recording.timebase import (
     SECONDS_PER_DAY,
     Timebase,
+    increasing_step,
     time_unit_from_spacing,
     timebase_from_index,
     timebase_from_times,
@@ -444,19 +445,16 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
     except RecordingError:
         if rate is not None and col.name == "t" and col.text.strip() == "t":
             return "s (imubench's t)", 1.0  # its own column is in seconds
-        steps = np.diff(t_raw)
-        steps = steps[np.isfinite(steps) & (steps > 0)]
-        if rate is None or not steps.size:
+        found = increasing_step(t_raw)
+        if rate is None or found is None:
             raise
-        step = float(np.median(steps))  # the unit that matches the given rate
-        options_s = {u: s for u, s in TIME_UNITS_S.items()}
-        unit = min(options_s, key=lambda u: abs(math.log(max(step, 1e-300) * options_s[u]
-                                                         * rate)))
-        return f"{unit} (from the rate)", options_s[unit]
+        per_sample = found * rate  # the unit that matches the given rate
+        unit = min(TIME_UNITS_S, key=lambda u: abs(math.log(per_sample * TIME_UNITS_S[u])))
+        return f"{unit} (from the rate)", TIME_UNITS_S[unit]
     if col.name == "t" and unit != "s" and col.text.strip() == "t":
         # imubench's own column is in seconds: a spacing that says otherwise is refused
-        steps = np.diff(t_raw[np.isfinite(t_raw)])
-        step = float(np.median(steps[steps > 0]))  # > 0: time_unit_from_spacing found one
+        step = increasing_step(t_raw)
+        assert step is not None  # time_unit_from_spacing found one
         raise RecordingError(
             f"{where}: column t steps by {step:.6g}: {1 / step:.6g} Hz if in seconds (as "
             f"imubench writes it), {1 / (step * scale):.6g} Hz if in {unit}; give "

@@ -96,19 +96,25 @@ def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
     return fits[0]
 
 
-def _median_step(t: np.ndarray, where: str) -> float:
-    """Median of the increasing steps; RecordingError (with the fix) when there are none
-    or when most stamps repeat (median step 0: stamps written with too few digits, e.g.
-    epoch seconds cut to 9 significant digits, so that no rate can be read from them)."""
+def increasing_step(t: np.ndarray) -> float | None:
+    """Median of the steps between finite stamps that increase (None when none does)."""
     steps = np.diff(t[np.isfinite(t)])
     d = steps[steps > 0]
-    if not len(d):
+    return float(np.median(d)) if len(d) else None
+
+
+def _median_step(t: np.ndarray, where: str) -> float:
+    """:func:`increasing_step`; RecordingError (with the fix) when no stamp increases or
+    when most stamps repeat (median step 0: stamps written with too few digits, e.g.
+    epoch seconds cut to 9 significant digits, so that no rate can be read from them)."""
+    step = increasing_step(t)
+    if step is None:
         raise RecordingError(f"{where}: the time column never increases; give --rate HZ")
-    if float(np.median(steps)) <= 0:
+    if float(np.median(np.diff(t[np.isfinite(t)]))) <= 0:
         raise RecordingError(
             f"{where}: most time stamps repeat the one before (median step 0; written with "
             f"too few digits?); give --rate HZ")
-    return float(np.median(d))
+    return step
 
 
 def increasing_rows(index: np.ndarray) -> np.ndarray:
