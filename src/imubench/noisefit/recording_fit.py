@@ -144,13 +144,14 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
     if not chans:
         raise FitError(f"{source}: no gyro or accel channel with data to fit")
     fits = {}
+    temp_c = rec.channel("temp")  # dense like the channels: NaN where samples are lost
     for k, ch in enumerate(chans):
+        y = rec.channel(ch)
         try:
-            fits[ch] = fit_channel(rec.channel(ch), rec.rate_hz, terms=terms, method=method,
-                                   channel=ch)
+            fits[ch] = fit_channel(y, rec.rate_hz, terms=terms, method=method, channel=ch)
         except FitError as exc:
             raise FitError(f"{source}: {exc}") from None
-        warning = temperature_warning(ch, UNITS[ch], rec.channel(ch), rec.temp_c, rec.rate_hz)
+        warning = temperature_warning(ch, UNITS[ch], y, temp_c, rec.rate_hz)
         if warning is not None:
             log.warning("%s: %s", source, warning)
             fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, warning))
