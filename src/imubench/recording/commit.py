@@ -5,7 +5,8 @@ bytes before it are on disk, the rest in the writer's buffer. The writers rememb
 file's size after each whole batch; on an error they call :func:`cut_back`, which drops
 the buffer and cuts the file to that size (shrinking a file needs no free space), so
 the file holds whole batches only and the caller counts the failed batch, and nothing
-else, as not recorded.
+else, as not recorded. (Also :func:`need_parent`: the writers' one rule for where a new
+file may go.)
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import os
 from pathlib import Path
 from typing import IO, Any
 
+from imubench.errors import RecordingError
+
 log = logging.getLogger(__name__)
 
 
@@ -24,8 +27,6 @@ def need_parent(path: Path) -> None:
     directories; a caller that means to (the daemon's ``log.path``) creates it first."""
     parent = path.parent
     if not parent.is_dir():
-        from imubench.errors import RecordingError
-
         raise RecordingError(f"{path}: the directory {parent} does not exist; create it "
                              "first (or give another output path)")
 
