@@ -127,3 +127,29 @@ def test_evidence_closed_uses_fired_statistics_one_sided_for_the_line() -> None:
     assert gone.evidence_closed(before) == pytest.approx(1.0)
     nothing = _comparison([0.0] * 6, line_z=0.5 * thr, temp_z=0.5 * thr)
     assert np.isnan(nothing.evidence_closed(nothing))
+
+
+def test_held_out_check_and_unmoved_gap_are_reconciled() -> None:
+    """A base-model refit accepted on the held-out spectrum while the held-out gap (the
+    Allan curve's RMS) stays at 0.218: the report names the check's parts and says why
+    the gap shown did not move (issue 15, decision and display disagreed silently)."""
+    kept = {"effect": "base_model", "params": {"white": 0.0041, "bandwidth_hz": 30.0,
+                                               "filter_order": 2},
+            "gap_after": 0.2, "gap_excess_after": 0.1, "evidence_closed": 0.5,
+            "holdout_gap_after": 0.218, "holdout_gap_excess_after": 0.15,
+            "holdout_chi2_drop": 9.0,
+            "holdout_chi2_drop_parts": {"allan": 0.2, "bands": 8.5, "statistics": 0.3}}
+    h = {"gap_before": 0.218, "gap_after": 0.218, "region_gap_before": 0.3,
+         "region_gap_after": 0.3, "gap_excess_before": 0.15, "gap_excess_after": 0.15,
+         "gap_null": 0.1, "chi2_closed": 0.2}
+    text = "\n".join(explain_channel(_entry("base_model", kept=[kept], holdout=h), 10))
+    assert ("Held-out check of base_model: chi-squared fell by 9.0 (Allan curve 0.2, "
+            "spectrum bands 8.5") in text
+    assert "held-out gap (0.218 -> 0.218) is the Allan curve's RMS alone, so it did not fall"\
+        in text
+    assert "mostly in the spectrum bands" in text
+    # a gap that fell with the check needs no reconciliation
+    kept2 = {**kept, "holdout_gap_after": 0.1}
+    text = "\n".join(explain_channel(_entry("base_model", kept=[kept2], holdout=h), 10))
+    assert "Held-out check of base_model: chi-squared fell by 9.0" in text
+    assert "did not fall" not in text

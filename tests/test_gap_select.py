@@ -273,3 +273,44 @@ def test_outliers_after_the_output_filter_close_the_tail_excess() -> None:
     assert w is not None and w.fit is not None
     assert w.fit.tail_z < 0.2 * d.before.tail_z
     assert w.params["outlier_rate"] == pytest.approx(0.2, rel=0.35)
+
+
+# ------------------------------------------------------------------ blind set (issue 15)
+def test_holdout_chi2_counts_correlated_taus_once() -> None:
+    """Five long taus that share most of their data (correlation 0.95) all at z = -2.4, as
+    a held-out half whose random walk was weaker than the fitted one: the plain sum of
+    z^2 counts that one excursion five times (28.8); the held-out check's Allan part is
+    the whole-curve Mahalanobis statistic, about once (z^2 / mean correlation ~ 6)."""
+    from imubench.gap.curves import global_chi2
+
+    z = [0.0, 0.0, 0.0, -2.4, -2.4, -2.4, -2.4, -2.4]
+    c = _cmp(z)
+    n = len(z)
+    corr = np.eye(n)
+    corr[3:, 3:] = 0.95 + 0.05 * np.eye(5)
+    c.chi2_global, c.dof_global, c.chi2_smooth = global_chi2(c.z, corr, c.tau_s)
+    parts = c.chi2_parts()
+    assert parts["allan"] < 8.0
+    assert float(np.sum(c.z**2)) == pytest.approx(28.8)
+    assert parts["bands"] == pytest.approx(0.0)
+    assert c.chi2_check == pytest.approx(sum(parts.values()))
+    # without a correlation model, the plain sum
+    plain = _cmp(z)
+    assert plain.chi2_parts()["allan"] == pytest.approx(28.8)
+    assert plain.chi2_parts()["statistics"] == pytest.approx(plain.chi2 - 28.8)
+
+
+def test_tail_threshold_is_normal_not_student_t() -> None:
+    """The impulse count's spread is Poisson-floored, not a standard deviation of K
+    realisations: a tail z of 8 fires at K = 10 (the Student-t threshold would be 12.4),
+    while a line or temperature z of 5 (K-sample spreads) still needs the t threshold
+    5.3."""
+    c = _cmp([0.0] * 6)
+    assert not c.significant
+    c.tail_z = 8.0
+    assert c.significant
+    c.tail_z = 0.0
+    for name in ("line_z", "temp_z"):
+        setattr(c, name, 5.0)
+        assert not c.significant
+        setattr(c, name, 0.0)

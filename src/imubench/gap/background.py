@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from imubench.gap.curves import STAT_TESTS, Comparison, stat_fired
+from imubench.gap.curves import STAT_TESTS, Comparison, stat_dof, stat_fired
 
 Z_WITHIN = 2.0
 """|z| against the background-inflated band below which a fired term counts as
@@ -113,7 +113,7 @@ def fired_masks(c: Comparison) -> tuple[np.ndarray, np.ndarray]:
 def within(c: Comparison, bg: Background) -> bool:
     """Whether every fired curve term of ``c`` is within ``bg`` and no statistic fired."""
     dof = c.realisations - 1
-    if any(stat_fired(getattr(c, name), z_norm, one_sided, dof)
+    if any(stat_fired(getattr(c, name), z_norm, one_sided, stat_dof(name, dof))
            for name, z_norm, one_sided in STAT_TESTS):
         return False
     taus, bands = fired_masks(c)

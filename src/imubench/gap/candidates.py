@@ -75,7 +75,10 @@ class Candidate:
     shape_z: float = float("nan")
     """Smoothed-kurtosis statistic (telegraph against Markov), NaN for other effects."""
     holdout_dchi2: float = float("nan")
-    """Held-out chi-squared before minus after adding the effect."""
+    """Held-out chi-squared before minus after adding the effect
+    (:meth:`imubench.gap.curves.Comparison.chi2_check`)."""
+    holdout_dparts: dict[str, float] = field(default_factory=dict)
+    """:attr:`holdout_dchi2` by source (``allan``, ``bands``, ``statistics``)."""
     accepted: bool = False
     note: str = ""
     """Why the candidate was not accepted (empty when accepted or not examined)."""
@@ -101,6 +104,7 @@ class Candidate:
             d["holdout_gap_after"] = self.holdout.gap
             d["holdout_gap_excess_after"] = self.holdout.gap_excess
             d["holdout_chi2_drop"] = self.holdout_dchi2
+            d["holdout_chi2_drop_parts"] = self.holdout_dparts
         return d
 
 
