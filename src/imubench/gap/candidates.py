@@ -49,7 +49,12 @@ INCREMENTS with the temperature's, against the realisations') above this normal-
 equivalent z (as Student t with K - 1 dof). A random walk or flicker level correlates
 with any slow temperature history in levels, and then a temperature coefficient closes
 a rising Allan curve as well as the random walk does; only a correlation of the
-prewhitened (differenced) series beyond the realisations' chance level is evidence."""
+prewhitened (differenced) series beyond the realisations' chance level is evidence.
+The whitened level test (:func:`imubench.gap.curves.temp_level_against`) opens the gate
+too (issue 15 blind set: a response of 5e-4 dps/degC gave increments t 3.07 against
+3.11 and level t 6, and with the gate shut a random walk took the temperature's
+long-tau excess); a temperature fitted to a random walk's chance correlation is then
+refused by the held-out check, where the response it predicts is absent."""
 Z_LINE_CANDIDATE = 3.0
 """Line z above which the sine and resonance candidates are fitted."""
 
@@ -229,7 +234,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                         "resonance_width_hz": rf.resonance_width_hz,
                         "resonance_height": rf.resonance_height}, 3))
         elif eff == "temperature":
-            if s.has_temperature and abs(before.temp_z) > t_threshold(Z_TEMP_CANDIDATE, dof):
+            gate = t_threshold(Z_TEMP_CANDIDATE, dof)
+            if s.has_temperature and (abs(before.temp_z) > gate
+                                      or abs(before.temp_level_z) > gate):
                 assert s.temp_c is not None
                 tf = evidence.fit_temperature(s.y, s.temp_c, s.rate_hz, cm.temp_ref)
                 if tf is not None:

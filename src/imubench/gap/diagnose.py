@@ -186,6 +186,7 @@ class ChannelDiagnosis:
             "line": {"f_hz": self.before.line_f_hz, "z": self.before.line_z},
             "impulses_z": self.before.tail_z,
             "temperature_slope_z": self.before.temp_z,
+            "temperature_level_z": self.before.temp_level_z,
             "trend_z": self.before.trend_z,
             "bias_step_z": self.step_z,
             "drift_t": self.drift_t,

@@ -42,6 +42,7 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
                    f"{_f(b['f_min_hz'])}-{_f(b['f_max_hz'])} Hz")
     names = {"line_z": f"a spectral line at {_f(c['line']['f_hz'], 4)} Hz",
              "tail_z": "impulsive tails", "temp_z": "correlation with temperature",
+             "temp_level_z": "correlation of the whitened level with temperature",
              "trend_z": "a time trend"}
     for key, z_norm, one_sided in STAT_TESTS:
         z = _stat(c, key)
@@ -54,13 +55,15 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
 def _stat(c: dict[str, Any], key: str) -> float:
     """A :data:`STAT_TESTS` statistic from the JSON entry (NaN when absent or null)."""
     v = {"line_z": c["line"]["z"], "tail_z": c["impulses_z"],
-         "temp_z": c["temperature_slope_z"], "trend_z": c["trend_z"]}[key]
+         "temp_z": c["temperature_slope_z"], "trend_z": c["trend_z"],
+         "temp_level_z": c.get("temperature_level_z")}[key]
     return float("nan") if v is None else float(v)
 
 
 def _strongest(c: dict[str, Any], dof: int) -> str:
     """The statistic closest to its threshold, as 'name t/threshold' (for `none`)."""
-    names = {"line_z": "line", "tail_z": "tails", "temp_z": "temperature", "trend_z": "trend"}
+    names = {"line_z": "line", "tail_z": "tails", "temp_z": "temperature", "trend_z": "trend",
+             "temp_level_z": "temperature level"}
     ratios = []
     for key, z_norm, one_sided in STAT_TESTS:
         z = _stat(c, key)
