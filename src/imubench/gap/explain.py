@@ -165,8 +165,9 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
 
     The check is a chi-squared over the Allan curve (whole-curve statistic, each tau once
     with the correlation of the estimates), the spectrum bands and the single statistics;
-    the gap is the Allan curve's RMS of ln(ADEV_real / ADEV_sim) alone, against the
-    realisations' mean Allan variance. An effect seen in the spectrum or a statistic
+    the gap is the Allan curve's RMS of ln(ADEV_real / ADEV_sim) alone, every tau weighted
+    equally (the long taus' scatter dominates it), against the realisations' mean Allan
+    variance. An effect seen in the spectrum or a statistic
     (temperature, outliers, a line, a step) or a base-model refit at short taus can pass
     the check and leave the gap as it was; a random walk can pass it and RAISE the gap,
     because the mean Allan variance of realisations with a random walk lies above a
@@ -184,11 +185,13 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
         if (parts and before is not None and after is not None and drop > 0
                 and after >= before - 0.01):
             main = max(parts, key=lambda n: parts[n])
-            txt += (f"; the held-out gap ({_f(before)} -> {_f(after)}) is the Allan curve's "
-                    "RMS alone, so it "
+            txt += (f"; the held-out gap ({_f(before)} -> {_f(after)}) "
                     + ("did not fall" if after < before + 0.01 else "rose")
-                    + f": the check's drop is mostly in the {PART_NAMES.get(main, main)}")
-            if main == "allan":
+                    + ": it is the Allan curve's RMS of ln ratios with every tau weighted "
+                    "equally (the scatter of the long taus dominates it), while the check "
+                    "weighs each term by its precision and adds the spectrum and the "
+                    f"statistics; its largest drop is in the {PART_NAMES.get(main, main)}")
+            if main == "allan" and after >= before + 0.01:
                 txt += (" (the whole-curve statistic compares with the realisations' mean "
                         "ln ADEV and counts correlated taus once; the gap compares with "
                         "their mean Allan variance, which a few realisations with large "
