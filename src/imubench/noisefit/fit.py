@@ -135,6 +135,9 @@ class Points:
     """Relative model-discrepancy std added to every point (see :func:`_estimate_delta`)."""
     filter_min_hz: float = 0.0
     """Lowest output-filter bandwidth searched (Hz); 0: :data:`FILTER_MIN_FRACTION` x rate."""
+    filter_bounded: bool = False
+    """The search floor cannot be raised further (:func:`_backed_extensions`): a filter
+    pinned at it is kept when the data need its shape, reported as bounded above only."""
 
     @property
     def filter_floor_hz(self) -> float:
@@ -877,10 +880,15 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     if kind == "filter":
         b0 = pts.filter_floor_hz
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
-        if value <= b0 * (1 + EDGE_MARGIN):
+        pinned = value <= b0 * (1 + EDGE_MARGIN)
+        if pinned and not pts.filter_bounded:
             return False, (f"dropped, bandwidth not identified ({value:.3g} Hz is the lowest "
                            "searched: the optimum is the search's edge, not the data's)"), None
         gain = _chi2_fixed_sigma(_without(st, "filter"), pts, sol.sigma)[0] - sol.chi2
+        if gain > EXTENSION_DCHI2 and pinned:
+            return True, (f"kept, {head}, without it chi2 rises {gain:.1f}: the data need "
+                          f"its shape but do not fix its bandwidth ({where}; the optimum is "
+                          "the lowest searched)"), None
         if gain > EXTENSION_DCHI2:
             return True, f"kept, {head}, {where}, without it chi2 rises {gain:.1f}", None
         return False, (f"dropped, the final model without it fits as well (chi2 rise "
@@ -999,6 +1007,13 @@ def _backed_extensions(pts: Points, arr: np.ndarray
             # pinned at the search's edge: search above it (a local optimum, or a slow
             # "filter" standing in for a term that is not there)
             pts = replace(pts, filter_min_hz=floor)
+            continue
+        if failed[0] == "filter" and "lowest searched" in why["filter"] \
+                and not pts.filter_bounded:
+            # pinned at every floor: the bandwidth is bounded only from above (an order-1
+            # filter over a white floor fits alike at any lower bandwidth); keep the filter
+            # if the short taus need its shape (judged by _extension_verdict)
+            pts = replace(pts, filter_bounded=True)
             continue
         banned.append(failed[0])
 
