@@ -861,9 +861,11 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     Butterworth still shapes the band near Nyquist, so an interval reaching there does
     not mean "no filter". Sine: a spectral line must back it
     (:func:`imubench.noisefit.spectral_line.line_test`) and carry at least
-    :data:`SINE_LINE_SHARE` of the fitted amplitude (``amplitude``, unit).
+    :data:`SINE_LINE_SHARE` of the fitted amplitude (``amplitude``, unit); without a line,
+    a narrowband peak there (:func:`~imubench.noisefit.spectral_line.peak_test`) is named
+    in the reason as a resonance the model cannot hold.
     """
-    from imubench.noisefit.spectral_line import line_test
+    from imubench.noisefit.spectral_line import line_test, peak_test
 
     value = float(getattr(st, _SETTING[kind]))
     lo, hi = ci[_SETTING_KEY[kind]]
@@ -896,6 +898,12 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
     test = line_test(arr, pts.rate_hz, *band)
     if not test.present:
+        peak = peak_test(arr, pts.rate_hz, value / SINE_BAND, value * SINE_BAND)
+        if peak is not None and peak.present:
+            return False, (f"dropped, {test.describe()}; but {peak.describe()}: a resonance, "
+                           "which no term of the noise model describes (its misfit stays in "
+                           "the model discrepancy floor; imubench gap tests it as the "
+                           "'resonance' effect)"), None
         return False, f"dropped, {test.describe()}", None
     if test.amplitude < SINE_LINE_SHARE * amplitude:
         return False, (f"dropped, the {test.describe()} carries amplitude "
