@@ -293,6 +293,14 @@ def test_filter_pinned_at_the_search_floor_is_kept_when_the_first_octave_needs_i
     assert "do not fix its bandwidth" in f.reasons["filter"]
     meas = oadev(y, 100.0, "freq", [0.01, 0.02, 0.04])
     np.testing.assert_allclose(meas.dev, np.sqrt(f.model_avar(meas.tau_s)), rtol=0.01)
+    # the datasheet density is white before and after the filter together (white alone
+    # was 0.028, 30 % below the -1/2 line): ADEV(1 s) less the flicker floor's share
+    n = datasheet_units("gx", f.params)["noise_density_mdps_per_sqrt_hz"] / 1000
+    one = oadev(y, 100.0, "freq", [1.0]).dev[0]
+    floor = 0.664 * f.params["flicker"]
+    assert n == pytest.approx(math.sqrt(one**2 - floor**2), rel=0.05)
+    lo, hi = f.ci["white_equivalent"]
+    assert lo < n < hi and hi / lo < 1.2
 
 
 def test_losing_an_extension_does_not_inflate_the_discrepancy_floor(reference_dir) -> None:
@@ -558,3 +566,22 @@ def test_a_resonance_is_named_where_the_sine_has_no_line(reference_dir) -> None:
     assert "sine_amplitude" not in f.present
     assert "narrowband peak at 2" in f.reasons["sine"] or "narrowband peak at 19" in \
         f.reasons["sine"], f.reasons["sine"]
+
+
+def test_white_equivalent_density_hand_computed() -> None:
+    """N = sqrt(white^2 + output_white^2 + 2 sigma^2 tau_c) for a Markov term with
+    tau_c <= 0.1 s (IEEE 952 C.6: its AVAR tends to 2 sigma^2 tau_c / tau)."""
+    from imubench.noisefit.units import white_equivalent
+
+    assert white_equivalent({"white": 0.03, "output_white": 0.04}) == pytest.approx(0.05)
+    fast = {"white": 0.03, "markov_sigma": 0.1, "markov_tau": 0.05}
+    assert white_equivalent(fast) == pytest.approx(math.sqrt(0.0009 + 2 * 0.01 * 0.05))
+    slow = {"white": 0.03, "markov_sigma": 0.1, "markov_tau": 5.0}
+    assert white_equivalent(slow) == pytest.approx(0.03)
+    assert datasheet_units("gx", {"white": 0.03, "output_white": 0.04})[
+        "arw_deg_per_sqrt_h"] == pytest.approx(3.0)
+    # a Markov term at tau_c = 0.05 s really is white at tau >= 1 s: its exact AVAR
+    tau = np.array([1.0, 4.0, 16.0])
+    cm = NoiseModel.single_term("gx", **fast)["gx"]
+    np.testing.assert_allclose(np.sqrt(model_avar(cm, tau, 100.0) * tau),
+                               white_equivalent(fast), rtol=0.03)

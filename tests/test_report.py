@@ -207,8 +207,14 @@ def test_report_writes_plots_fit_and_pages(recording: Path, tmp_path: Path,
                   "rate random walk", "mdps/√Hz", "°/√h", "°/h/√h", "datasheet typical"):
         assert label in gyro
     assert "arw_deg_per_sqrt_h" not in gyro  # human labels, not raw keys
-    n = doc["channels"]["gx"]["params"]["white"] * 1000
-    lo, hi = (v * 1000 for v in doc["channels"]["gx"]["ci95"]["white"])
+    gx = doc["channels"]["gx"]
+    # the noise density is the white-equivalent one: white before and after the filter
+    n = gx["datasheet_units"]["noise_density_mdps_per_sqrt_hz"]
+    assert n == pytest.approx(1000 * math.hypot(gx["params"]["white"],
+                                                gx["params"]["output_white"]))
+    key = "white_equivalent" if "white_equivalent" in gx["ci95"] else "white"
+    lo, hi = (v * 1000 for v in gx["ci95"][key])
+    assert lo <= n <= hi
     assert re.search(rf"{n:.3f}\d* \[{lo:.3f}\d*, {hi:.3f}\d*\]", gyro)
     accel = (out / "accel.html").read_text()
     for label in ("velocity random walk", "m/s/√h", "µg/√Hz"):

@@ -54,6 +54,12 @@ from imubench.noisefit.covariance import oavar_correlation, oavar_edf
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.kernels import AMPLITUDE_KEY, averaging_factors, term_avar
 from imubench.noisefit.model_avar import model_avar
+from imubench.noisefit.units import (
+    WHITE_EQUIVALENT,
+    white_equivalent,
+    white_equivalent_interval,
+    white_equivalent_weights,
+)
 
 BASE_TERMS: tuple[str, ...] = ("white", "flicker", "random_walk", "ramp", "quantization")
 EXTENSIONS: tuple[str, ...] = ("filter", "markov", "sine")
@@ -1096,6 +1102,10 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
             j = withall.terms.index(term)
             ci[AMPLITUDE_KEY[term]] = (0.0, math.sqrt(max(sol_all.theta[j], 0.0)
                                                    + Z_PRESENT * se_all[j]))
+    n2 = white_equivalent(params) ** 2
+    if n2 > 0:  # delta method on the squared amplitudes (tau_c held at its estimate)
+        g = white_equivalent_weights(st.terms, st.tau_c_s)
+        ci[WHITE_EQUIVALENT] = white_equivalent_interval(n2, float(g @ sol.cov_theta @ g))
     if wanted is None:
         for term in BASE_TERMS:
             lo, hi = ci[AMPLITUDE_KEY[term]]

@@ -25,6 +25,7 @@ from imubench.noisefit.kernels import AMPLITUDE_KEY
 from imubench.noisefit.temperature import temperature_warning
 from imubench.noisefit.units import (
     KALIBR_UNITS,
+    WHITE_EQUIVALENT,
     datasheet_comparison,
     datasheet_units,
     kalibr_imu,
@@ -73,6 +74,9 @@ class RecordingFit:
                    for ch, f in self.fits.items()}
         limits = {ch: {k: hi for k, (_, hi) in f.ci.items() if k not in f.present}
                   for ch, f in self.fits.items()}
+        for ch, f in self.fits.items():  # no white-equivalent density: white's upper limit
+            if WHITE_EQUIVALENT not in f.ci and "white" in limits[ch]:
+                limits[ch][WHITE_EQUIVALENT] = limits[ch]["white"]
         return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
 
     def _kalibr_or_reason(self) -> dict[str, Any]:

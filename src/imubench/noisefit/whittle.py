@@ -94,6 +94,12 @@ from imubench.noisefit.fit import (
     parse_terms,
 )
 from imubench.noisefit.kernels import AMPLITUDE_KEY, filter_gain2, gacv_unit
+from imubench.noisefit.units import (
+    WHITE_EQUIVALENT,
+    white_equivalent,
+    white_equivalent_interval,
+    white_equivalent_weights,
+)
 
 TAPER_FRACTION: float = 0.1
 """Fraction of the record under the Tukey taper's cosine ends (half at each end)."""
@@ -578,6 +584,16 @@ def fit_whittle(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "
         half = Z95 * se["bandwidth_hz"]
         ci["bandwidth_hz"] = (st.bandwidth_hz * math.exp(-half),
                               st.bandwidth_hz * math.exp(half))
+    n2 = white_equivalent(params) ** 2
+    if n2 > 0:  # delta method; cov is in log theta (and log tau_c)
+        weights = white_equivalent_weights(st.terms, st.tau_c_s)
+        grad = np.zeros(len(names))
+        for j, term in enumerate(st.terms):
+            if term in names:
+                grad[names.index(term)] = weights[j] * float(fit.theta[j])
+                if term == "markov" and weights[j] > 0 and "markov_tau" in names:
+                    grad[names.index("markov_tau")] = weights[j] * float(fit.theta[j])
+        ci[WHITE_EQUIVALENT] = white_equivalent_interval(n2, float(grad @ cov @ grad))
     absent = [t for t in BASE if AMPLITUDE_KEY[t] not in present]
     for term, upper in _upper_limits(fit, bases, absent).items():
         ci[AMPLITUDE_KEY[term]] = (0.0, upper)
