@@ -73,6 +73,8 @@ FREE: tuple[str, ...] = ("flicker", "random_walk")
 FIXED_KEYS: dict[str, str] = {"white": "white", "quantization": "quantization",
                               "markov": "markov_sigma", "output_white": "output_white"}
 _LOG_FLOOR: float = -80.0
+PROFILE_SPAN: float = 46.0
+"""Farthest the profile interval of log K^2 is searched from the estimate (K^2 x 1e+-20)."""
 
 
 @dataclass
@@ -196,12 +198,16 @@ def _profile_end(prof: _Profile, best: float, start: float, se: float, level: fl
     target = math.sqrt(level)
     psi0, r0 = start, 0.0
     psi1 = start + sign * max(se, 0.05) * target
+    edge = start + sign * PROFILE_SPAN
     for _ in range(12):
         r1 = math.sqrt(max(2.0 * (prof.at(psi1) - best), 0.0))
-        if abs(r1 - target) < 0.02:
+        if abs(r1 - target) < 0.02 or psi1 == edge:
             return psi1
         slope = (r1 - r0) / abs(psi1 - psi0) if abs(psi1 - psi0) > 0 else 0.0
         nxt = psi1 + sign * ((target - r1) / slope if slope > 1e-6 else 2.0 * abs(psi1 - psi0))
+        # a flat profile (K barely identified) sends the secant far: stop at the span's
+        # edge, where the interval end is "not bounded by the data" (K^2 x e^46 ~ 1e20)
+        nxt = min(nxt, edge) if sign > 0 else max(nxt, edge)
         psi0, r0, psi1 = psi1, r1, nxt
     return psi1
 
