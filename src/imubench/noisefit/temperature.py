@@ -66,7 +66,8 @@ def temperature_warning(channel: str, unit: str, y: np.ndarray, temp_c: np.ndarr
     if found is None or abs(found[1]) <= T_LIMIT:
         return None
     slope, t, n = found
-    return (f"{channel}: the rate follows the die temperature ({slope:.3g} {unit}/degC, "
+    what = "rate" if channel.startswith("g") else "acceleration"
+    return (f"{channel}: the {what} follows the die temperature ({slope:.3g} {unit}/degC, "
             f"t {t:.1f} over {n} blocks of {BLOCK_S:g} s); the fitted long-tau terms "
             "(random walk, flicker) include that drift: fit a recording at constant "
             "temperature, or model the temperature effect (imubench gap)")

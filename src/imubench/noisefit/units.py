@@ -35,7 +35,7 @@ accelerometer_random_walk = K g0 m/s^3/sqrt(Hz), update_rate = the sample rate (
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -182,6 +182,26 @@ KALIBR_TERMS: dict[str, tuple[str, str]] = {
 """Kalibr key -> (sensor, model-file key of the fitted term)."""
 
 
+def check_kalibr_request(inflate: float, channels: Iterable[str] | None = None) -> None:
+    """Refuse a Kalibr export that cannot be complete (callable before any fitting):
+    ``inflate`` must be >= 1 and ``channels`` (when known) must hold a gyro and an
+    accelerometer axis (Kalibr needs all four densities; no placeholder values are made
+    up)."""
+    if not (math.isfinite(inflate) and inflate >= 1.0):
+        raise FitError(f"--kalibr-inflate {inflate}: must be a number >= 1")
+    if channels is None:
+        return
+    have = set(channels)
+    missing = [key for key, (sensor, _) in KALIBR_TERMS.items()
+               if not have & set(GYRO if sensor == "gyro" else ACCEL)]
+    if missing:
+        sensors = sorted({KALIBR_TERMS[k][0] for k in missing})
+        names = " and ".join("accelerometer (ax ay az)" if s == "accel" else "gyro (gx gy gz)"
+                             for s in sensors)
+        raise FitError(f"Kalibr imu.yaml needs {', '.join(missing)}, but no {names} axis "
+                       "was fitted; fit both sensors")
+
+
 def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: float,
                rostopic: str = "/imu0", *,
                upper_limits: Mapping[str, Mapping[str, float]] | None = None,
@@ -202,17 +222,7 @@ def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: fl
     Kalibr needs all four densities: when no gyro or no accelerometer axis was fitted,
     :class:`FitError` names the missing keys (no placeholder values are made up).
     """
-    if not (math.isfinite(inflate) and inflate >= 1.0):
-        raise FitError(f"--kalibr-inflate {inflate}: must be a number >= 1")
-    missing = [key for key, (sensor, _) in KALIBR_TERMS.items()
-               if not any(ch in params_by_channel
-                          for ch in (GYRO if sensor == "gyro" else ACCEL))]
-    if missing:
-        sensors = sorted({KALIBR_TERMS[k][0] for k in missing})
-        names = " and ".join("accelerometer (ax ay az)" if s == "accel" else "gyro (gx gy gz)"
-                             for s in sensors)
-        raise FitError(f"Kalibr imu.yaml needs {', '.join(missing)}, but no {names} axis "
-                       "was fitted; fit both sensors")
+    check_kalibr_request(inflate, params_by_channel)
     limits = upper_limits or {}
     out: dict[str, Any] = {"rostopic": rostopic, "update_rate": float(rate_hz)}
     marked: list[str] = []
@@ -331,6 +341,7 @@ __all__ = [
     "SHORT_MARKOV_S",
     "WHITE_EQUIVALENT",
     "Quantity",
+    "check_kalibr_request",
     "datasheet_comparison",
     "datasheet_units",
     "kalibr_imu",
