@@ -273,3 +273,13 @@ def test_report_bad_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     bad.write_text("x")
     assert main(["report", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "r.txt" in capsys.readouterr().err
+
+
+def test_interval_text_keeps_both_ends_readable() -> None:
+    """Two significant digits on the narrower half; an interval over decades is printed
+    in significant digits, never with a 0.0 end (a [0.0076, 24.8] Hz bandwidth)."""
+    from imubench.noisefit.ieee952 import fmt_interval
+
+    assert fmt_interval(0.2401, 0.2389, 0.2413) == "0.2401 [0.2389, 0.2413]"
+    assert fmt_interval(8.0, 0.00759, 24.8) == "8 [0.00759, 24.8]"
+    assert fmt_interval(28.9, 28.6, 29.2) == "28.90 [28.60, 29.20]"

@@ -96,6 +96,10 @@ def fmt_interval(value: float, low: float, high: float) -> str:
     halves = [h for h in (value - low, high - value) if h > 0]
     spread = min(halves) if halves else abs(value) * 1e-3
     decimals = int(min(max(1 - np.floor(np.log10(spread)), 0), 6))
+    if (low != 0 and float(f"{low:.{decimals}f}") == 0) or (
+            high != 0 and float(f"{high:.{decimals}f}") == 0):
+        # an interval over decades ([0.0076, 24.8]): fixed decimals would print 0.0
+        return f"{fmt(value)} [{fmt(low)}, {fmt(high)}]"
     return f"{value:.{decimals}f} [{low:.{decimals}f}, {high:.{decimals}f}]"
 
 

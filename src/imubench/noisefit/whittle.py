@@ -581,9 +581,9 @@ def fit_whittle(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "
         params["bandwidth_hz"] = st.bandwidth_hz
         params["filter_order"] = st.filter_order
         present.extend(["bandwidth_hz", "filter_order"])
-        half = Z95 * se["bandwidth_hz"]
+        half = Z95 * se["bandwidth_hz"]  # a bandwidth lies below Nyquist
         ci["bandwidth_hz"] = (st.bandwidth_hz * math.exp(-half),
-                              st.bandwidth_hz * math.exp(half))
+                              min(st.bandwidth_hz * math.exp(half), 0.5 * rate_hz))
     n2 = white_equivalent(params) ** 2
     if n2 > 0:  # delta method; cov is in log theta (and log tau_c)
         weights = white_equivalent_weights(st.terms, st.tau_c_s)
