@@ -264,6 +264,7 @@ def fit_exact(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "au
         start = _scan_start(f_all, start, names.index("random_walk"))
     x_hat, nll_hat, hess = _newton(f_all, start)
     notes = list(base.notes)
+    reasons = dict(base.reasons)
     k = names.index("random_walk") if "random_walk" in names else -1
     theta = np.exp(x_hat)
     nll_0 = math.inf
@@ -309,18 +310,18 @@ def fit_exact(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "au
         if keep and theta[k] > 0:
             present.append("random_walk")
             ci["random_walk"] = (lower, upper)
-            notes.append(f"random_walk kept (block likelihood): LR {lr:.1f}"
-                         + (f" >= {TERM_LR}" if wanted is None else ", listed"))
+            reasons["random_walk"] = (f"kept, block likelihood LR {lr:.1f}"
+                                      + (f" >= {TERM_LR}" if wanted is None else ", listed"))
         else:
             params["random_walk"] = 0.0
             ci["random_walk"] = (0.0, upper)
-            notes.append(f"random_walk dropped (block likelihood): LR {lr:.2f} < {TERM_LR}; "
-                         "one-sided 95 % upper limit from the profile")
+            reasons["random_walk"] = (f"dropped, block likelihood LR {lr:.2f} < {TERM_LR} "
+                                      "(one-sided 95 % upper limit from the profile)")
     order_keys = [key for key in params if key in present]
     notes.append(f"exact: flicker and random walk from the Gaussian likelihood of "
                  f"{d.size} differenced means of {m}-sample blocks, -log L = {nll_hat:.6g}")
     return replace(base, method="exact", params=params, ci=ci, present=tuple(order_keys),
-                   notes=tuple(notes))
+                   notes=tuple(notes), reasons=reasons)
 
 
 __all__ = ["CHI2_1_90", "CHI2_1_95", "BlockModel", "fit_exact"]
