@@ -126,8 +126,8 @@ def run(args: argparse.Namespace) -> int:
             args.kalibr.write_text(kalibr_yaml(kalibr), encoding="utf-8")
             for key in kalibr["upper_limits"]:
                 print(kalibr_limit_message(args.kalibr, kalibr, key), file=sys.stderr)
-        if args.json != "-":
-            print(format_summary(result))
+        # the summary goes to stderr when stdout carries the JSON (docs/cli.md)
+        print(format_summary(result), file=sys.stderr if args.json == "-" else sys.stdout)
     except BrokenPipeError:
         raise  # stdout's reader went away: cli.main exits 141, no message
     except OSError as exc:

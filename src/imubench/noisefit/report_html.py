@@ -152,8 +152,9 @@ def _source_paragraph(info: PageInfo) -> str:
     return (f"<p>Recording <code>{html.escape(info.recording)}</code>: "
             f"{info.rate_hz:g} Hz, {info.duration_s / 3600:.3g} h, chip "
             f"{html.escape(str(info.chip or 'unknown'))}. Noise {where}. The "
-            "IEEE 952 minimum reading always has its chi-squared interval (it is read on "
-            "the measured curve).</p>")
+            "IEEE 952 minimum reading is read on the measured curve, with the chi-squared "
+            "interval of that point when the curve shows a floor, else as an upper bound "
+            "(&lt; value: the curve shows no established floor).</p>")
 
 
 def _png(path: Path) -> str:
