@@ -283,3 +283,22 @@ def test_interval_text_keeps_both_ends_readable() -> None:
     assert fmt_interval(0.2401, 0.2389, 0.2413) == "0.2401 [0.2389, 0.2413]"
     assert fmt_interval(8.0, 0.00759, 24.8) == "8 [0.00759, 24.8]"
     assert fmt_interval(28.9, 28.6, 29.2) == "28.90 [28.60, 29.20]"
+
+
+def test_legend_lists_only_the_readouts_drawn(sim: dict[str, np.ndarray]) -> None:
+    """A readout outside the axes (K read at 3 s far below the data) gets no marker, and
+    the legend does not announce it."""
+    from dataclasses import replace
+
+    fits, curves, readouts = _sensor(sim, GYRO)
+    low = {ch: {**r, "K": replace(r["K"], dev=1e-9, value=1e-9)} for ch, r in readouts.items()}
+    texts = [t.get_text() for t in
+             sigma_tau_figure("t", fits, curves, low, "gyro").axes[0].get_legend().get_texts()]
+    entry = next(t for t in texts if t.startswith("readouts"))
+    assert "N □" in entry and "K" not in entry, texts
+    inside = {ch: {**r, "K": replace(r["K"], dev=float(np.median(curves[ch].dev)))}
+              for ch, r in readouts.items()}
+    texts = [t.get_text() for t in
+             sigma_tau_figure("t", fits, curves, inside, "gyro").axes[0].get_legend()
+             .get_texts()]
+    assert any("K ◇" in t for t in texts), texts
