@@ -263,9 +263,11 @@ def test_report_model_with_fit_options_is_refused(recording: Path, tmp_path: Pat
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "m.toml"
     path.write_text(MODEL.to_toml())
-    assert main(["report", str(recording), "--model", str(path), "--terms", "white",
-                 "--out", str(tmp_path / "o")]) == 2
-    assert "--model" in capsys.readouterr().err and not (tmp_path / "o").exists()
+    for option in (["--terms", "white"], ["--terms", "auto"], ["--method", "wls"]):
+        # the defaults too: a fit option says the user expects a fit
+        assert main(["report", str(recording), "--model", str(path), *option,
+                     "--out", str(tmp_path / "o")]) == 2
+        assert "--model" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
 def test_report_bad_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
