@@ -20,12 +20,14 @@ Part 2 (round trip with an independent generator, ``--method``) is not in this m
 Part 3, ADIS16405 replicates (../shared/reference/imu-real/adis16405, 3 replicates x 6
 axes, 10 000 s at 100 Hz each): for every ordered pair (A, B) of replicates and every axis,
 the model fitted on A predicts B's overlapping ADEV at octave taus up to T/10 (T = B's
-length). Metric, per case: rms_pred = RMS over those taus of ln(ADEV_B / sqrt(AVAR_model_A));
-rms_own = the same with B's own fit (the model fitted on B itself); the case passes when
-rms_pred <= 1.10 * rms_own. Target: >= 85 % of cases. Cases between replicates 1 and 2
-(the only ones looked at while tuning) and those involving replicate 3 (held out) are
-reported apart. For comparison with issue 7's figure the older metric is printed too:
-A's raw ADEV curve as the predictor instead of B's own fit.
+length). The issue's metric, per case: rms_pred = RMS over those taus of
+ln(ADEV_B / sqrt(AVAR_model_A)); rms_raw = the same with A's own measured ADEV curve as
+the predictor; the case passes when rms_pred <= 1.10 * rms_raw ("predicts the other
+replicates at least as well as that replicate's own curve", with the 10 % allowance). B is
+never fitted. Target: >= 85 % of cases. Cases between replicates 1 and 2 (the only ones
+looked at while tuning) and those involving replicate 3 (held out) are reported apart.
+A stricter figure is printed beside it: B's own fit (an in-sample fit of B) as the
+reference instead of A's raw curve.
 
     python bench/bench_fit_acceptance.py --part 1 --quick
     python bench/bench_fit_acceptance.py --part 1 --seeds 50 --log part1.jsonl
@@ -198,9 +200,9 @@ def part3(args: argparse.Namespace) -> None:
     rate = 100.0
     reps = {r: _adis(r) for r in (1, 2, 3)}
     print("\n### Part 3: ADIS16405, model of replicate A predicts replicate B "
-          "(octave taus up to T/10; pass: rms_pred <= 1.10 rms_own)")
-    print("| axis | A -> B | terms of A's fit | rms_pred | rms_own (B's fit) | ratio | pass | "
-          "rms with A's raw curve | pass (old metric) |")
+          "(octave taus up to T/10; pass: rms_pred <= 1.10 rms_raw, A's measured curve)")
+    print("| axis | A -> B | terms of A's fit | rms_pred | rms_raw (A's curve) | ratio | pass | "
+          "rms_own (B's fit) | pass (vs B's fit) |")
     print("|---|---|---|---|---|---|---|---|---|")
     counts = {"tune": [0, 0, 0], "held-out": [0, 0, 0]}
     held_out: dict[str, ChannelFit] = {}
@@ -219,19 +221,19 @@ def part3(args: argparse.Namespace) -> None:
                 rms_own = _rms_ln(meas, np.sqrt(fits[b].model_avar(tau)))
                 raw_a = oadev(reps[a][ch], rate, "freq", list(tau)).dev
                 rms_raw = _rms_ln(meas, raw_a)
-                ok, ok_old = rms_pred <= 1.10 * rms_own, rms_pred <= 1.10 * rms_raw
+                ok, ok_own = rms_pred <= 1.10 * rms_raw, rms_pred <= 1.10 * rms_own
                 group = "tune" if 3 not in (a, b) else "held-out"
                 counts[group][0] += ok
-                counts[group][1] += ok_old
+                counts[group][1] += ok_own
                 counts[group][2] += 1
                 terms = ",".join(k for k in fits[a].present if k != "filter_order")
-                print(f"| {ch} | {a} -> {b} | {terms} | {rms_pred:.4f} | {rms_own:.4f} | "
-                      f"{rms_pred / rms_own:.2f} | {'yes' if ok else 'NO'} | {rms_raw:.4f} | "
-                      f"{'yes' if ok_old else 'NO'} |", flush=True)
-    for group, (n_ok, n_old, tot) in counts.items():
+                print(f"| {ch} | {a} -> {b} | {terms} | {rms_pred:.4f} | {rms_raw:.4f} | "
+                      f"{rms_pred / rms_raw:.2f} | {'yes' if ok else 'NO'} | {rms_own:.4f} | "
+                      f"{'yes' if ok_own else 'NO'} |", flush=True)
+    for group, (n_ok, n_own, tot) in counts.items():
         print(f"{group} (replicates {'1, 2' if group == 'tune' else 'involving 3'}): "
-              f"{n_ok}/{tot} = {100 * n_ok / tot:.0f} % pass (own fit; target >= 85 %); "
-              f"old metric (A's raw curve) {n_old}/{tot} = {100 * n_old / tot:.0f} %")
+              f"{n_ok}/{tot} = {100 * n_ok / tot:.0f} % pass (A's raw curve; target >= 85 %); "
+              f"against B's own fit {n_own}/{tot} = {100 * n_own / tot:.0f} %")
     print("\nreasons of the fits of replicate 3 (held out):")
     for ch, f3 in held_out.items():
         print(f"  {ch}: " + "; ".join(f"{t}: {w}" for t, w in f3.reasons.items()))

@@ -87,3 +87,21 @@ def test_round_trip_on_the_independent_generator(seed: int) -> None:
         assert lo < est < hi
         sd = math.log(hi / lo) / (2.0 * 1.959964)
         assert abs(math.log(est / true)) < 3.3 * sd, key
+
+
+def test_profile_end_stops_at_the_span_on_a_flat_profile() -> None:
+    """A random walk the block means barely see has a flat profile likelihood: the
+    secant search for the interval end doubled its step 12 times and overflowed
+    math.exp (Samsung S5 accelerometer x, `fit --method exact`). It stops at the span."""
+    from typing import cast
+
+    from imubench.noisefit.exactfit import PROFILE_SPAN, _Profile, _profile_end
+
+    class Flat:
+        def at(self, log_k2: float) -> float:
+            math.exp(log_k2)  # what the real profile computes first
+            return 10.0
+
+    for sign in (1.0, -1.0):
+        end = _profile_end(cast(_Profile, Flat()), 10.0, -20.0, 0.3, 3.84, sign)
+        assert end == -20.0 + sign * PROFILE_SPAN

@@ -236,3 +236,17 @@ def test_kalibr_refuses_a_gyro_only_fit(recording: Path, tmp_path: Path,
     assert "accelerometer_noise_density, accelerometer_random_walk" in err
     assert "no accelerometer (ax ay az) axis was fitted" in err
     assert not kal.exists() and not (tmp_path / "m.toml").exists()
+
+
+def test_kalibr_requests_are_refused_before_the_recording_is_read(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A bad --kalibr-inflate or a --channels list without accelerometer axes is refused
+    at once (it used to come after fitting every channel, a minute on an hour of data):
+    the recording named here does not even exist."""
+    missing = tmp_path / "never-read.csv"
+    for extra, words in ((["--kalibr-inflate", "0.5"], "--kalibr-inflate 0.5: must be"),
+                         (["--channels", "gx,gy"], "no accelerometer (ax ay az) axis")):
+        rc = main(["fit", str(missing), "-o", str(tmp_path / "m.toml"),
+                   "--kalibr", str(tmp_path / "imu.yaml"), *extra])
+        err = capsys.readouterr().err
+        assert rc == 2 and words in err and "never-read" not in err, err

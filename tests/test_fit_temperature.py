@@ -39,3 +39,18 @@ def test_no_warning_without_a_temperature_effect_or_a_varying_temperature() -> N
     assert warned <= 1  # |t| > 5 on about 0 of 30 nulls, allowing one
     y, _ = _record(7, 0.01)
     assert temperature_slope(y, np.full(N, 25.0), RATE) is None  # steady: nothing to say
+
+
+def test_a_recording_without_temperature_is_checked_silently() -> None:
+    """A CSV without a temp column gives an all-NaN temperature: no slope, no numpy
+    "Mean of empty slice" warning on the user's terminal; blocks partly lost still count."""
+    import warnings
+
+    y, temp = _record(3, 0.01)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert temperature_slope(y, np.full(N, np.nan), RATE) is None
+        gappy = temp.copy()
+        gappy[: 40 * int(30 * RATE)] = np.nan  # the first 40 blocks lost entirely
+        found = temperature_slope(y, gappy, RATE)
+    assert found is not None and abs(found[0] / 0.01 - 1) < 0.05

@@ -277,9 +277,54 @@ def test_sinusoid_does_not_bring_a_spurious_flicker() -> None:
     assert lo <= 0.5 <= hi
 
 
+def test_filter_pinned_at_the_search_floor_is_kept_when_the_first_octave_needs_it(
+        reference_dir) -> None:
+    """ADIS16405 rep 2 gx: an order-1 output filter fits alike at any bandwidth from the
+    search floor up to ~25 Hz, so its optimum sits at the floor. Dropping it for that left
+    a model 16 % off the measured ADEV at tau0 (and a discrepancy floor that hid every
+    long-tau term); it is kept, with the bandwidth reported as not fixed by the data."""
+    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep2.npz"
+    if not path.is_file():
+        pytest.skip("ADIS16405 reference data not present")
+    d = np.load(path)
+    y = d["gyro_counts"][:, 0].astype(float) * float(d["gyro_lsb_dps"])
+    f = fit_channel(y, 100.0, channel="gx")
+    assert "bandwidth_hz" in f.present, f.reasons["filter"]
+    assert "do not fix its bandwidth" in f.reasons["filter"]
+    meas = oadev(y, 100.0, "freq", [0.01, 0.02, 0.04])
+    np.testing.assert_allclose(meas.dev, np.sqrt(f.model_avar(meas.tau_s)), rtol=0.01)
+    # the datasheet density is white before and after the filter together (white alone
+    # was 0.028, 30 % below the -1/2 line): ADEV(1 s) less the flicker floor's share
+    n = datasheet_units("gx", f.params)["noise_density_mdps_per_sqrt_hz"] / 1000
+    one = oadev(y, 100.0, "freq", [1.0]).dev[0]
+    floor = 0.664 * f.params["flicker"]
+    assert n == pytest.approx(math.sqrt(one**2 - floor**2), rel=0.05)
+    lo, hi = f.ci["white_equivalent"]
+    assert lo < n < hi and hi / lo < 1.2
+
+
+def test_losing_an_extension_does_not_inflate_the_discrepancy_floor(reference_dir) -> None:
+    """ADIS16405 rep 3 ay: the Markov term fails its tau_c check after the base terms are
+    chosen. Re-estimating the discrepancy floor for the model without it gave 0.26 (from
+    0.037), after which white, the filter and the 0.54 Hz line all fell out and the model
+    was 23 % off at tau0. The reference's floor is kept: the model follows the curve."""
+    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep3.npz"
+    if not path.is_file():
+        pytest.skip("ADIS16405 reference data not present")
+    d = np.load(path)
+    y = d["accel_counts"][:, 1].astype(float) * float(d["accel_lsb_g"])
+    f = fit_channel(y, 100.0, channel="ay")
+    assert {"white", "bandwidth_hz", "sine_amplitude"} <= set(f.present), f.reasons
+    meas = oadev(y, 100.0, "freq", "octave")
+    keep = meas.tau_s <= 350.0
+    ratio = meas.dev[keep] / np.sqrt(f.model_avar(meas.tau_s[keep]))
+    assert np.all(np.abs(np.log(ratio)) < 0.08), ratio
+
+
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="issue 14: with the stricter model selection the rep1 "
-                   "model beats rep1's raw curve on 7/12 cases (was 10/12); "
+                   "model beats rep1's raw curve on 7/12 cases (was 10/12): the gyros' 20 Hz "
+                   "resonance (gz) and weak long-tau rise (gx, gy) are not modelled; "
                    "bench/bench_fit_acceptance.py --part 3, docs/benchmarks.md")
 def test_adis16405_model_generalises_to_replicates_2_and_3(reference_dir) -> None:
     """Acceptance item 2: the rep1 model predicts reps 2/3 as well as rep1's raw OADEV."""
@@ -484,3 +529,59 @@ def test_kalibr_refuses_one_sensor_only() -> None:
         kalibr_imu({"gx": {"white": 0.004, "random_walk": 1e-4}}, 104.0)
     with pytest.raises(FitError, match=r"no gyro \(gx gy gz\) axis was fitted"):
         kalibr_imu({"az": {"white": 8e-5, "random_walk": 1e-6}}, 104.0)
+
+
+def test_peak_test_finds_a_resonance_and_not_a_filter_roll_off() -> None:
+    """A 2 Hz wide band-pass resonance at 20 Hz (scipy's iirpeak on white noise, 100 Hz)
+    is a peak, not a line; white noise and a first-order 15 Hz low-pass roll-off are
+    neither."""
+    from scipy.signal import butter, iirpeak, lfilter
+
+    from imubench.noisefit.spectral_line import peak_test
+
+    rng = np.random.default_rng(5)
+    n, fs = 360_000, 100.0
+    white = rng.standard_normal(n)
+    b, a = iirpeak(20.0, 20.0 / 2.0, fs)
+    res = white + 3.0 * lfilter(b, a, rng.standard_normal(n))
+    found = peak_test(res, fs, 16.0, 25.0)
+    assert found is not None and found.present, found
+    assert abs(found.freq_hz - 20.0) < 0.3 and 0.5 < found.width_hz < 4.0
+    assert not line_test(res, fs, 16.0, 25.0).present
+    for y in (white, lfilter(*butter(1, 15.0, fs=fs), white)):
+        null = peak_test(y, fs, 16.0, 25.0)
+        assert null is not None and not null.present, null
+
+
+def test_a_resonance_is_named_where_the_sine_has_no_line(reference_dir) -> None:
+    """ADIS16405 rep 1 gz has a ~1.6 Hz wide resonance near 20 Hz (ADEV at 0.02 s above
+    that at 0.01 s). The sine the Allan curve asks for has no spectral line and is
+    dropped; the reason names the peak instead of leaving the misfit unexplained."""
+    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep1.npz"
+    if not path.is_file():
+        pytest.skip("ADIS16405 reference data not present")
+    d = np.load(path)
+    y = d["gyro_counts"][:, 2].astype(float) * float(d["gyro_lsb_dps"])
+    f = fit_channel(y, 100.0, channel="gz")
+    assert "sine_amplitude" not in f.present
+    assert "narrowband peak at 2" in f.reasons["sine"] or "narrowband peak at 19" in \
+        f.reasons["sine"], f.reasons["sine"]
+
+
+def test_white_equivalent_density_hand_computed() -> None:
+    """N = sqrt(white^2 + output_white^2 + 2 sigma^2 tau_c) for a Markov term with
+    tau_c <= 0.1 s (IEEE 952 C.6: its AVAR tends to 2 sigma^2 tau_c / tau)."""
+    from imubench.noisefit.units import white_equivalent
+
+    assert white_equivalent({"white": 0.03, "output_white": 0.04}) == pytest.approx(0.05)
+    fast = {"white": 0.03, "markov_sigma": 0.1, "markov_tau": 0.05}
+    assert white_equivalent(fast) == pytest.approx(math.sqrt(0.0009 + 2 * 0.01 * 0.05))
+    slow = {"white": 0.03, "markov_sigma": 0.1, "markov_tau": 5.0}
+    assert white_equivalent(slow) == pytest.approx(0.03)
+    assert datasheet_units("gx", {"white": 0.03, "output_white": 0.04})[
+        "arw_deg_per_sqrt_h"] == pytest.approx(3.0)
+    # a Markov term at tau_c = 0.05 s really is white at tau >= 1 s: its exact AVAR
+    tau = np.array([1.0, 4.0, 16.0])
+    cm = NoiseModel.single_term("gx", **fast)["gx"]
+    np.testing.assert_allclose(np.sqrt(model_avar(cm, tau, 100.0) * tau),
+                               white_equivalent(fast), rtol=0.03)

@@ -207,8 +207,14 @@ def test_report_writes_plots_fit_and_pages(recording: Path, tmp_path: Path,
                   "rate random walk", "mdps/√Hz", "°/√h", "°/h/√h", "datasheet typical"):
         assert label in gyro
     assert "arw_deg_per_sqrt_h" not in gyro  # human labels, not raw keys
-    n = doc["channels"]["gx"]["params"]["white"] * 1000
-    lo, hi = (v * 1000 for v in doc["channels"]["gx"]["ci95"]["white"])
+    gx = doc["channels"]["gx"]
+    # the noise density is the white-equivalent one: white before and after the filter
+    n = gx["datasheet_units"]["noise_density_mdps_per_sqrt_hz"]
+    assert n == pytest.approx(1000 * math.hypot(gx["params"]["white"],
+                                                gx["params"]["output_white"]))
+    key = "white_equivalent" if "white_equivalent" in gx["ci95"] else "white"
+    lo, hi = (v * 1000 for v in gx["ci95"][key])
+    assert lo <= n <= hi
     assert re.search(rf"{n:.3f}\d* \[{lo:.3f}\d*, {hi:.3f}\d*\]", gyro)
     accel = (out / "accel.html").read_text()
     for label in ("velocity random walk", "m/s/√h", "µg/√Hz"):
@@ -257,9 +263,11 @@ def test_report_model_with_fit_options_is_refused(recording: Path, tmp_path: Pat
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "m.toml"
     path.write_text(MODEL.to_toml())
-    assert main(["report", str(recording), "--model", str(path), "--terms", "white",
-                 "--out", str(tmp_path / "o")]) == 2
-    assert "--model" in capsys.readouterr().err and not (tmp_path / "o").exists()
+    for option in (["--terms", "white"], ["--terms", "auto"], ["--method", "wls"]):
+        # the defaults too: a fit option says the user expects a fit
+        assert main(["report", str(recording), "--model", str(path), *option,
+                     "--out", str(tmp_path / "o")]) == 2
+        assert "--model" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
 def test_report_bad_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -267,3 +275,32 @@ def test_report_bad_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     bad.write_text("x")
     assert main(["report", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "r.txt" in capsys.readouterr().err
+
+
+def test_interval_text_keeps_both_ends_readable() -> None:
+    """Two significant digits on the narrower half; an interval over decades is printed
+    in significant digits, never with a 0.0 end (a [0.0076, 24.8] Hz bandwidth)."""
+    from imubench.noisefit.ieee952 import fmt_interval
+
+    assert fmt_interval(0.2401, 0.2389, 0.2413) == "0.2401 [0.2389, 0.2413]"
+    assert fmt_interval(8.0, 0.00759, 24.8) == "8 [0.00759, 24.8]"
+    assert fmt_interval(28.9, 28.6, 29.2) == "28.90 [28.60, 29.20]"
+
+
+def test_legend_lists_only_the_readouts_drawn(sim: dict[str, np.ndarray]) -> None:
+    """A readout outside the axes (K read at 3 s far below the data) gets no marker, and
+    the legend does not announce it."""
+    from dataclasses import replace
+
+    fits, curves, readouts = _sensor(sim, GYRO)
+    low = {ch: {**r, "K": replace(r["K"], dev=1e-9, value=1e-9)} for ch, r in readouts.items()}
+    texts = [t.get_text() for t in
+             sigma_tau_figure("t", fits, curves, low, "gyro").axes[0].get_legend().get_texts()]
+    entry = next(t for t in texts if t.startswith("readouts"))
+    assert "N □" in entry and "K" not in entry, texts
+    inside = {ch: {**r, "K": replace(r["K"], dev=float(np.median(curves[ch].dev)))}
+              for ch, r in readouts.items()}
+    texts = [t.get_text() for t in
+             sigma_tau_figure("t", fits, curves, inside, "gyro").axes[0].get_legend()
+             .get_texts()]
+    assert any("K ◇" in t for t in texts), texts

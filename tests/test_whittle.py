@@ -109,8 +109,8 @@ def test_auto_selection_keeps_what_is_there_and_adds_nothing() -> None:
     fit = fit_channel(y, RATE, method="whittle")
     assert set(fit.present) == {"white", "flicker"}
     assert fit.ci["random_walk"][0] == 0.0 and fit.ci["random_walk"][1] < 3e-4
-    assert any(n.startswith("random_walk dropped") for n in fit.notes)
-    assert any(n.startswith("markov dropped") for n in fit.notes)
+    assert fit.reasons["random_walk"].startswith("dropped")
+    assert fit.reasons["markov"].startswith("dropped")
 
 
 def test_gaps_are_tapered_out_not_filled() -> None:

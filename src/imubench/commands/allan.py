@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -176,8 +177,9 @@ def run(args: argparse.Namespace) -> int:
             res = analyse(args, data, rec_rate, bar.fraction)
         except StatsError as exc:  # e.g. too few samples left: name the file
             raise StatsError(f"{args.input} {channel}: {exc}") from None
-    if args.json is None:
-        print(format_table(res, dev_unit(channel)))
-    else:
+    if args.json is not None:
         write_json(with_units(res.to_dict(), channel, args.data_type), args.json)
+    # the table goes to stderr when stdout carries the JSON (docs/cli.md)
+    print(format_table(res, dev_unit(channel)),
+          file=sys.stderr if args.json == "-" else sys.stdout)
     return 0

@@ -17,7 +17,12 @@ from imubench.commands import write_json
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
-from imubench.noisefit.units import kalibr_limit_message, kalibr_yaml, param_units
+from imubench.noisefit.units import (
+    check_kalibr_request,
+    kalibr_limit_message,
+    kalibr_yaml,
+    param_units,
+)
 from imubench.progress import progress
 from imubench.recording.options import add_input_arguments, input_options
 
@@ -98,6 +103,9 @@ def run(args: argparse.Namespace) -> int:
     if args.output is None:
         raise FitError("-o MODEL.toml is required for one recording (a directory or glob "
                        "writes into --out-dir)")
+    if args.kalibr is not None:  # refused before a long fit, not after it
+        check_kalibr_request(args.kalibr_inflate, args.channels.replace(",", " ").split()
+                             if args.channels else None)
     try:
         with progress(100, "fit", unit="%") as bar:
             result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
@@ -118,8 +126,8 @@ def run(args: argparse.Namespace) -> int:
             args.kalibr.write_text(kalibr_yaml(kalibr), encoding="utf-8")
             for key in kalibr["upper_limits"]:
                 print(kalibr_limit_message(args.kalibr, kalibr, key), file=sys.stderr)
-        if args.json != "-":
-            print(format_summary(result))
+        # the summary goes to stderr when stdout carries the JSON (docs/cli.md)
+        print(format_summary(result), file=sys.stderr if args.json == "-" else sys.stdout)
     except BrokenPipeError:
         raise  # stdout's reader went away: cli.main exits 141, no message
     except OSError as exc:

@@ -30,8 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--model", type=Path, default=None, metavar="MODEL.toml",
                    help="use this model file (imubench fit -o output) instead of fitting")
-    p.add_argument("--terms", default="auto", help="as for imubench fit")
-    p.add_argument("--method", choices=METHODS, default="wls", help="as for imubench fit")
+    p.add_argument("--terms", default=None, help="as for imubench fit (default auto)")
+    p.add_argument("--method", choices=METHODS, default=None,
+                   help="as for imubench fit (default wls)")
     add_input_arguments(p)
     p.set_defaults(func=run)
 
@@ -39,14 +40,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from imubench.noisefit.report import write_report
 
-    if args.model is not None and (args.terms != "auto" or args.method != "wls"):
+    if args.model is not None and (args.terms is not None or args.method is not None):
         print("imubench report: error: --terms and --method choose how to fit; --model "
               f"{args.model} reuses a fit and fits nothing (drop one of them)",
               file=sys.stderr)
         return 2
     try:
-        files = write_report(args.recording, args.out, terms=args.terms, method=args.method,
-                             options=input_options(args), model_file=args.model)
+        files = write_report(args.recording, args.out, terms=args.terms or "auto",
+                             method=args.method or "wls", options=input_options(args),
+                             model_file=args.model)
     except BrokenPipeError:
         raise  # stdout's reader went away: cli.main exits 141, no message
     except OSError as exc:

@@ -73,6 +73,8 @@ FREE: tuple[str, ...] = ("flicker", "random_walk")
 FIXED_KEYS: dict[str, str] = {"white": "white", "quantization": "quantization",
                               "markov": "markov_sigma", "output_white": "output_white"}
 _LOG_FLOOR: float = -80.0
+PROFILE_SPAN: float = 46.0
+"""Farthest the profile interval of log K^2 is searched from the estimate (K^2 x 1e+-20)."""
 
 
 @dataclass
@@ -196,12 +198,16 @@ def _profile_end(prof: _Profile, best: float, start: float, se: float, level: fl
     target = math.sqrt(level)
     psi0, r0 = start, 0.0
     psi1 = start + sign * max(se, 0.05) * target
+    edge = start + sign * PROFILE_SPAN
     for _ in range(12):
         r1 = math.sqrt(max(2.0 * (prof.at(psi1) - best), 0.0))
-        if abs(r1 - target) < 0.02:
+        if abs(r1 - target) < 0.02 or psi1 == edge:
             return psi1
         slope = (r1 - r0) / abs(psi1 - psi0) if abs(psi1 - psi0) > 0 else 0.0
         nxt = psi1 + sign * ((target - r1) / slope if slope > 1e-6 else 2.0 * abs(psi1 - psi0))
+        # a flat profile (K barely identified) sends the secant far: stop at the span's
+        # edge, where the interval end is "not bounded by the data" (K^2 x e^46 ~ 1e20)
+        nxt = min(nxt, edge) if sign > 0 else max(nxt, edge)
         psi0, r0, psi1 = psi1, r1, nxt
     return psi1
 
@@ -258,6 +264,7 @@ def fit_exact(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "au
         start = _scan_start(f_all, start, names.index("random_walk"))
     x_hat, nll_hat, hess = _newton(f_all, start)
     notes = list(base.notes)
+    reasons = dict(base.reasons)
     k = names.index("random_walk") if "random_walk" in names else -1
     theta = np.exp(x_hat)
     nll_0 = math.inf
@@ -303,18 +310,18 @@ def fit_exact(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "au
         if keep and theta[k] > 0:
             present.append("random_walk")
             ci["random_walk"] = (lower, upper)
-            notes.append(f"random_walk kept (block likelihood): LR {lr:.1f}"
-                         + (f" >= {TERM_LR}" if wanted is None else ", listed"))
+            reasons["random_walk"] = (f"kept, block likelihood LR {lr:.1f}"
+                                      + (f" >= {TERM_LR}" if wanted is None else ", listed"))
         else:
             params["random_walk"] = 0.0
             ci["random_walk"] = (0.0, upper)
-            notes.append(f"random_walk dropped (block likelihood): LR {lr:.2f} < {TERM_LR}; "
-                         "one-sided 95 % upper limit from the profile")
+            reasons["random_walk"] = (f"dropped, block likelihood LR {lr:.2f} < {TERM_LR} "
+                                      "(one-sided 95 % upper limit from the profile)")
     order_keys = [key for key in params if key in present]
     notes.append(f"exact: flicker and random walk from the Gaussian likelihood of "
                  f"{d.size} differenced means of {m}-sample blocks, -log L = {nll_hat:.6g}")
     return replace(base, method="exact", params=params, ci=ci, present=tuple(order_keys),
-                   notes=tuple(notes))
+                   notes=tuple(notes), reasons=reasons)
 
 
 __all__ = ["CHI2_1_90", "CHI2_1_95", "BlockModel", "fit_exact"]

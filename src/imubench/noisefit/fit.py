@@ -54,6 +54,12 @@ from imubench.noisefit.covariance import oavar_correlation, oavar_edf
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.kernels import AMPLITUDE_KEY, averaging_factors, term_avar
 from imubench.noisefit.model_avar import model_avar
+from imubench.noisefit.units import (
+    WHITE_EQUIVALENT,
+    white_equivalent,
+    white_equivalent_interval,
+    white_equivalent_weights,
+)
 
 BASE_TERMS: tuple[str, ...] = ("white", "flicker", "random_walk", "ramp", "quantization")
 EXTENSIONS: tuple[str, ...] = ("filter", "markov", "sine")
@@ -135,6 +141,9 @@ class Points:
     """Relative model-discrepancy std added to every point (see :func:`_estimate_delta`)."""
     filter_min_hz: float = 0.0
     """Lowest output-filter bandwidth searched (Hz); 0: :data:`FILTER_MIN_FRACTION` x rate."""
+    filter_bounded: bool = False
+    """The search floor cannot be raised further (:func:`_backed_extensions`): a filter
+    pinned at it is kept when the data need its shape, reported as bounded above only."""
 
     @property
     def filter_floor_hz(self) -> float:
@@ -858,9 +867,11 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     Butterworth still shapes the band near Nyquist, so an interval reaching there does
     not mean "no filter". Sine: a spectral line must back it
     (:func:`imubench.noisefit.spectral_line.line_test`) and carry at least
-    :data:`SINE_LINE_SHARE` of the fitted amplitude (``amplitude``, unit).
+    :data:`SINE_LINE_SHARE` of the fitted amplitude (``amplitude``, unit); without a line,
+    a narrowband peak there (:func:`~imubench.noisefit.spectral_line.peak_test`) is named
+    in the reason as a resonance the model cannot hold.
     """
-    from imubench.noisefit.spectral_line import line_test
+    from imubench.noisefit.spectral_line import line_test, peak_test
 
     value = float(getattr(st, _SETTING[kind]))
     lo, hi = ci[_SETTING_KEY[kind]]
@@ -877,10 +888,15 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     if kind == "filter":
         b0 = pts.filter_floor_hz
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
-        if value <= b0 * (1 + EDGE_MARGIN):
+        pinned = value <= b0 * (1 + EDGE_MARGIN)
+        if pinned and not pts.filter_bounded:
             return False, (f"dropped, bandwidth not identified ({value:.3g} Hz is the lowest "
                            "searched: the optimum is the search's edge, not the data's)"), None
         gain = _chi2_fixed_sigma(_without(st, "filter"), pts, sol.sigma)[0] - sol.chi2
+        if gain > EXTENSION_DCHI2 and pinned:
+            return True, (f"kept, {head}, without it chi2 rises {gain:.1f}: the data need "
+                          f"its shape but do not fix its bandwidth ({where}; the optimum is "
+                          "the lowest searched)"), None
         if gain > EXTENSION_DCHI2:
             return True, f"kept, {head}, {where}, without it chi2 rises {gain:.1f}", None
         return False, (f"dropped, the final model without it fits as well (chi2 rise "
@@ -888,6 +904,12 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
     test = line_test(arr, pts.rate_hz, *band)
     if not test.present:
+        peak = peak_test(arr, pts.rate_hz, value / SINE_BAND, value * SINE_BAND)
+        if peak is not None and peak.present:
+            return False, (f"dropped, {test.describe()}; but {peak.describe()}: a resonance, "
+                           "which no term of the noise model describes (its misfit stays in "
+                           "the model discrepancy floor; imubench gap tests it as the "
+                           "'resonance' effect)"), None
         return False, f"dropped, {test.describe()}", None
     if test.amplitude < SINE_LINE_SHARE * amplitude:
         return False, (f"dropped, the {test.describe()} carries amplitude "
@@ -961,15 +983,6 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
         st = _without(st, failed)
 
 
-def _refresh_delta(st: Structure, pts: Points) -> Points:
-    """``pts`` with the discrepancy floor re-estimated for ``st`` (:func:`_estimate_delta`):
-    the floor of a richer reference structure is too small for one that lost a term."""
-    base = replace(pts, delta=0.0)
-    sol = _fit_structure(st, base, None, iterations=3)
-    corr = _correlation(st, sol, base)
-    return replace(base, delta=_estimate_delta(st, base, corr, 2 * len(_extensions_in(st))))
-
-
 def _backed_extensions(pts: Points, arr: np.ndarray
                        ) -> tuple[Structure, Points, dict[str, float], dict[str, str]]:
     """The best subset of extensions (:func:`_select_extensions`) among those the data
@@ -1000,6 +1013,13 @@ def _backed_extensions(pts: Points, arr: np.ndarray
             # "filter" standing in for a term that is not there)
             pts = replace(pts, filter_min_hz=floor)
             continue
+        if failed[0] == "filter" and "lowest searched" in why["filter"] \
+                and not pts.filter_bounded:
+            # pinned at every floor: the bandwidth is bounded only from above (an order-1
+            # filter over a white floor fits alike at any lower bandwidth); keep the filter
+            # if the short taus need its shape (judged by _extension_verdict)
+            pts = replace(pts, filter_bounded=True)
+            continue
         banned.append(failed[0])
 
 
@@ -1027,10 +1047,12 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
             if not lost:
                 break
             # an extension failed once the base terms were chosen: choose them again
-            # without it (they were chosen alongside it)
+            # without it (they were chosen alongside it). The discrepancy floor stays the
+            # reference's: re-estimated for the poorer structure it absorbed the misfit the
+            # lost term leaves (ADIS16405 rep 3 ay: 0.037 -> 0.26), every short-tau point
+            # lost its weight, and white, filter and sine fell out one after the other
             for k in lost:
                 backed = _without(backed, k)
-            pts = _refresh_delta(backed, pts)
     else:
         st = Structure(tuple(t for t in wanted if t in BASE_TERMS))
         kinds = [k for k in EXTENSIONS if k in wanted]
@@ -1080,6 +1102,10 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
             j = withall.terms.index(term)
             ci[AMPLITUDE_KEY[term]] = (0.0, math.sqrt(max(sol_all.theta[j], 0.0)
                                                    + Z_PRESENT * se_all[j]))
+    n2 = white_equivalent(params) ** 2
+    if n2 > 0:  # delta method on the squared amplitudes (tau_c held at its estimate)
+        g = white_equivalent_weights(st.terms, st.tau_c_s)
+        ci[WHITE_EQUIVALENT] = white_equivalent_interval(n2, float(g @ sol.cov_theta @ g))
     if wanted is None:
         for term in BASE_TERMS:
             lo, hi = ci[AMPLITUDE_KEY[term]]

@@ -3,8 +3,10 @@
 The three numbers a datasheet quotes, read as Annex C reads them on the sigma-tau plot:
 
 - **N** (angle / velocity random walk): the slope -1/2 line read at tau = 1 s. The line is
-  the fitted white-noise term, sigma(tau) = N / sqrt(tau) (C.2), so the reading is the
-  fitted N and its interval the fit's 95 % interval.
+  the fitted white-equivalent density, sigma(tau) = N / sqrt(tau) (C.2): white before and
+  after the output filter and a Gauss-Markov term of short correlation time
+  (:func:`imubench.noisefit.units.white_equivalent`), so the reading is that N and its
+  interval the fit's 95 % interval of it.
 - **B** (bias instability): the flat minimum of the *measured* Allan deviation divided by
   sqrt(2 ln2 / pi) = 0.664 (C.3), at the tau where it occurs. Its 95 % interval is the
   chi-squared interval of that OADEV point (EDF from :mod:`imubench.stats`, NIST SP 1065
@@ -22,6 +24,7 @@ have no intervals, and none are made up here).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,13 +32,13 @@ import numpy as np
 from imubench.fleet.readouts import read_terms
 from imubench.noisefit.fit import ChannelFit
 from imubench.noisefit.tangent import FLICKER_FLOOR
-from imubench.noisefit.units import Quantity, quantities
+from imubench.noisefit.units import WHITE_EQUIVALENT, Quantity, quantities, term_value
 from imubench.stats.result import StatResult
 
 READ_TAU_S: dict[str, float] = {"N": 1.0, "K": 3.0}
 """Averaging time (s) at which Annex C reads the -1/2 (N) and +1/2 (K) lines."""
-TERM_OF: dict[str, str] = {"N": "white", "B": "flicker", "K": "random_walk"}
-"""Readout symbol -> model-file key of the coefficient."""
+TERM_OF: dict[str, str] = {"N": WHITE_EQUIVALENT, "B": "flicker", "K": "random_walk"}
+"""Readout symbol -> the coefficient (a model-file key, or the white-equivalent density)."""
 
 
 @dataclass(frozen=True)
@@ -93,21 +96,40 @@ def fmt_interval(value: float, low: float, high: float) -> str:
     halves = [h for h in (value - low, high - value) if h > 0]
     spread = min(halves) if halves else abs(value) * 1e-3
     decimals = int(min(max(1 - np.floor(np.log10(spread)), 0), 6))
+    if (low != 0 and float(f"{low:.{decimals}f}") == 0) or (
+            high != 0 and float(f"{high:.{decimals}f}") == 0):
+        # an interval over decades ([0.0076, 24.8]): fixed decimals would print 0.0
+        return f"{fmt(value)} [{fmt(low)}, {fmt(high)}]"
     return f"{value:.{decimals}f} [{low:.{decimals}f}, {high:.{decimals}f}]"
 
 
+def fitted_coefficient(fit: ChannelFit, key: str
+                       ) -> tuple[float, tuple[float, float] | None]:
+    """(value, 95 % interval) of a coefficient of ``fit``: a model-file key, or the
+    white-equivalent density (:func:`~imubench.noisefit.units.white_equivalent`; its
+    interval is the fit's ``white_equivalent`` one, or ``white``'s when white is its only
+    part). Value 0 when the fit judged it absent; the interval is then (0, upper limit)
+    or None."""
+    present = {k: v for k, v in fit.params.items() if k in fit.present}
+    value = term_value(present, key)
+    ci = fit.ci.get(key)
+    if key == WHITE_EQUIVALENT and ci is None and (
+            value <= 0 or math.isclose(value, float(present.get("white", 0.0)))):
+        ci = fit.ci.get("white")
+    return value, None if ci is None else (float(ci[0]), float(ci[1]))
+
+
 def _line_reading(symbol: str, fit: ChannelFit) -> Readout:
-    """N or K from the fitted term's line (module docstring)."""
+    """N or K from the fitted terms' line (module docstring)."""
     key = TERM_OF[symbol]
     tau = READ_TAU_S[symbol]
-    ci = fit.ci.get(key)
     source = "model file" if fit.method == "model file" else "fit"
-    if key in fit.present and fit.params.get(key, 0.0) > 0:
-        v = float(fit.params[key])
-        return Readout(symbol, v, tau, v, None if ci is None else (float(ci[0]), float(ci[1])),
-                       "value", source, f"{key} line read at tau = {tau:g} s")
+    v, ci = fitted_coefficient(fit, key)
+    if v > 0:
+        return Readout(symbol, v, tau, v, ci, "value", source,
+                       f"{key} line read at tau = {tau:g} s")
     if ci is not None and ci[1] > 0:
-        return Readout(symbol, float(ci[1]), None, None, None, "upper", source,
+        return Readout(symbol, ci[1], None, None, None, "upper", source,
                        f"{key} not detected: upper 95 % limit")
     return Readout(symbol, None, None, None, None, "none", source,
                    f"{key} not in the {source}")
@@ -142,5 +164,6 @@ def readout_quantities(channel: str) -> dict[str, tuple[Quantity, ...]]:
     return {sym: tuple(q for q in qs if q.term == term) for sym, term in TERM_OF.items()}
 
 
-__all__ = ["READ_TAU_S", "TERM_OF", "Readout", "fmt", "fmt_interval", "ieee952_readouts",
+__all__ = ["READ_TAU_S", "TERM_OF", "Readout", "fitted_coefficient", "fmt", "fmt_interval",
+           "ieee952_readouts",
            "readout_quantities"]

@@ -172,6 +172,7 @@ def sigma_tau_figure(title: str, fits: dict[str, ChannelFit], curves: dict[str, 
     term_labels: list[Text] = []
     slope_labels: list[Text] = []
     labelled_terms: set[str] = set()
+    shown: set[str] = set()  # readout symbols with a marker inside the axes
     for ch in chans:
         color = COLORS[ch[1]]
         c = curves[ch]
@@ -194,6 +195,7 @@ def sigma_tau_figure(title: str, fits: dict[str, ChannelFit], curves: dict[str, 
                 continue
             ax.plot([r.tau_s], [r.dev], READOUT_MARKERS[sym], ms=7, mfc="none", mec=color,
                     mew=1.6, zorder=4)
+            shown.add(sym)
             labels.append(ax.annotate(sym, (r.tau_s, r.dev), fontsize=8, color=color,
                                       fontweight="bold", textcoords="offset points",
                                       xytext=(6, 4)))
@@ -221,11 +223,15 @@ def sigma_tau_figure(title: str, fits: dict[str, ChannelFit], curves: dict[str, 
     right.yaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
     ax.grid(True, which="both", alpha=0.25)
     ax.set_title(title, fontsize=9)
-    legend = _legend(ax, chans, [
+    glyphs = {"N": "□", "B": "▽", "K": "◇"}  # READOUT_MARKERS' shapes
+    entries: list[tuple[str, dict[str, Any]]] = [
         ("OADEV ± 95 %", {"marker": "o", "ls": "none", "ms": 4}),
-        ("model", {"ls": "-"}), ("terms", {"ls": "--", "lw": 0.8}),
-        ("readouts N □ B ▽ K ◇", {"marker": "s", "ls": "none", "mfc": "none"}),
-    ])
+        ("model", {"ls": "-"}), ("terms", {"ls": "--", "lw": 0.8})]
+    if shown:  # only the readouts drawn (K at 3 s can lie below the data's range)
+        entries.append(("readouts " + " ".join(f"{k} {g}" for k, g in glyphs.items()
+                                                if k in shown),
+                        {"marker": "s", "ls": "none", "mfc": "none"}))
+    legend = _legend(ax, chans, entries)
     _readout_table(tab_ax, chans, readouts)
     fig.tight_layout()
     keep_non_overlapping(fig, ax, labels + term_labels + slope_labels, occupied=[legend])

@@ -22,9 +22,11 @@ from imubench.noisefit.fit import (
     fit_channel,
 )
 from imubench.noisefit.kernels import AMPLITUDE_KEY
+from imubench.noisefit.outliers import outlier_warning
 from imubench.noisefit.temperature import temperature_warning
 from imubench.noisefit.units import (
     KALIBR_UNITS,
+    WHITE_EQUIVALENT,
     datasheet_comparison,
     datasheet_units,
     kalibr_imu,
@@ -73,6 +75,9 @@ class RecordingFit:
                    for ch, f in self.fits.items()}
         limits = {ch: {k: hi for k, (_, hi) in f.ci.items() if k not in f.present}
                   for ch, f in self.fits.items()}
+        for ch, f in self.fits.items():  # no white-equivalent density: white's upper limit
+            if WHITE_EQUIVALENT not in f.ci and "white" in limits[ch]:
+                limits[ch][WHITE_EQUIVALENT] = limits[ch]["white"]
         return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
 
     def _kalibr_or_reason(self) -> dict[str, Any]:
@@ -151,10 +156,11 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
             fits[ch] = fit_channel(y, rec.rate_hz, terms=terms, method=method, channel=ch)
         except FitError as exc:
             raise FitError(f"{source}: {exc}") from None
-        warning = temperature_warning(ch, UNITS[ch], y, temp_c, rec.rate_hz)
-        if warning is not None:
-            log.warning("%s: %s", source, warning)
-            fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, warning))
+        for warning in (temperature_warning(ch, UNITS[ch], y, temp_c, rec.rate_hz),
+                        outlier_warning(ch, y)):
+            if warning is not None:
+                log.warning("%s: %s", source, warning)
+                fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, warning))
         if on_channel is not None:
             on_channel(k + 1, len(chans))
     chip = rec.metadata.get("chip")

@@ -20,8 +20,8 @@ from pathlib import Path
 from lsm6ds_sim.model import DATASHEET_PREFIX, NoiseModel, datasheet_chips, load_model
 
 from imubench.noisefit.fit import ChannelFit
-from imubench.noisefit.ieee952 import Readout, fmt, fmt_interval
-from imubench.noisefit.units import Quantity, quantities
+from imubench.noisefit.ieee952 import Readout, fitted_coefficient, fmt, fmt_interval
+from imubench.noisefit.units import WHITE_EQUIVALENT, Quantity, quantities, term_value
 
 STYLE = """body{font-family:sans-serif;margin:1em;max-width:1100px}
 td,th{border:1px solid #bbb;padding:2px 6px;font-size:12px}th{background:#eee}
@@ -69,9 +69,9 @@ def datasheet_typicals(chip: str | None) -> tuple[NoiseModel | None, dict[str, s
 
 def _cell(fit: ChannelFit, q: Quantity) -> str:
     """Value [95 % interval] of a fitted quantity, or what stands in for it."""
-    v = float(fit.params.get(q.term, 0.0)) * q.factor
-    ci = fit.ci.get(q.term)
-    if q.term not in fit.present or v <= 0:
+    value, ci = fitted_coefficient(fit, q.term)
+    v = value * q.factor
+    if v <= 0:
         if ci is not None and ci[1] > 0:
             return f"not detected (&lt; {fmt(ci[1] * q.factor)})"
         return "not in the model" if not fit.ci else "not detected"
@@ -82,9 +82,11 @@ def _cell(fit: ChannelFit, q: Quantity) -> str:
 
 def _datasheet_cell(q: Quantity, chans: Sequence[str], typical: NoiseModel | None,
                     sources: Mapping[str, str]) -> str:
-    if typical is None or q.term not in sources:
+    source_key = "white" if q.term == WHITE_EQUIVALENT else q.term
+    if typical is None or source_key not in sources:
         return "-"
-    values = sorted({fmt(float(getattr(typical[ch], q.term)) * q.factor) for ch in chans})
+    values = sorted({fmt(term_value(typical[ch].to_dict(), q.term) * q.factor)
+                     for ch in chans})
     return " / ".join(values) + " *"
 
 
@@ -150,8 +152,9 @@ def _source_paragraph(info: PageInfo) -> str:
     return (f"<p>Recording <code>{html.escape(info.recording)}</code>: "
             f"{info.rate_hz:g} Hz, {info.duration_s / 3600:.3g} h, chip "
             f"{html.escape(str(info.chip or 'unknown'))}. Noise {where}. The "
-            "IEEE 952 minimum reading always has its chi-squared interval (it is read on "
-            "the measured curve).</p>")
+            "IEEE 952 minimum reading is read on the measured curve, with the chi-squared "
+            "interval of that point when the curve shows a floor, else as an upper bound "
+            "(&lt; value: the curve shows no established floor).</p>")
 
 
 def _png(path: Path) -> str:

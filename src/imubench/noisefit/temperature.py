@@ -26,6 +26,15 @@ T_LIMIT = 5.0
 """|t| above which the rate is said to follow the temperature."""
 
 
+def _block_means(a: np.ndarray, n: int, m: int) -> np.ndarray:
+    """Means of n blocks of m samples over their finite values (NaN for a block without)."""
+    blocks = np.asarray(a[: n * m], dtype=float).reshape(n, m)
+    ok = np.isfinite(blocks)
+    count = ok.sum(axis=1)
+    total = np.where(ok, blocks, 0.0).sum(axis=1)
+    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+
+
 def temperature_slope(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
                       ) -> tuple[float, float, int] | None:
     """(slope per degC, t statistic, blocks) of the rate's block means on the temperature's,
@@ -34,8 +43,7 @@ def temperature_slope(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
     n = min(len(y), len(temp_c)) // m
     if n < MIN_BLOCKS:
         return None
-    yb = np.nanmean(np.asarray(y[: n * m], dtype=float).reshape(n, m), axis=1)
-    tb = np.nanmean(np.asarray(temp_c[: n * m], dtype=float).reshape(n, m), axis=1)
+    yb, tb = _block_means(y, n, m), _block_means(temp_c, n, m)
     ok = np.isfinite(yb) & np.isfinite(tb)
     yb, tb = yb[ok], tb[ok]
     if len(yb) < MIN_BLOCKS or float(np.std(tb)) < MIN_TEMP_SPREAD_C:
@@ -58,7 +66,8 @@ def temperature_warning(channel: str, unit: str, y: np.ndarray, temp_c: np.ndarr
     if found is None or abs(found[1]) <= T_LIMIT:
         return None
     slope, t, n = found
-    return (f"{channel}: the rate follows the die temperature ({slope:.3g} {unit}/degC, "
+    what = "rate" if channel.startswith("g") else "acceleration"
+    return (f"{channel}: the {what} follows the die temperature ({slope:.3g} {unit}/degC, "
             f"t {t:.1f} over {n} blocks of {BLOCK_S:g} s); the fitted long-tau terms "
             "(random walk, flicker) include that drift: fit a recording at constant "
             "temperature, or model the temperature effect (imubench gap)")

@@ -16,6 +16,14 @@ accel bias instability ug      B [g] * 1e6
 accel random walk ug/sqrt(s)   K [g/sqrt(s)] * 1e6     (m/s^2/sqrt(h): K g0 60)
 =============================  ==========================================
 
+N here is the **white-equivalent density** (:func:`white_equivalent`): every term whose
+AVAR follows N^2/tau at the taus a datasheet reads it (1 s and beyond), i.e. the white
+noise before the output filter (``white``, unity DC gain), the white noise after it
+(``output_white``) and a Gauss-Markov term of correlation time <= :data:`SHORT_MARKOV_S`
+(AVAR -> 2 sigma^2 tau_c / tau for tau >> tau_c, IEEE 952 C.6). The split between these
+is often poorly determined (ADIS16405 gyros: ``white`` 0.029 and ``output_white`` 0.029
+dps/sqrt(Hz)); their sum is what the -1/2 slope of the measured curve shows.
+
 Kalibr (``imu.yaml``, continuous-time densities in SI; Kalibr wiki "IMU Noise Model"): its
 white-noise density sigma has discrete std sigma/sqrt(dt) per sample and its bias random
 walk sigma_b a discrete std sigma_b sqrt(dt) per sample, which is exactly N and K here:
@@ -27,9 +35,11 @@ accelerometer_random_walk = K g0 m/s^3/sqrt(Hz), update_rate = the sample rate (
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from imubench.noisefit.errors import FitError
 
@@ -53,11 +63,51 @@ class Quantity:
 
 
 _FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)  # ADEV of flicker B is 0.664 B (IEEE 952 C.3)
+WHITE_EQUIVALENT: str = "white_equivalent"
+"""Name of the white-equivalent density N (:func:`white_equivalent`) in quantities, in a
+fit's ``ci`` and in the readouts; not a model-file key."""
+SHORT_MARKOV_S: float = 0.1
+"""A Gauss-Markov term with tau_c up to this (s) is white at tau = 1 s, where N is read
+(1 s / 0.1 s = 10 correlation times: its AVAR is within 15 % of 2 sigma^2 tau_c / tau)."""
+
+
+def white_equivalent(params: Mapping[str, float]) -> float:
+    """White-equivalent density N (unit/sqrt(Hz)) of a channel's model-file values:
+    sqrt(white^2 + output_white^2 + 2 markov_sigma^2 markov_tau) where the Markov term
+    counts only when markov_tau <= :data:`SHORT_MARKOV_S` (module docstring)."""
+    n2 = float(params.get("white", 0.0)) ** 2 + float(params.get("output_white", 0.0)) ** 2
+    tau_c = float(params.get("markov_tau", 0.0))
+    if 0.0 < tau_c <= SHORT_MARKOV_S:
+        n2 += 2.0 * float(params.get("markov_sigma", 0.0)) ** 2 * tau_c
+    return math.sqrt(n2)
+
+
+def white_equivalent_weights(terms: Sequence[str], tau_c_s: float) -> np.ndarray:
+    """d(N^2)/d(theta_j) for squared amplitudes theta_j of ``terms`` (names ``white``,
+    ``output_white``, ``markov``; others 0): the gradient of the delta-method interval
+    of :func:`white_equivalent`."""
+    short = 0.0 < tau_c_s <= SHORT_MARKOV_S
+    return np.array([1.0 if t in ("white", "output_white") else
+                     2.0 * tau_c_s if (t == "markov" and short) else 0.0 for t in terms])
+
+
+def white_equivalent_interval(n2: float, var_n2: float, z: float = 1.959964
+                              ) -> tuple[float, float]:
+    """95 % interval of N from N^2 and its variance (normal in N^2, clipped at 0)."""
+    half = z * math.sqrt(max(var_n2, 0.0))
+    return math.sqrt(max(n2 - half, 0.0)), math.sqrt(n2 + half)
+
+
+def term_value(params: Mapping[str, float], term: str) -> float:
+    """A quantity's coefficient: a model-file key's value, or :func:`white_equivalent`."""
+    if term == WHITE_EQUIVALENT:
+        return white_equivalent(params)
+    return float(params.get(term, 0.0))
 
 GYRO_QUANTITIES: tuple[Quantity, ...] = (
-    Quantity("noise_density_mdps_per_sqrt_hz", "rate noise density", "mdps/√Hz", "white",
-             1000.0),
-    Quantity("arw_deg_per_sqrt_h", "angle random walk", "°/√h", "white", 60.0),
+    Quantity("noise_density_mdps_per_sqrt_hz", "rate noise density", "mdps/√Hz",
+             WHITE_EQUIVALENT, 1000.0),
+    Quantity("arw_deg_per_sqrt_h", "angle random walk", "°/√h", WHITE_EQUIVALENT, 60.0),
     Quantity("bias_instability_deg_per_h", "bias instability", "°/h", "flicker", 3600.0),
     Quantity("adev_floor_deg_per_h", "Allan deviation floor (0.664 B)", "°/h", "flicker",
              3600.0 * _FLOOR),
@@ -68,8 +118,9 @@ GYRO_QUANTITIES: tuple[Quantity, ...] = (
 
 ACCEL_QUANTITIES: tuple[Quantity, ...] = (
     Quantity("noise_density_ug_per_sqrt_hz", "acceleration noise density", "µg/√Hz",
-             "white", 1e6),
-    Quantity("vrw_m_per_s_per_sqrt_h", "velocity random walk", "m/s/√h", "white", G0 * 60.0),
+             WHITE_EQUIVALENT, 1e6),
+    Quantity("vrw_m_per_s_per_sqrt_h", "velocity random walk", "m/s/√h", WHITE_EQUIVALENT,
+             G0 * 60.0),
     Quantity("bias_instability_ug", "bias instability", "µg", "flicker", 1e6),
     Quantity("adev_floor_ug", "Allan deviation floor (0.664 B)", "µg", "flicker",
              1e6 * _FLOOR),
@@ -90,12 +141,13 @@ def quantities(channel: str) -> tuple[Quantity, ...]:
 
 def datasheet_units(channel: str, params: Mapping[str, float]) -> dict[str, float]:
     """The fitted N, B, K of one channel in datasheet units (names carry the unit)."""
-    return {q.key: float(params.get(q.term, 0.0)) * q.factor for q in quantities(channel)}
+    return {q.key: term_value(params, q.term) * q.factor for q in quantities(channel)}
 
 
 def param_units(channel: str) -> dict[str, str]:
-    """The unit of every noise-model parameter of ``channel`` (gx..az; docs/noise-model.md),
-    for the JSON outputs: ``u`` is the channel's unit (dps or g)."""
+    """The unit of every noise-model parameter of ``channel`` (gx..az; docs/noise-model.md)
+    and of the white-equivalent density, for the JSON outputs: ``u`` is the channel's unit
+    (dps or g)."""
     from imubench.batch import UNITS
 
     if channel not in (*GYRO, *ACCEL):
@@ -105,7 +157,8 @@ def param_units(channel: str) -> dict[str, str]:
         "white": f"{u}/sqrt(Hz)", "flicker": u, "random_walk": f"{u}/sqrt(s)",
         "ramp": f"{u}/s", "quantization": f"{u}*s", "markov_sigma": u, "markov_tau": "s",
         "sine_amplitude": u, "sine_freq": "Hz", "bandwidth_hz": "Hz", "filter_order": "1",
-        "output_white": f"{u}/sqrt(Hz)", "temp_coeff": f"{u}/degC",
+        "output_white": f"{u}/sqrt(Hz)", WHITE_EQUIVALENT: f"{u}/sqrt(Hz)",
+        "temp_coeff": f"{u}/degC",
         "temp_coeff2": f"{u}/degC^2", "outlier_rate": "1/s", "outlier_amplitude": u,
         "bias": u,
     }
@@ -121,12 +174,32 @@ KALIBR_UNITS: dict[str, str] = {
 
 
 KALIBR_TERMS: dict[str, tuple[str, str]] = {
-    "gyroscope_noise_density": ("gyro", "white"),
+    "gyroscope_noise_density": ("gyro", WHITE_EQUIVALENT),
     "gyroscope_random_walk": ("gyro", "random_walk"),
-    "accelerometer_noise_density": ("accel", "white"),
+    "accelerometer_noise_density": ("accel", WHITE_EQUIVALENT),
     "accelerometer_random_walk": ("accel", "random_walk"),
 }
 """Kalibr key -> (sensor, model-file key of the fitted term)."""
+
+
+def check_kalibr_request(inflate: float, channels: Iterable[str] | None = None) -> None:
+    """Refuse a Kalibr export that cannot be complete (callable before any fitting):
+    ``inflate`` must be >= 1 and ``channels`` (when known) must hold a gyro and an
+    accelerometer axis (Kalibr needs all four densities; no placeholder values are made
+    up)."""
+    if not (math.isfinite(inflate) and inflate >= 1.0):
+        raise FitError(f"--kalibr-inflate {inflate}: must be a number >= 1")
+    if channels is None:
+        return
+    have = set(channels)
+    missing = [key for key, (sensor, _) in KALIBR_TERMS.items()
+               if not have & set(GYRO if sensor == "gyro" else ACCEL)]
+    if missing:
+        sensors = sorted({KALIBR_TERMS[k][0] for k in missing})
+        names = " and ".join("accelerometer (ax ay az)" if s == "accel" else "gyro (gx gy gz)"
+                             for s in sensors)
+        raise FitError(f"Kalibr imu.yaml needs {', '.join(missing)}, but no {names} axis "
+                       "was fitted; fit both sensors")
 
 
 def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: float,
@@ -149,17 +222,7 @@ def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: fl
     Kalibr needs all four densities: when no gyro or no accelerometer axis was fitted,
     :class:`FitError` names the missing keys (no placeholder values are made up).
     """
-    if not (math.isfinite(inflate) and inflate >= 1.0):
-        raise FitError(f"--kalibr-inflate {inflate}: must be a number >= 1")
-    missing = [key for key, (sensor, _) in KALIBR_TERMS.items()
-               if not any(ch in params_by_channel
-                          for ch in (GYRO if sensor == "gyro" else ACCEL))]
-    if missing:
-        sensors = sorted({KALIBR_TERMS[k][0] for k in missing})
-        names = " and ".join("accelerometer (ax ay az)" if s == "accel" else "gyro (gx gy gz)"
-                             for s in sensors)
-        raise FitError(f"Kalibr imu.yaml needs {', '.join(missing)}, but no {names} axis "
-                       "was fitted; fit both sensors")
+    check_kalibr_request(inflate, params_by_channel)
     limits = upper_limits or {}
     out: dict[str, Any] = {"rostopic": rostopic, "update_rate": float(rate_hz)}
     marked: list[str] = []
@@ -173,7 +236,7 @@ def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: fl
         for ch in chans:
             if ch not in params_by_channel:
                 continue
-            v = float(params_by_channel[ch].get(term, 0.0))
+            v = term_value(params_by_channel[ch], term)
             if v <= 0.0 and term in limits.get(ch, {}):
                 values.append((float(limits[ch][term]), True, ch))
             else:
@@ -248,7 +311,7 @@ def kalibr_limit_message(path: object, values: Mapping[str, Any], key: str) -> s
 def datasheet_comparison(chip: str | None,
                          params_by_channel: Mapping[str, Mapping[str, float]]
                          ) -> dict[str, dict[str, Any]]:
-    """Fitted white density vs the chip's datasheet-typical one (``datasheet:<chip>``).
+    """Fitted white-equivalent density vs the chip's datasheet-typical one (``datasheet:<chip>``).
 
     Returns ``{channel: {"fitted": N, "typical": N_typ, "ratio": N / N_typ, "unit": the
     unit of N and N_typ}}``; empty when
@@ -262,8 +325,8 @@ def datasheet_comparison(chip: str | None,
     typical = load_model(DATASHEET_PREFIX + chip)
     out: dict[str, dict[str, Any]] = {}
     for ch, p in params_by_channel.items():
-        n_typ = float(typical[ch].white)
-        n = float(p.get("white", 0.0))
+        n_typ = white_equivalent(typical[ch].to_dict())
+        n = white_equivalent(p)
         if n_typ > 0:
             out[ch] = {"fitted": n, "typical": n_typ, "ratio": n / n_typ,
                        "unit": param_units(ch)["white"]}
@@ -275,7 +338,10 @@ __all__ = [
     "G0",
     "GYRO_QUANTITIES",
     "KALIBR_UNITS",
+    "SHORT_MARKOV_S",
+    "WHITE_EQUIVALENT",
     "Quantity",
+    "check_kalibr_request",
     "datasheet_comparison",
     "datasheet_units",
     "kalibr_imu",
@@ -283,4 +349,8 @@ __all__ = [
     "kalibr_yaml",
     "param_units",
     "quantities",
+    "term_value",
+    "white_equivalent",
+    "white_equivalent_interval",
+    "white_equivalent_weights",
 ]

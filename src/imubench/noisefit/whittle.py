@@ -56,7 +56,7 @@ white, flicker, random walk, quantization start in; the output filter (with
 ``output_white``) and a Gauss-Markov term (tau_c in [2 tau0, T/30], as for ``wls``) enter
 if their best setting gives LR > :data:`EXTENSION_LR`; then backward elimination drops
 the linear term with the smallest LR while it is below :data:`TERM_LR` (a Gauss-Markov
-amplitude: :data:`EXTENSION_LR`). The notes say per term why it was kept or dropped.
+amplitude: :data:`EXTENSION_LR`). ``reasons`` say per term why it was kept or dropped.
 Ramp and sine are deterministic: the periodogram has no place for them (a ramp is the
 increments' mean, dropped; a line is not a continuous spectrum), so ``whittle`` refuses
 them in ``terms`` and does not look for them; use ``wls``.
@@ -94,6 +94,12 @@ from imubench.noisefit.fit import (
     parse_terms,
 )
 from imubench.noisefit.kernels import AMPLITUDE_KEY, filter_gain2, gacv_unit
+from imubench.noisefit.units import (
+    WHITE_EQUIVALENT,
+    white_equivalent,
+    white_equivalent_interval,
+    white_equivalent_weights,
+)
 
 TAPER_FRACTION: float = 0.1
 """Fraction of the record under the Tukey taper's cosine ends (half at each end)."""
@@ -402,8 +408,9 @@ def _drop(st: Structure, term: str) -> Structure:
     return replace(st, terms=terms, tau_c_s=0.0 if term == "markov" else st.tau_c_s)
 
 
-def _select(bases: _Bases, notes: list[str]) -> _Fit:
-    """Likelihood-ratio model selection (module docstring), with a note per decision."""
+def _select(bases: _Bases, reasons: dict[str, str]) -> _Fit:
+    """Likelihood-ratio model selection (module docstring); ``reasons`` gets, per term
+    name, why it was kept or dropped (as :attr:`ChannelFit.reasons`)."""
     current = _fit_linear(Structure(BASE), bases)
     for kind in ("filter", "markov"):
         cand = (_search_filter if kind == "filter" else _search_markov)(current.st, bases)
@@ -411,10 +418,10 @@ def _select(bases: _Bases, notes: list[str]) -> _Fit:
         setting = (f"bandwidth {cand.st.bandwidth_hz:.4g} Hz, order {cand.st.filter_order}"
                    if kind == "filter" else f"tau_c {cand.st.tau_c_s:.4g} s")
         if lr > EXTENSION_LR:
-            notes.append(f"{kind} kept: best {setting}, LR {lr:.1f} > {EXTENSION_LR}")
+            reasons[kind] = f"kept, LR {lr:.1f} > {EXTENSION_LR}, best {setting}"
             current = cand
         else:
-            notes.append(f"{kind} dropped: best {setting}, LR {lr:.1f} <= {EXTENSION_LR}")
+            reasons[kind] = f"dropped, LR {lr:.1f} <= {EXTENSION_LR} (best {setting})"
     while len(current.st.terms) > 1:
         lrs = {}
         reduced = {}
@@ -426,10 +433,10 @@ def _select(bases: _Bases, notes: list[str]) -> _Fit:
         weakest = min(lrs, key=lambda t: lrs[t] - need[t])
         if lrs[weakest] >= need[weakest]:
             for t in current.st.terms:
-                notes.append(f"{AMPLITUDE_KEY[t]} kept: LR {lrs[t]:.1f} >= {need[t]}")
+                if t not in ("markov", "output_white"):  # their reason is the search's
+                    reasons[t] = f"kept, LR {lrs[t]:.1f} >= {need[t]}"
             break
-        notes.append(f"{AMPLITUDE_KEY[weakest]} dropped: LR {lrs[weakest]:.2f} < "
-                     f"{need[weakest]}")
+        reasons[weakest] = f"dropped, LR {lrs[weakest]:.2f} < {need[weakest]}"
         current = reduced[weakest]
     return current
 
@@ -543,7 +550,12 @@ def fit_whittle(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "
         notes.append(f"{sp.missing} of {sp.n_increments} increments touch missing samples: "
                      f"taper weight 0 there, {GAP_RAMP_SAMPLES}-sample cosine ramps around "
                      "each gap")
-    fit = _select(bases, notes) if wanted is None else _explicit(wanted, bases, channel)
+    reasons: dict[str, str] = {}
+    if wanted is None:
+        fit = _select(bases, reasons)
+    else:
+        fit = _explicit(wanted, bases, channel)
+        reasons = {t: "fitted as asked (terms list, no selection)" for t in wanted}
     st = fit.st
     names, obs, fisher = _observed_information(fit, bases)
     try:
@@ -575,9 +587,19 @@ def fit_whittle(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "
         params["bandwidth_hz"] = st.bandwidth_hz
         params["filter_order"] = st.filter_order
         present.extend(["bandwidth_hz", "filter_order"])
-        half = Z95 * se["bandwidth_hz"]
+        half = Z95 * se["bandwidth_hz"]  # a bandwidth lies below Nyquist
         ci["bandwidth_hz"] = (st.bandwidth_hz * math.exp(-half),
-                              st.bandwidth_hz * math.exp(half))
+                              min(st.bandwidth_hz * math.exp(half), 0.5 * rate_hz))
+    n2 = white_equivalent(params) ** 2
+    if n2 > 0:  # delta method; cov is in log theta (and log tau_c)
+        weights = white_equivalent_weights(st.terms, st.tau_c_s)
+        grad = np.zeros(len(names))
+        for j, term in enumerate(st.terms):
+            if term in names:
+                grad[names.index(term)] = weights[j] * float(fit.theta[j])
+                if term == "markov" and weights[j] > 0 and "markov_tau" in names:
+                    grad[names.index("markov_tau")] = weights[j] * float(fit.theta[j])
+        ci[WHITE_EQUIVALENT] = white_equivalent_interval(n2, float(grad @ cov @ grad))
     absent = [t for t in BASE if AMPLITUDE_KEY[t] not in present]
     for term, upper in _upper_limits(fit, bases, absent).items():
         ci[AMPLITUDE_KEY[term]] = (0.0, upper)
@@ -586,7 +608,7 @@ def fit_whittle(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "
     pts = avar_points(arr, rate_hz, taus, channel)
     return ChannelFit(channel, float(rate_hz), "whittle", params, ci, tuple(present),
                       pts.tau_s, pts.avar, pts.edf, float(np.nanmean(arr)),
-                      notes=tuple(notes))
+                      notes=tuple(notes), reasons=reasons)
 
 
 __all__ = [
