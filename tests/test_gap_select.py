@@ -349,3 +349,21 @@ def test_whitened_level_test_sees_a_smooth_temperature_response_the_increments_m
     assert abs(incr) < level / 2
     null = feats(sd * rng.standard_normal(n))
     assert abs(temp_level_against(null, sims)) < thr
+
+
+def test_resonance_candidate_needs_a_peak_over_the_model() -> None:
+    """A resonance stands at least RESONANCE_MIN_RATIO above the model's PSD at its
+    centre: a 20 % band excess (replicate differences on ADIS gy) is not one."""
+    import numpy as np
+
+    from imubench.gap.candidates import RESONANCE_MIN_RATIO, is_peak
+    from imubench.gap.evidence import fit_resonance
+
+    f = np.linspace(0.0, 50.0, 501)
+    model = np.full(f.size, 3.2e-5)
+    bump = np.exp(-0.5 * ((f - 20.0) / 1.0) ** 2)
+    for height, want in ((0.2, False), (RESONANCE_MIN_RATIO + 1.0, True)):
+        real = model * (1.0 + height * bump)
+        rf = fit_resonance(f, real, model)
+        assert rf is not None and abs(rf.resonance_freq_hz - 20.0) < 0.2
+        assert is_peak(rf, f, model) is want

@@ -57,6 +57,19 @@ long-tau excess); a temperature fitted to a random walk's chance correlation is 
 refused by the held-out check, where the response it predicts is absent."""
 Z_LINE_CANDIDATE = 3.0
 """Line z above which the sine and resonance candidates are fitted."""
+RESONANCE_MIN_RATIO = 2.0
+"""A resonance is a peak: the real PSD at its centre must be at least this times the
+model's (issue 15: on ADIS16405 gy, where the spectrum has no peak, a 5-20 % excess of one
+replicate's band over another's was named a resonance on nulls; the gz resonance near
+20 Hz is 11-17x its continuum, the blind set's near-limit one 4x)."""
+
+
+def is_peak(rf: evidence.ResonanceFit, f_hz: np.ndarray, model_psd: np.ndarray) -> bool:
+    """Does the fitted resonance stand :data:`RESONANCE_MIN_RATIO` above the model's PSD
+    at its centre?"""
+    i = int(np.argmin(np.abs(f_hz - rf.resonance_freq_hz)))
+    base = float(model_psd[i])
+    return base > 0 and (base + rf.resonance_height) / base >= RESONANCE_MIN_RATIO
 
 
 @dataclass
@@ -227,8 +240,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
         elif eff == "resonance":
             above = any(b["direction"] == "real_above" for b in before.bands)
             if above or before.line_z > Z_LINE_CANDIDATE:
-                rf = evidence.fit_resonance(fit.f_hz, fit.real.psd, cur.psd.mean(axis=0))
-                if rf is not None:
+                model_psd = cur.psd.mean(axis=0)
+                rf = evidence.fit_resonance(fit.f_hz, fit.real.psd, model_psd)
+                if rf is not None and is_peak(rf, fit.f_hz, model_psd):
                     cands.append(Candidate(eff, {
                         "resonance_freq_hz": rf.resonance_freq_hz,
                         "resonance_width_hz": rf.resonance_width_hz,
