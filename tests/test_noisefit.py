@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import allantools
 import numpy as np
@@ -277,17 +278,25 @@ def test_sinusoid_does_not_bring_a_spurious_flicker() -> None:
     assert lo <= 0.5 <= hi
 
 
+def _adis(reference_dir: Path, rep: int, channel: str) -> np.ndarray:
+    """One channel of an ADIS16405 reference replicate in dps or g (skips when absent)."""
+    path = reference_dir / "imu-real" / "adis16405" / f"adis16405_rep{rep}.npz"
+    if not path.is_file():
+        pytest.skip("ADIS16405 reference data not present")
+    d = np.load(path)
+    axis = "xyz".index(channel[1])
+    if channel[0] == "g":
+        return d["gyro_counts"][:, axis].astype(float) * float(d["gyro_lsb_dps"])
+    return d["accel_counts"][:, axis].astype(float) * float(d["accel_lsb_g"])
+
+
 def test_filter_pinned_at_the_search_floor_is_kept_when_the_first_octave_needs_it(
         reference_dir) -> None:
     """ADIS16405 rep 2 gx: an order-1 output filter fits alike at any bandwidth from the
     search floor up to ~25 Hz, so its optimum sits at the floor. Dropping it for that left
     a model 16 % off the measured ADEV at tau0 (and a discrepancy floor that hid every
     long-tau term); it is kept, with the bandwidth reported as not fixed by the data."""
-    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep2.npz"
-    if not path.is_file():
-        pytest.skip("ADIS16405 reference data not present")
-    d = np.load(path)
-    y = d["gyro_counts"][:, 0].astype(float) * float(d["gyro_lsb_dps"])
+    y = _adis(reference_dir, 2, "gx")
     f = fit_channel(y, 100.0, channel="gx")
     assert "bandwidth_hz" in f.present, f.reasons["filter"]
     assert "do not fix its bandwidth" in f.reasons["filter"]
@@ -308,11 +317,7 @@ def test_losing_an_extension_does_not_inflate_the_discrepancy_floor(reference_di
     chosen. Re-estimating the discrepancy floor for the model without it gave 0.26 (from
     0.037), after which white, the filter and the 0.54 Hz line all fell out and the model
     was 23 % off at tau0. The reference's floor is kept: the model follows the curve."""
-    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep3.npz"
-    if not path.is_file():
-        pytest.skip("ADIS16405 reference data not present")
-    d = np.load(path)
-    y = d["accel_counts"][:, 1].astype(float) * float(d["accel_lsb_g"])
+    y = _adis(reference_dir, 3, "ay")
     f = fit_channel(y, 100.0, channel="ay")
     assert {"white", "bandwidth_hz", "sine_amplitude"} <= set(f.present), f.reasons
     meas = oadev(y, 100.0, "freq", "octave")
@@ -557,11 +562,7 @@ def test_a_resonance_is_named_where_the_sine_has_no_line(reference_dir) -> None:
     """ADIS16405 rep 1 gz has a ~1.6 Hz wide resonance near 20 Hz (ADEV at 0.02 s above
     that at 0.01 s). The sine the Allan curve asks for has no spectral line and is
     dropped; the reason names the peak instead of leaving the misfit unexplained."""
-    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep1.npz"
-    if not path.is_file():
-        pytest.skip("ADIS16405 reference data not present")
-    d = np.load(path)
-    y = d["gyro_counts"][:, 2].astype(float) * float(d["gyro_lsb_dps"])
+    y = _adis(reference_dir, 1, "gz")
     f = fit_channel(y, 100.0, channel="gz")
     assert "sine_amplitude" not in f.present
     assert "narrowband peak at 2" in f.reasons["sine"] or "narrowband peak at 19" in \
