@@ -255,8 +255,8 @@ def test_kalibr_requests_are_refused_before_the_recording_is_read(
 def test_noise_density_is_white_before_and_after_the_filter(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Simulated white 0.004 through a 20 Hz output filter plus white 0.003 after it: the
-    datasheet density is their quadrature sum, 5 mdps/sqrt(Hz), whatever split the fit
-    finds; the terminal names it when the fit reports the two parts."""
+    datasheet density is their quadrature sum, 5 mdps/sqrt(Hz), and the terminal names it
+    beside the two parts the fit reports."""
     model = NoiseModel.quiet().with_channel("gx", white=0.004, bandwidth_hz=20.0,
                                             output_white=0.003)
     rec = write_recording(tmp_path / "f.imbr", model, 200_000)
@@ -267,5 +267,4 @@ def test_noise_density_is_white_before_and_after_the_filter(
     gx = json.loads(js.read_text())["channels"]["gx"]
     assert gx["datasheet_units"]["noise_density_mdps_per_sqrt_hz"] == pytest.approx(
         5.0, rel=0.03)
-    if "output_white" in gx["present"]:
-        assert "white-equivalent density N=" in out
+    assert "output_white" in gx["present"] and "white-equivalent density N=" in out, out
