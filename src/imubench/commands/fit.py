@@ -17,7 +17,6 @@ from imubench.batchrun import add_batch_options, is_batch
 from imubench.commands import write_json
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
-from imubench.noisefit.ieee952 import fitted_coefficient
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
 from imubench.noisefit.units import (
     WHITE_EQUIVALENT,
@@ -75,7 +74,7 @@ def format_summary(result: RecordingFit) -> str:
             unit = param_units(ch)[key]
             parts.append(f"{key}={f.params[key]:.4g} {unit} [{lo:.3g}, {hi:.3g}]")
         lines.append(f"{ch}: " + ("  ".join(parts) if parts else "(no term found)"))
-        n, ci = fitted_coefficient(f, WHITE_EQUIVALENT)
+        n, ci = f.coefficient(WHITE_EQUIVALENT)
         if n > 0 and not math.isclose(n, f.params.get("white", 0.0)):
             lo, hi = ci if ci is not None else (float("nan"), float("nan"))
             lines.append(f"    white-equivalent density N={n:.4g} {param_units(ch)['white']} "

@@ -118,12 +118,17 @@ class Candidate:
         }
         if self.note:
             d["rejected_because"] = self.note
-        if self.holdout is not None:
-            d["holdout_gap_after"] = self.holdout.gap
-            d["holdout_gap_excess_after"] = self.holdout.gap_excess
-            d["holdout_chi2_drop"] = self.holdout_dchi2
-            d["holdout_chi2_drop_parts"] = self.holdout_dparts
+        d.update(self.holdout_dict())
         return d
+
+    def holdout_dict(self) -> dict[str, Any]:
+        """The held-out part's figures after this effect (empty without a held-out part)."""
+        if self.holdout is None:
+            return {}
+        return {"holdout_gap_after": self.holdout.gap,
+                "holdout_gap_excess_after": self.holdout.gap_excess,
+                "holdout_chi2_drop": self.holdout_dchi2,
+                "holdout_chi2_drop_parts": self.holdout_dparts}
 
 
 def additive(cm: ChannelModel, effect: str) -> bool:

@@ -225,12 +225,7 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
     assert c.fit is not None
     d: dict[str, Any] = {"effect": c.effect, "params": c.params, "gap_after": c.fit.gap,
                          "gap_excess_after": c.fit.gap_excess,
-                         "evidence_closed": c.evidence_closed}
-    if c.holdout is not None:
-        d["holdout_gap_after"] = c.holdout.gap
-        d["holdout_gap_excess_after"] = c.holdout.gap_excess
-        d["holdout_chi2_drop"] = c.holdout_dchi2
-        d["holdout_chi2_drop_parts"] = c.holdout_dparts
+                         "evidence_closed": c.evidence_closed, **c.holdout_dict()}
     return d
 
 

@@ -56,6 +56,7 @@ from imubench.noisefit.kernels import AMPLITUDE_KEY, averaging_factors, term_ava
 from imubench.noisefit.model_avar import model_avar
 from imubench.noisefit.units import (
     WHITE_EQUIVALENT,
+    term_value,
     white_equivalent,
     white_equivalent_interval,
     white_equivalent_weights,
@@ -190,6 +191,20 @@ class ChannelFit:
         vals: dict[str, float] = {k: float(v) for k, v in self.params.items()}
         vals["filter_order"] = int(self.params.get("filter_order", 1))
         return cm.replace(**vals)
+
+    def coefficient(self, key: str) -> tuple[float, tuple[float, float] | None]:
+        """(value, 95 % interval) of a coefficient: a model-file key, or the
+        white-equivalent density (:func:`~imubench.noisefit.units.white_equivalent`; its
+        interval is the fit's ``white_equivalent`` one, or ``white``'s when white is its
+        only part). Value 0 when the fit judged it absent; the interval is then (0, upper
+        limit) or None."""
+        present = {k: v for k, v in self.params.items() if k in self.present}
+        value = term_value(present, key)
+        ci = self.ci.get(key)
+        if key == WHITE_EQUIVALENT and ci is None and (
+                value <= 0 or math.isclose(value, float(present.get("white", 0.0)))):
+            ci = self.ci.get("white")
+        return value, None if ci is None else (float(ci[0]), float(ci[1]))
 
     def model_avar(self, tau_s: Sequence[float] | np.ndarray,
                    rate_hz: float | None = None) -> np.ndarray:

@@ -24,7 +24,6 @@ have no intervals, and none are made up here).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +31,7 @@ import numpy as np
 from imubench.fleet.readouts import read_terms
 from imubench.noisefit.fit import ChannelFit
 from imubench.noisefit.tangent import FLICKER_FLOOR
-from imubench.noisefit.units import WHITE_EQUIVALENT, Quantity, quantities, term_value
+from imubench.noisefit.units import WHITE_EQUIVALENT, Quantity, quantities
 from imubench.stats.result import StatResult
 
 READ_TAU_S: dict[str, float] = {"N": 1.0, "K": 3.0}
@@ -103,28 +102,12 @@ def fmt_interval(value: float, low: float, high: float) -> str:
     return f"{value:.{decimals}f} [{low:.{decimals}f}, {high:.{decimals}f}]"
 
 
-def fitted_coefficient(fit: ChannelFit, key: str
-                       ) -> tuple[float, tuple[float, float] | None]:
-    """(value, 95 % interval) of a coefficient of ``fit``: a model-file key, or the
-    white-equivalent density (:func:`~imubench.noisefit.units.white_equivalent`; its
-    interval is the fit's ``white_equivalent`` one, or ``white``'s when white is its only
-    part). Value 0 when the fit judged it absent; the interval is then (0, upper limit)
-    or None."""
-    present = {k: v for k, v in fit.params.items() if k in fit.present}
-    value = term_value(present, key)
-    ci = fit.ci.get(key)
-    if key == WHITE_EQUIVALENT and ci is None and (
-            value <= 0 or math.isclose(value, float(present.get("white", 0.0)))):
-        ci = fit.ci.get("white")
-    return value, None if ci is None else (float(ci[0]), float(ci[1]))
-
-
 def _line_reading(symbol: str, fit: ChannelFit) -> Readout:
     """N or K from the fitted terms' line (module docstring)."""
     key = TERM_OF[symbol]
     tau = READ_TAU_S[symbol]
     source = "model file" if fit.method == "model file" else "fit"
-    v, ci = fitted_coefficient(fit, key)
+    v, ci = fit.coefficient(key)
     if v > 0:
         return Readout(symbol, v, tau, v, ci, "value", source,
                        f"{key} line read at tau = {tau:g} s")
@@ -164,6 +147,5 @@ def readout_quantities(channel: str) -> dict[str, tuple[Quantity, ...]]:
     return {sym: tuple(q for q in qs if q.term == term) for sym, term in TERM_OF.items()}
 
 
-__all__ = ["READ_TAU_S", "TERM_OF", "Readout", "fitted_coefficient", "fmt", "fmt_interval",
-           "ieee952_readouts",
+__all__ = ["READ_TAU_S", "TERM_OF", "Readout", "fmt", "fmt_interval", "ieee952_readouts",
            "readout_quantities"]

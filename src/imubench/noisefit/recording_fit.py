@@ -75,9 +75,10 @@ class RecordingFit:
                    for ch, f in self.fits.items()}
         limits = {ch: {k: hi for k, (_, hi) in f.ci.items() if k not in f.present}
                   for ch, f in self.fits.items()}
-        for ch, f in self.fits.items():  # no white-equivalent density: white's upper limit
-            if WHITE_EQUIVALENT not in f.ci and "white" in limits[ch]:
-                limits[ch][WHITE_EQUIVALENT] = limits[ch]["white"]
+        for ch, f in self.fits.items():  # N's limit by ChannelFit.coefficient's rule
+            _, ci = f.coefficient(WHITE_EQUIVALENT)
+            if ci is not None:
+                limits[ch].setdefault(WHITE_EQUIVALENT, ci[1])
         return kalibr_imu(present, self.rate_hz, upper_limits=limits, inflate=inflate)
 
     def _kalibr_or_reason(self) -> dict[str, Any]:

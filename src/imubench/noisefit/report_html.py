@@ -20,7 +20,7 @@ from pathlib import Path
 from lsm6ds_sim.model import DATASHEET_PREFIX, NoiseModel, datasheet_chips, load_model
 
 from imubench.noisefit.fit import ChannelFit
-from imubench.noisefit.ieee952 import Readout, fitted_coefficient, fmt, fmt_interval
+from imubench.noisefit.ieee952 import Readout, fmt, fmt_interval
 from imubench.noisefit.units import WHITE_EQUIVALENT, Quantity, quantities, term_value
 
 STYLE = """body{font-family:sans-serif;margin:1em;max-width:1100px}
@@ -69,7 +69,7 @@ def datasheet_typicals(chip: str | None) -> tuple[NoiseModel | None, dict[str, s
 
 def _cell(fit: ChannelFit, q: Quantity) -> str:
     """Value [95 % interval] of a fitted quantity, or what stands in for it."""
-    value, ci = fitted_coefficient(fit, q.term)
+    value, ci = fit.coefficient(q.term)
     v = value * q.factor
     if v <= 0:
         if ci is not None and ci[1] > 0:
