@@ -1,0 +1,330 @@
+"""Issue 15, acceptance 2, as the issue states it: effects at 2x the detection limit on a
+sensor the diagnosis was not tuned on.
+
+Usage: ``PYTHONPATH=src:drivers:simulator .venv/bin/python bench/bench_gap_limits_real.py
+[--quick] [--axes gx,gy,gz,ax,ay,az] [--effects sine,ramp,...]``
+
+The issue: "Effects >= 2x the stated detection limit added to real static recordings of a
+sensor the diagnosis was not tuned on: top-1 >= 85 %; real nulls never named as an
+unmodelled effect unless an independent check shows it is in the data."
+
+What it measures, per axis of the Samsung Galaxy S5 static recording
+(../shared/reference/imu-real/samsung-s5-static/, 10 Hz, 5.97 h, Android "measured" gyro
+in rad/s converted to dps; accel in m/s2 converted to g; no temperature column; decimated
+with a zero-phase filter, so taus below ~0.5 s are the filter's):
+
+1. The record is cut into three equal segments of 71,600 samples (1.99 h). The model is
+   the noise fit (``imubench.noisefit.fit_channel``, ``terms="auto"``, the engine of
+   ``imubench fit``) of the FIRST segment; segments 2 and 3 are the test backgrounds
+   (distinct data). With the default holdout fraction 0.5 each half has 35,800 samples,
+   far above the 256 the diagnosis needs, and taus up to ~1 h.
+2. On each test segment the detection limits are measured by the code under test,
+   ``imubench.gap.limits.detection_limits`` (what ``imubench gap --limits`` prints),
+   with the first segment's model. The S5 record has no temperature column, so the bench
+   supplies its own synthetic one (``bench_gap_acceptance.temperature_history``: two
+   incommensurate sines and a drift, 0.0625 degC steps) as the segment's temperature, so
+   that the temperature effect has a limit too.
+3. Each effect with a limit is added to the segment at TWICE its stated limit by the
+   textbook generators of ``bench_gap_acceptance.effect_signal`` (not the simulator's,
+   not ``limits.inject``), with fresh draws (own seeds; sine at fs/10 +- 10 % like the
+   limit's, random phase; bias step at a random time in the middle 80 %), and diagnosed
+   with ``diagnose_channel`` at the default options (holdout 0.5, 10 realisations).
+   Top-1 (the issue's figure) = the verdict names the injected effect. An effect whose
+   limit could not be found is listed as such and counted as NOT right. Also shown,
+   not the issue's figure: the effect anywhere in ``kept``.
+4. Nulls: each test segment with nothing added. Right when the verdict is ``none`` or
+   ``base_model``; an unmodelled effect's name is a false alarm unless an independent
+   check finds that effect in the data: ``outliers`` -> excess kurtosis of the first
+   differences taken 1 s apart (beyond the decimation filter's memory; a Gaussian model,
+   which the fit always is, gives 0 with standard error sqrt(24/m)) above 5 standard
+   errors; ``sine``/``resonance`` -> ``imubench.noisefit.spectral_line.peak_test`` within
+   25 % of the fitted frequency. Every other named effect on a null is a false alarm.
+
+Why it is independent of the tuning: the S5 was never used while the gap code was
+changed (tuning used ADIS16405 replicates 1-2 and the blind bench's synthetic CSVs), the
+sizes come from the code's own stated limits rather than planned magnitudes, and the
+added signals are the acceptance bench's textbook generators. ``--quick``: gx and the
+second segment only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import os
+import platform
+import sys
+import time
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import kurtosis
+
+from imubench.gap import MAIN_PARAM, GapOptions, Series, diagnose_channel
+from imubench.gap.limits import LIMIT_EFFECTS, detection_limits
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_gap_acceptance import (  # the textbook generators and the model recipe
+    effect_signal,
+    fitted_model,
+    temperature_history,
+)
+
+S5 = (Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "imu-real"
+      / "samsung-s5-static")
+CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")
+G = 9.80665
+SEGMENTS = 3
+"""Equal segments: the first is the model's, the others are test backgrounds."""
+FACTOR = 2.0
+"""Injected size as a multiple of the stated detection limit (the issue's ">= 2x")."""
+NULL_OK = ("none", "base_model")
+KURT_Z = 5.0
+"""Standard errors of excess kurtosis that count as heavy tails in the data."""
+SEED = 7
+"""Seed of the limit search and the nulls' diagnosis (GapOptions.seed)."""
+INJECT_SEED = 20261127
+"""Root of the injections' draws and their diagnoses (not the limit search's)."""
+
+
+def load(ch: str) -> tuple[np.ndarray, float]:
+    z = np.load(S5 / "samsung_galaxy_s5_static.npz")
+    i = "xyz".index(ch[1])
+    if ch[0] == "g":
+        return np.degrees(z["gyro_measured_rad_s"][:, i]), float(z["fs_hz"])
+    return z["accel_m_s2"][:, i] / G, float(z["fs_hz"])
+
+
+def heavy_tails(y: np.ndarray, fs: float) -> tuple[bool, str]:
+    """Excess kurtosis of first differences 1 s apart against a Gaussian's 0."""
+    step = max(1, round(fs))
+    d = np.diff(y)[::step]
+    k = float(kurtosis(d))
+    se = math.sqrt(24.0 / len(d))
+    return k / se > KURT_Z, f"diff excess kurtosis {k:.2f} ({k / se:.0f} SE, m={len(d)})"
+
+
+def independent_check(verdict: str, params: dict[str, float], y: np.ndarray, fs: float
+                      ) -> tuple[bool, str]:
+    if verdict == "outliers":
+        return heavy_tails(y, fs)
+    if verdict in ("sine", "resonance"):
+        from imubench.noisefit.spectral_line import peak_test
+
+        f0 = params.get("resonance_freq_hz") or params.get("sine_freq") or 0.0
+        if f0 <= 0:
+            return False, "no frequency to test"
+        peak = peak_test(y, fs, f0 / 1.25, min(f0 * 1.25, 0.49 * fs))
+        return (peak is not None and peak.present,
+                f"peak test: {peak.describe() if peak else 'not testable'}")
+    return False, "no independent check for this effect"
+
+
+@dataclass
+class Case:
+    channel: str
+    segment: int
+    effect: str
+    """Injected effect, or "null"."""
+    size: float | None
+    verdict: str = ""
+    kept: list[str] = field(default_factory=list)
+    reason: str = ""
+    param_error: float = float("nan")
+    seconds: float = 0.0
+    in_data: bool = False
+    check: str = ""
+    no_limit: bool = False
+
+    @property
+    def right(self) -> bool:
+        if self.effect == "null":
+            return self.verdict in NULL_OK or self.in_data
+        return not self.no_limit and self.verdict == self.effect
+
+    @property
+    def kept_right(self) -> bool:
+        return not self.no_limit and self.effect in self.kept
+
+
+def injection(rng: np.random.Generator, n: int, fs: float, effect: str, size: float,
+              temp: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
+    """The textbook signal of ``effect`` at ``size`` (its main parameter) and its truth."""
+    key = MAIN_PARAM[effect]
+    p = {key: size}
+    if effect == "sine":
+        p["sine_freq"] = fs / 10.0 * (1.0 + 0.1 * rng.uniform(-1, 1))
+    if effect == "bias_step":
+        p["step_time_s"] = n / fs * rng.uniform(0.1, 0.9)
+    return effect_signal(rng, n, fs, effect, p, temp), p
+
+
+def diagnose(model, ch: str, series: Series, seed: int) -> tuple[object, float]:
+    t0 = time.perf_counter()
+    d = diagnose_channel(model, ch, series, GapOptions(seed=seed, realisations=10))
+    return d, time.perf_counter() - t0
+
+
+def line(c: Case) -> str:
+    size = "" if c.size is None else f"{c.size:.3g}"
+    ok = "OK " if c.right else "BAD"
+    return (f"  {c.channel} seg{c.segment} {c.effect:11s} size={size:9s} "
+            f"verdict={c.verdict:11s} kept={c.kept} perr={c.param_error:5.2f} {ok} "
+            f"({c.seconds:.0f} s) reason={c.reason!r}{' ' + c.check if c.check else ''}")
+
+
+def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
+                effects: tuple[str, ...]) -> tuple[list[Case], dict]:
+    n = len(y)
+    temp = temperature_history(n, fs)
+    bg = Series(y, temp, fs, f"s5:{ch}:seg{seg}")
+    out: list[Case] = []
+
+    d, sec = diagnose(model, ch, bg, SEED)
+    c = Case(ch, seg, "null", None, d.verdict, [k.effect for k in d.kept], d.reason,
+             seconds=sec)
+    if d.verdict not in NULL_OK and d.winner is not None:
+        c.in_data, c.check = independent_check(d.verdict, d.winner.params, y, fs)
+        c.check = f"independent check: {'IN DATA' if c.in_data else 'not found'} ({c.check})"
+    elif d.verdict not in NULL_OK:
+        c.check = "no effect named" if d.verdict == "unexplained" else ""
+    print(line(c), flush=True)
+    out.append(c)
+
+    t0 = time.perf_counter()
+    lim = detection_limits(model, ch, bg, GapOptions(seed=SEED), effects)
+    lim_s = time.perf_counter() - t0
+    print(f"  {ch} seg{seg} limits ({lim_s:.0f} s): " + ", ".join(
+        f"{e} {v['smallest_identified']:.3g}" if v["smallest_identified"] is not None
+        else f"{e} NOT FOUND" for e, v in lim["effects"].items()), flush=True)
+    for e in effects:
+        if e not in lim["effects"]:
+            print(f"  {ch} seg{seg} {e}: no limit measured (not in the limit search's "
+                  "output)", flush=True)
+
+    for j, eff in enumerate(effects):
+        lv = lim["effects"].get(eff, {}).get("smallest_identified")
+        if lv is None:
+            c = Case(ch, seg, eff, None, "-", no_limit=True,
+                     reason="limit not found: " + str(lim["effects"].get(eff, {})
+                                                       .get("tried", "not searched")))
+            print(line(c), flush=True)
+            out.append(c)
+            continue
+        size = FACTOR * lv
+        rng = np.random.default_rng([INJECT_SEED, ci, seg, j])
+        add, truth = injection(rng, n, fs, eff, size, temp)
+        d, sec = diagnose(model, ch, Series(y + add, temp, fs, bg.name),
+                          INJECT_SEED % 1000 + 10 * seg + j)
+        c = Case(ch, seg, eff, size, d.verdict, [k.effect for k in d.kept], d.reason,
+                 seconds=sec)
+        w = d.winner
+        if w is not None and d.verdict == eff:
+            key = MAIN_PARAM[eff]
+            c.param_error = abs(abs(w.params[key]) - abs(truth[key])) / abs(truth[key])
+        print(line(c), flush=True)
+        out.append(c)
+    return out, {"seconds": lim_s, **lim}
+
+
+def summarise(cases: list[Case], limits: dict, effects: tuple[str, ...], wall: float
+              ) -> None:
+    eff = [c for c in cases if c.effect != "null"]
+    nul = [c for c in cases if c.effect == "null"]
+    print("\n## limits (smallest size identified 3/3; units of the channel: dps or g, per "
+          "s, per sqrt(s), per degC)")
+
+    def shown(e: str, v: dict) -> str:
+        if v["smallest_identified"] is not None:
+            return f"{e}={v['smallest_identified']:.3g}"
+        tried = [(float(f"{t['size']:.3g}"), t["identified"]) for t in v["tried"]]
+        return f"{e}=NOT FOUND (tried {tried})"
+
+    for (ch, seg), lim in limits.items():
+        print(f"  {ch} seg{seg} ({lim['seconds']:.0f} s): " + "; ".join(
+            shown(e, v) for e, v in lim["effects"].items()))
+    print("\n## effects at 2x the limit")
+    print("  | effect | top-1 (verdict) | in kept | no limit | verdicts |")
+    for e in effects:
+        rs = [c for c in eff if c.effect == e]
+        if not rs:
+            continue
+        print(f"  | {e} | {sum(c.right for c in rs)}/{len(rs)} | "
+              f"{sum(c.kept_right for c in rs)}/{len(rs)} | {sum(c.no_limit for c in rs)} | "
+              f"{dict(Counter(c.verdict for c in rs))} |")
+    right = sum(c.right for c in eff)
+    withlim = [c for c in eff if not c.no_limit]
+    print(f"  top-1 {right}/{len(eff)} ({right / max(1, len(eff)):.0%}; issue target >= 85 %)"
+          f"; among effects with a limit {sum(c.right for c in withlim)}/{len(withlim)}; "
+          f"in kept {sum(c.kept_right for c in eff)}/{len(eff)}")
+    perr = [c.param_error for c in eff if c.right and math.isfinite(c.param_error)]
+    print(f"  median main-parameter error (named right, n={len(perr)}): "
+          f"{np.median(perr) if perr else math.nan:.0%}")
+    by_ch: dict[str, list[Case]] = defaultdict(list)
+    for c in eff:
+        by_ch[c.channel].append(c)
+    print("  by channel: " + ", ".join(f"{ch} {sum(c.right for c in rs)}/{len(rs)}"
+                                       for ch, rs in by_ch.items()))
+    print("  misses:")
+    for c in eff:
+        if not c.right:
+            print("  " + line(c))
+    named = [c for c in nul if c.verdict not in (*NULL_OK, "unexplained")]
+    print(f"\n## nulls: right {sum(c.right for c in nul)}/{len(nul)}; named an unmodelled "
+          f"effect {len(named)}/{len(nul)} ({sum(c.in_data for c in named)} found in the "
+          f"data by an independent check); verdicts {dict(Counter(c.verdict for c in nul))}")
+    for c in nul:
+        if c.verdict not in NULL_OK:
+            print("  " + line(c))
+    print(f"\nwall time {wall:.0f} s ({wall / 60:.1f} min)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="gx and the second segment only")
+    ap.add_argument("--axes", default="gx,gy,gz", help="comma list of gx,gy,gz,ax,ay,az")
+    ap.add_argument("--effects", default=",".join(LIMIT_EFFECTS),
+                    help="comma list among " + ",".join(LIMIT_EFFECTS))
+    args = ap.parse_args(argv)
+    if not (S5 / "samsung_galaxy_s5_static.npz").is_file():
+        print(f"skipped: no reference data at {S5}", file=sys.stderr)
+        return 0
+    axes = ("gx",) if args.quick else tuple(a for a in args.axes.split(",") if a)
+    bad = [a for a in axes if a not in CHANNELS]
+    effects = tuple(e for e in args.effects.split(",") if e)
+    bad += [e for e in effects if e not in LIMIT_EFFECTS]
+    if bad:
+        ap.error(f"unknown axis or effect(s): {bad}")
+    segs = (1,) if args.quick else tuple(range(1, SEGMENTS))
+    print(f"# bench_gap_limits_real {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC "
+          f"{platform.node()} {platform.machine()} cpus={os.cpu_count()} "
+          f"python {sys.version.split()[0]} load {os.getloadavg()[0]:.1f} axes={axes} "
+          f"segments={segs} effects={effects}", flush=True)
+    t_all = time.perf_counter()
+    cases: list[Case] = []
+    limits: dict = {}
+    for ch in axes:
+        y, fs = load(ch)
+        n = len(y) // SEGMENTS
+        model = fitted_model(y[:n], fs, ch)
+        cm = model[ch]
+        print(f"{ch}: model from segment 0 ({n} samples, {n / fs / 3600:.2f} h): " + ", ".join(
+            f"{k}={getattr(cm, k):.3g}" for k in ("white", "flicker", "random_walk", "ramp",
+                                                   "quantization", "markov_sigma",
+                                                   "markov_tau", "sine_amplitude",
+                                                   "sine_freq", "bandwidth_hz")
+            if getattr(cm, k)), flush=True)
+        for seg in segs:
+            cs, lim = run_segment(ch, CHANNELS.index(ch), seg, model,
+                                  y[seg * n:(seg + 1) * n], fs, effects)
+            cases += cs
+            limits[(ch, seg)] = lim
+    summarise(cases, limits, effects, time.perf_counter() - t_all)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
