@@ -39,6 +39,9 @@ with a zero-phase filter, so taus below ~0.5 s are the filter's):
    which the fit always is, gives 0 with standard error sqrt(24/m)) above 5 standard
    errors; ``sine``/``resonance`` -> ``imubench.noisefit.spectral_line.peak_test`` within
    25 % of the fitted frequency. Every other named effect on a null is a false alarm.
+5. Shown beside top-1 (not the issue's figure): the first kept unmodelled effect after
+   skipping the effect the same segment's null named and the independent check found
+   (an effect the real background already has, e.g. heavy tails named ``outliers``).
 
 Why it is independent of the tuning: the S5 was never used while the gap code was
 changed (tuning used ADIS16405 replicates 1-2 and the blind bench's synthetic CSVs), the
@@ -50,7 +53,9 @@ second segment only.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
+import json
 import math
 import os
 import platform
@@ -148,6 +153,13 @@ class Case:
     @property
     def kept_right(self) -> bool:
         return not self.no_limit and self.effect in self.kept
+
+    def right_after(self, real: set[str]) -> bool:
+        """The first kept unmodelled effect, skipping those the same segment's null named
+        and an independent check found in the data, is the injected one (not the issue's
+        figure: it discounts an effect the real background already has)."""
+        rest = [e for e in self.kept if e != "base_model" and e not in real]
+        return not self.no_limit and bool(rest) and rest[0] == self.effect
 
 
 def injection(rng: np.random.Generator, n: int, fs: float, effect: str, size: float,
@@ -247,19 +259,27 @@ def summarise(cases: list[Case], limits: dict, effects: tuple[str, ...], wall: f
         print(f"  {ch} seg{seg} ({lim['seconds']:.0f} s): " + "; ".join(
             shown(e, v) for e, v in lim["effects"].items()))
     print("\n## effects at 2x the limit")
-    print("  | effect | top-1 (verdict) | in kept | no limit | verdicts |")
+    real = {(c.channel, c.segment): {c.verdict} if c.in_data else set() for c in nul}
+
+    def after(c: Case) -> bool:
+        return c.right_after(real.get((c.channel, c.segment), set()))
+
+    print("  | effect | top-1 (verdict) | first after the null's confirmed effect | in kept "
+          "| no limit | verdicts |")
     for e in effects:
         rs = [c for c in eff if c.effect == e]
         if not rs:
             continue
         print(f"  | {e} | {sum(c.right for c in rs)}/{len(rs)} | "
+              f"{sum(after(c) for c in rs)}/{len(rs)} | "
               f"{sum(c.kept_right for c in rs)}/{len(rs)} | {sum(c.no_limit for c in rs)} | "
               f"{dict(Counter(c.verdict for c in rs))} |")
     right = sum(c.right for c in eff)
     withlim = [c for c in eff if not c.no_limit]
     print(f"  top-1 {right}/{len(eff)} ({right / max(1, len(eff)):.0%}; issue target >= 85 %)"
           f"; among effects with a limit {sum(c.right for c in withlim)}/{len(withlim)}; "
-          f"in kept {sum(c.kept_right for c in eff)}/{len(eff)}")
+          f"in kept {sum(c.kept_right for c in eff)}/{len(eff)}; first after the null's "
+          f"confirmed effect {sum(after(c) for c in eff)}/{len(eff)}")
     perr = [c.param_error for c in eff if c.right and math.isfinite(c.param_error)]
     print(f"  median main-parameter error (named right, n={len(perr)}): "
           f"{np.median(perr) if perr else math.nan:.0%}")
@@ -288,6 +308,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--axes", default="gx,gy,gz", help="comma list of gx,gy,gz,ax,ay,az")
     ap.add_argument("--effects", default=",".join(LIMIT_EFFECTS),
                     help="comma list among " + ",".join(LIMIT_EFFECTS))
+    ap.add_argument("--json", default=None, help="write the cases and limits here")
     args = ap.parse_args(argv)
     if not (S5 / "samsung_galaxy_s5_static.npz").is_file():
         print(f"skipped: no reference data at {S5}", file=sys.stderr)
@@ -322,6 +343,11 @@ def main(argv: list[str] | None = None) -> int:
                                   y[seg * n:(seg + 1) * n], fs, effects)
             cases += cs
             limits[(ch, seg)] = lim
+    if args.json:
+        Path(args.json).write_text(json.dumps(
+            {"cases": [dataclasses.asdict(c) for c in cases],
+             "limits": {f"{ch}:seg{seg}": v for (ch, seg), v in limits.items()}},
+            indent=1, default=float))
     summarise(cases, limits, effects, time.perf_counter() - t_all)
     return 0
 
