@@ -558,15 +558,18 @@ def test_peak_test_finds_a_resonance_and_not_a_filter_roll_off() -> None:
         assert null is not None and not null.present, null
 
 
-def test_a_resonance_is_named_where_the_sine_has_no_line(reference_dir) -> None:
+def test_a_resonance_is_fitted_where_the_sine_has_no_line(reference_dir) -> None:
     """ADIS16405 rep 1 gz has a ~1.6 Hz wide resonance near 20 Hz (ADEV at 0.02 s above
-    that at 0.01 s). The sine the Allan curve asks for has no spectral line and is
-    dropped; the reason names the peak instead of leaving the misfit unexplained."""
+    that at 0.01 s). It is no sine (no spectral line there): the resonance term holds it,
+    and its reason names the peak it was tried at (tests/test_resonance.py checks the
+    misfit it leaves)."""
     y = _adis(reference_dir, 1, "gz")
     f = fit_channel(y, 100.0, channel="gz")
     assert "sine_amplitude" not in f.present
-    assert "narrowband peak at 2" in f.reasons["sine"] or "narrowband peak at 19" in \
-        f.reasons["sine"], f.reasons["sine"]
+    assert "resonance_height" in f.present, f.reasons["resonance"]
+    why = f.reasons["resonance"]
+    assert why.startswith("kept") and ("narrowband peak at 2" in why
+                                       or "narrowband peak at 19" in why), why
 
 
 def test_white_equivalent_density_hand_computed() -> None:

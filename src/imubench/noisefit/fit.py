@@ -1232,7 +1232,7 @@ def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
         y: rate samples (dps or g), NaN where samples were lost.
         rate_hz: sample rate (Hz).
         terms: "auto" (model selection) or a list / comma string of term names among
-            white flicker random_walk ramp quantization markov sine filter.
+            white flicker random_walk ramp quantization markov sine filter resonance.
         method: "wls" (GLS on the OAVAR curve), "tangent" (datasheet practice) or
             "whittle" (spectral likelihood, :mod:`.whittle`) or "exact" (whittle, then
             flicker and random walk by the exact block-mean likelihood, :mod:`.exactfit`).
