@@ -23,6 +23,7 @@ from imubench.cli import main
 from imubench.errors import ModelError
 from imubench.gap import extras
 from imubench.noisefit import fit_channel
+from imubench.noisefit.errors import FitError
 from imubench.noisefit.kernels import resonance_avar
 from imubench.stats import oadev
 from tests.test_fit_cli import write_recording
@@ -159,6 +160,22 @@ def test_fit_adds_no_resonance_without_a_peak() -> None:
     f = fit_channel(y, FS, channel="gz")
     assert "resonance_height" not in f.present
     assert f.reasons["resonance"].startswith("dropped"), f.reasons["resonance"]
+
+
+def test_explicit_terms_fit_a_resonance_only_at_a_peak() -> None:
+    """terms="white,resonance": fitted at the peak; refused where the spectrum has none,
+    and by the whittle method (it does not model a resonance)."""
+    y = simulate(NoiseModel.single_term("gz", **TRUTH), 1 << 19, FS, 14, channels=["gz"])["gz"]
+    f = fit_channel(y, FS, channel="gz", terms="white,resonance")
+    assert f.params["resonance_freq_hz"] == pytest.approx(19.7, abs=0.4)
+    assert f.params["resonance_width_hz"] == pytest.approx(1.8, rel=0.2)
+    assert f.params["resonance_height"] == pytest.approx(4e-4, rel=0.2)
+    white = simulate(NoiseModel.single_term("gz", white=0.004), 1 << 19, FS, 14,
+                     channels=["gz"])["gz"]
+    with pytest.raises(FitError, match="narrowband peak"):
+        fit_channel(white, FS, channel="gz", terms="white,resonance")
+    with pytest.raises(FitError, match="wls only"):
+        fit_channel(y, FS, channel="gz", terms="white,resonance", method="whittle")
 
 
 @pytest.mark.parametrize("rep", [1, 2, 3])

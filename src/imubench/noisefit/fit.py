@@ -6,8 +6,9 @@ Method ``wls`` (default), in four steps:
    taus) with its EDF (Greenhall & Riley, PTTI 2003, per identified noise type), from
    :func:`imubench.stats.oadev`.
 2. **Linear terms.** With the nonlinear settings fixed (Markov correlation time, sine
-   frequency, output filter bandwidth/order), the model AVAR is linear in the squared
-   amplitudes theta = (N^2, B^2, K^2, R^2, Q^2, sigma_M^2, A^2): ``a ~ X theta`` with X the
+   frequency, output filter bandwidth/order, resonance centre/width), the model AVAR is
+   linear in the squared amplitudes theta = (N^2, B^2, K^2, R^2, Q^2, sigma_M^2, A^2) and
+   the resonance's PSD height h (linear itself): ``a ~ X theta`` with X the
    exact sampled-data AVAR of each term at unit amplitude (:mod:`.kernels`). theta >= 0 is
    solved by non-negative generalized least squares with the covariance
    ``Sigma_ij = r_ij sqrt(V_i V_j)``, ``V_i = 2 A_i^2 / edf_i`` (chi-squared variance of an
@@ -16,9 +17,11 @@ Method ``wls`` (default), in four steps:
    (:mod:`.covariance`).
 3. **Model selection** (``terms="auto"``; every term gets a reason in
    :attr:`ChannelFit.reasons` and its statistic in :attr:`ChannelFit.chi2_drop`).
-   (a) Nonlinear extensions (output filter, Gauss-Markov, sine) are searched on log
-   grids (then refined); a subset of them is chosen by GLS chi-squared charged
-   :data:`EXTENSION_DCHI2` per extension (:func:`_select_extensions`). (b) Each chosen
+   (a) Nonlinear extensions (output filter, Gauss-Markov, sine, and a resonance where the
+   spectrum has a narrowband peak: :func:`.spectral_line.find_peak` gives its centre,
+   its width is searched about the peak's) are searched on log grids (then refined); a
+   subset of them is chosen by GLS chi-squared charged :data:`EXTENSION_DCHI2` per
+   extension (:func:`_select_extensions`). (b) Each chosen
    extension must be backed by the data (:func:`_extension_verdict`): Markov tau_c's
    profile interval within the data's taus, the filter's bandwidth interval excluding
    "no filter" and its estimate off the search's lower edge, a sine backed by a
@@ -582,7 +585,8 @@ def _estimate_delta(st: Structure, pts: Points, corr: np.ndarray, n_nonlinear: i
 
 def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
                        ) -> tuple[Structure, Points, dict[str, float]]:
-    """Best subset of the nonlinear extensions (filter, Markov, sine).
+    """Best subset of the nonlinear extensions (filter, Markov, sine, resonance; the
+    resonance only when ``pts.peak`` holds a narrowband peak).
 
     Every subset is fitted (settings by coordinate search with diagonal weights); the best
     fitting one (lowest chi2) is refined and gives the reference covariance (model
@@ -934,7 +938,9 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     (:func:`imubench.noisefit.spectral_line.line_test`) and carry at least
     :data:`SINE_LINE_SHARE` of the fitted amplitude (``amplitude``, unit); without a line,
     a narrowband peak there (:func:`~imubench.noisefit.spectral_line.peak_test`) is named
-    in the reason as a resonance the model cannot hold.
+    in the reason as a resonance (the resonance term's). Resonance: kept (it was tried
+    only at a narrowband peak, and chosen by its chi2 drop); the reason names the peak
+    and the width's profile interval.
     """
     from imubench.noisefit.spectral_line import line_test, peak_test
 
