@@ -380,7 +380,8 @@ def _correlation(st: Structure, sol: _Solution, pts: Points) -> np.ndarray:
     """Model correlation of the OAVAR points for the fitted structure (:mod:`.covariance`)."""
     return oavar_correlation(pts.m, pts.n_terms, _amp2(st, sol.theta), pts.rate_hz,
                              tau_c_s=st.tau_c_s, bandwidth_hz=st.bandwidth_hz,
-                             filter_order=st.filter_order)
+                             filter_order=st.filter_order,
+                             resonance=(st.res_freq_hz, st.res_width_hz))
 
 
 def _with_model_edf(st: Structure, sol: _Solution, pts: Points) -> Points:
@@ -396,7 +397,8 @@ def _with_model_edf(st: Structure, sol: _Solution, pts: Points) -> Points:
     amp2 = _amp2(st, sol.theta)
     model = design(st, pts) @ sol.theta
     edf = oavar_edf(pts.m, pts.n_terms, amp2, model, pts.rate_hz, tau_c_s=st.tau_c_s,
-                    bandwidth_hz=st.bandwidth_hz, filter_order=st.filter_order)
+                    bandwidth_hz=st.bandwidth_hz, filter_order=st.filter_order,
+                    resonance=(st.res_freq_hz, st.res_width_hz))
     return replace(pts, edf=np.minimum(pts.edf, edf))
 
 
