@@ -866,6 +866,12 @@ EDGE_MARGIN: float = 0.1
 not estimated."""
 
 
+def _filter_pinned(st: Structure, pts: Points) -> bool:
+    """Whether the structure's output filter sits at the bandwidth search's floor (within
+    :data:`EDGE_MARGIN`): an optimum on the search's edge, not one the data fix."""
+    return st.bandwidth_hz <= pts.filter_floor_hz * (1 + EDGE_MARGIN)
+
+
 VERDICT_ORDER: tuple[str, ...] = ("markov", "sine", "resonance", "filter")
 """Order in which extensions are judged and, when several fail, the one excluded first:
 a Markov term with tau_c below the shortest tau competes with the output filter and can
@@ -959,9 +965,8 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
         return False, (f"dropped, tau_c not identified ({where} not within the data's "
                        f"taus [{t0:.3g}, {t1:.3g}] s)"), None
     if kind == "filter":
-        b0 = pts.filter_floor_hz
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
-        pinned = value <= b0 * (1 + EDGE_MARGIN)
+        pinned = _filter_pinned(st, pts)
         if pinned and not pts.filter_bounded:
             return False, (f"dropped, bandwidth not identified ({value:.3g} Hz is the lowest "
                            "searched: the optimum is the search's edge, not the data's)"), None
@@ -1092,14 +1097,14 @@ def _backed_extensions(pts: Points, arr: np.ndarray
         # one at a time: the others were judged with settings searched alongside it
         reasons[failed[0]] = why[failed[0]]
         floor = pts.filter_floor_hz * FILTER_FLOOR_STEP
-        if failed[0] == "filter" and "lowest searched" in why["filter"] \
-                and floor < FILTER_FLOOR_MAX * pts.rate_hz:
+        pinned = (failed[0] == "filter" and _filter_pinned(st, pts)
+                  and not pts.filter_bounded)  # refused as "the lowest searched"
+        if pinned and floor < FILTER_FLOOR_MAX * pts.rate_hz:
             # pinned at the search's edge: search above it (a local optimum, or a slow
             # "filter" standing in for a term that is not there)
             pts = replace(pts, filter_min_hz=floor)
             continue
-        if failed[0] == "filter" and "lowest searched" in why["filter"] \
-                and not pts.filter_bounded:
+        if pinned:
             # pinned at every floor: the bandwidth is bounded only from above (an order-1
             # filter over a white floor fits alike at any lower bandwidth); keep the filter
             # if the short taus need its shape (judged by _extension_verdict)
