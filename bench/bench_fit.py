@@ -35,7 +35,7 @@ SCENARIOS: dict[str, dict[str, float]] = {
     "sinusoid": {"white": 0.004, "sine_amplitude": 0.01, "sine_freq": 0.5},
 }
 ALL_TERMS = {AMPLITUDE_KEY[t] for t in BASE_TERMS} | {"markov_sigma", "sine_amplitude",
-                                                      "bandwidth_hz"}
+                                                      "bandwidth_hz", "resonance_height"}
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "imu-real"
 
 

@@ -63,7 +63,7 @@ NOISE_TERMS: tuple[str, ...] = ("white", "flicker", "random_walk")
 TERM_KEY: dict[str, str] = {
     "white": "white", "flicker": "flicker", "random_walk": "random_walk", "ramp": "ramp",
     "quantization": "quantization", "markov": "markov_sigma", "sine": "sine_amplitude",
-    "filter": "bandwidth_hz",
+    "filter": "bandwidth_hz", "resonance": "resonance_height",
 }
 """Term -> the model key whose non-zero value means the term is there (truth or fit)."""
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "imu-real"

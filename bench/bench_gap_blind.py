@@ -51,7 +51,8 @@ random walk 2e-4 (clear) and 1.5e-4, Markov tau_c 30 s, temperature 5e-4 dps/deg
 
 Seeds: every (effect, magnitude) and null is drawn once per split; the ``tune`` split uses
 data seeds 1000+ and diagnosis seed 11, the ``heldout`` split data seeds 2000+ and
-diagnosis seed 12. Tune only on ``tune``; report both separately.
+diagnosis seed 12, the ``fresh`` split data seeds 3000+ and diagnosis seed 13 (see
+:data:`SPLITS`). Tune only on ``tune``; report each separately.
 
 ``--quick``: the clear magnitudes and 2 nulls per split.
 """
@@ -128,8 +129,10 @@ MAIN = {"temperature": "temp_coeff", "sine": "sine_amplitude", "random_walk": "r
         "filter": "bandwidth_hz", "bias_step": "step_size", "telegraph": "telegraph_step",
         "resonance": "resonance_freq_hz"}
 N_NULL = 4
-SPLITS = {"tune": (1000, 11), "heldout": (2000, 12)}
-"""Split: (first data seed, diagnosis seed)."""
+SPLITS = {"tune": (1000, 11), "heldout": (2000, 12), "fresh": (3000, 13)}
+"""Split: (first data seed, diagnosis seed). ``fresh`` was added on 2026-11-27 after two
+held-out misses had been studied case by case (temperature clear, Markov clear): it is
+the split nobody has looked into; run it, do not tune on it."""
 
 
 # ------------------------------------------------------------------ generator

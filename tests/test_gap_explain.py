@@ -152,3 +152,20 @@ def test_held_out_check_and_unmoved_gap_are_reconciled() -> None:
     text = "\n".join(explain_channel(_entry("base_model", kept=[kept2], holdout=h), 10))
     assert "Held-out check of base_model: chi-squared fell by 9.0" in text
     assert "did not fall" not in text
+
+
+def test_headline_never_claims_a_negative_closure() -> None:
+    """A kept effect whose held-out Allan gap rises (its held-out evidence is in the
+    statistics) is not said to 'close -54 %' of the gap: the headline says the Allan gap
+    does not close, with the numbers, and where the held-out evidence is."""
+    kept = {**TEMP_EFFECT, "holdout_gap_after": 0.243, "holdout_gap_excess_after": 0.228,
+            "holdout_chi2_drop": 8.8,
+            "holdout_chi2_drop_parts": {"allan": 0.0, "bands": -0.7, "statistics": 9.5}}
+    hold = {"gap_before": 0.182, "gap_after": 0.243, "gap_excess_before": 0.148,
+            "gap_excess_after": 0.228, "gap_null": 0.106}
+    c = _entry("temperature", effects=[TEMP_EFFECT], kept=[kept], holdout=hold)
+    first = explain_channel(c, 10)[0]
+    assert "closes" not in first and "%" not in first
+    assert ("on the held-out part it does not close the Allan-curve gap (0.182 -> 0.243), "
+            "the held-out evidence for it is in the line, tail, temperature, trend and "
+            "level statistics.") in first

@@ -86,6 +86,29 @@ def test_telegraph_is_two_level_and_gaussian_markov_is_not() -> None:
     assert abs(smoothed_kurtosis(ar + white(rng, n), win)) < 0.5
 
 
+def test_telegraph_is_named_only_when_the_amplitudes_favour_two_levels() -> None:
+    """Markov and telegraph share their Allan curve and spectrum; the telegraph is refused
+    (with a reason) unless its shape z is smaller in magnitude than the Markov's, whatever
+    the rest of the scores say, and a tie goes to the Gaussian process."""
+    from imubench.gap.candidates import Candidate
+    from imubench.gap.diagnose import _shape_scores
+
+    def pair(z_markov: float, z_tel: float) -> tuple[Candidate, Candidate]:
+        m = Candidate("markov", {"markov_sigma": 1e-3, "markov_tau": 5.0}, 2, score=40.0,
+                      shape_z=z_markov)
+        t = Candidate("telegraph", {"telegraph_step": 2e-3, "telegraph_dwell_s": 10.0}, 2,
+                      score=38.0, shape_z=z_tel)
+        _shape_scores([m, t])
+        return m, t
+
+    m, t = pair(-0.3, 0.5)  # near the limit: the telegraph's lower score is chance
+    assert t.refusal.startswith("two levels are not shown") and not m.refusal
+    assert m.score == pytest.approx(40.0) and t.score == pytest.approx(38.0 + 0.5**2 - 0.3**2)
+    m, t = pair(-1.7, -0.5)  # two levels fit better (real telegraph on an ADIS hour)
+    assert not t.refusal and t.score < m.score
+    assert pair(0.4, -0.4)[1].refusal  # a tie goes to the Gaussian process
+
+
 def test_resonance_fit_finds_centre_width_height() -> None:
     rng = np.random.default_rng(5)
     n = int(1800 * RATE)

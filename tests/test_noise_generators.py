@@ -29,6 +29,8 @@ TERMS: dict[str, dict[str, float]] = {
     "quantization": {"quantization": 1e-4},
     "markov": {"markov_sigma": 0.01, "markov_tau": 2.0},
     "sine": {"sine_amplitude": 0.01, "sine_freq": 1.7},
+    "resonance": {"resonance_freq_hz": 20.0, "resonance_width_hz": 2.0,
+                  "resonance_height": 1e-4},
     "outliers": {"outlier_rate": 2.0, "outlier_amplitude": 0.5},
     "filter": {"white": 0.004, "bandwidth_hz": 10.0, "filter_order": 2},
 }

@@ -17,6 +17,9 @@ and the sim-to-real diagnosis (which copies a model, changes a term, and re-simu
     markov_tau = 0.0         # s, its correlation time
     sine_amplitude = 0.0     # unit, peak
     sine_freq = 0.0          # Hz
+    resonance_freq_hz = 0.0  # Hz, centre of a narrowband resonance (noise band-pass)
+    resonance_width_hz = 0.0 # Hz, its -3 dB width
+    resonance_height = 0.0   # unit^2/Hz, its peak one-sided PSD above the continuum
     outlier_rate = 0.0       # impulses per second
     outlier_amplitude = 0.0  # unit, standard deviation of an impulse
     bias = 0.0               # unit
@@ -67,6 +70,9 @@ NON_NEGATIVE_KEYS: frozenset[str] = frozenset(
         "markov_tau",
         "sine_amplitude",
         "sine_freq",
+        "resonance_freq_hz",
+        "resonance_width_hz",
+        "resonance_height",
         "outlier_rate",
         "outlier_amplitude",
         "bandwidth_hz",
@@ -96,6 +102,13 @@ class ChannelModel:
     markov_tau: float = 0.0
     sine_amplitude: float = 0.0
     sine_freq: float = 0.0
+    resonance_freq_hz: float = 0.0
+    """Centre (Hz) of the narrowband resonance; below the output's Nyquist frequency
+    (checked when simulating)."""
+    resonance_width_hz: float = 0.0
+    """-3 dB width (Hz) of the resonance's band-pass (lsm6ds_sim.noise.resonance_filter)."""
+    resonance_height: float = 0.0
+    """Peak one-sided PSD (unit^2/Hz) the resonance adds at its centre; 0 = no resonance."""
     outlier_rate: float = 0.0
     outlier_amplitude: float = 0.0
     bias: float = 0.0
@@ -429,6 +442,24 @@ def _check_merged(cm: ChannelModel, loc: _Locator, table: str) -> None:
             f"{loc.where(table, 'sine_amplitude')}: sine_amplitude > 0 needs sine_freq > 0"
             " (Hz); a constant offset is 'bias'"
         )
+    _check_resonance(cm, loc, table)
+
+
+RESONANCE_KEYS: tuple[str, ...] = ("resonance_freq_hz", "resonance_width_hz",
+                                   "resonance_height")
+"""The three keys of the resonance term: all > 0, or all 0 (no resonance)."""
+
+
+def _check_resonance(cm: ChannelModel, loc: _Locator, table: str) -> None:
+    """A resonance needs its centre, its width and its height, all > 0."""
+    given = [k for k in RESONANCE_KEYS if getattr(cm, k) > 0]
+    if given and len(given) < len(RESONANCE_KEYS):
+        missing = [k for k in RESONANCE_KEYS if k not in given]
+        raise ModelError(
+            f"{loc.where(table, given[0])}: {', '.join(given)} > 0 needs "
+            f"{' and '.join(missing)} > 0 too (a resonance is a centre in Hz, a -3 dB "
+            "width in Hz and a peak PSD height in unit^2/Hz)"
+        )
 
 
 def _channel_from_table(
@@ -455,6 +486,7 @@ __all__ = [
     "GYRO_CHANNELS",
     "KEYS",
     "NON_NEGATIVE_KEYS",
+    "RESONANCE_KEYS",
     "ChannelModel",
     "NoiseModel",
     "datasheet_chips",

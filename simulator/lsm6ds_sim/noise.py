@@ -27,6 +27,9 @@ Gauss-Markov        sigma, tau_c                 (q tau_c)^2/tau [1 - tau_c/(2 t
                                                  (3 - 4 e^{-tau/tau_c} + e^{-2 tau/tau_c})],
                                                  q = sigma sqrt(2 / tau_c)
 sinusoid            A (peak), f0                 A^2 sin^4(pi f0 tau) / (pi f0 tau)^2
+resonance           height h, f0, width w        2 int S(f) sin^4(pi f tau)/(pi f tau)^2 df,
+                                                 S = h |H_bp(f)|^2 (no closed form; see
+                                                 imubench.noisefit.kernels.resonance_avar)
 outliers            rate lambda, std s           impulses: white-like, lambda s^2 tau0 / tau
 ==================  ===========================  =========================================
 
@@ -42,7 +45,10 @@ import threading
 
 import numpy as np
 import scipy.fft
+from scipy.linalg import solve_discrete_lyapunov
 from scipy.signal import lfilter
+
+from .errors import ModelError
 
 TERM_IDS: dict[str, int] = {
     "white": 0,
@@ -54,6 +60,7 @@ TERM_IDS: dict[str, int] = {
     "sine": 6,
     "outliers": 7,
     "output_white": 8,
+    "resonance": 9,
 }
 """Stable index of each term in the seed's spawn key (never renumber: seeds would change)."""
 
@@ -319,6 +326,78 @@ class Sinusoid(TermGenerator):
         return self.amplitude * np.sin(2.0 * math.pi * cycles + self.phase0)
 
 
+def resonance_filter(f0_hz: float, width_hz: float, rate_hz: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(b, a) of the resonance's second-order digital band-pass, peak gain 1 at f0_hz.
+
+    ``H(z) = (1 - beta)/2 (1 - z^-2) / (1 - cos(w0) (1 + beta) z^-1 + beta z^-2)`` with
+    ``w0 = 2 pi f0/fs`` and ``beta = (1 - tan(Bw/2)) / (1 + tan(Bw/2))``, ``Bw = 2 pi
+    width/fs``: |H| = 1 at w0 and its -3 dB points are exactly Bw apart (S. K. Mitra,
+    Digital Signal Processing: A Computer-Based Approach, section "Simple IIR digital
+    filters", second-order band-pass; the RBJ audio-EQ cookbook band-pass with
+    ``alpha = tan(Bw/2)`` in place of its ``sin(w0)/(2Q)``, which sets the width only
+    approximately).
+
+    Raises:
+        ModelError: f0_hz not in (0, fs/2), or width_hz not in (0, fs/2) (the Nyquist
+            frequency is only known here, at simulation time).
+    """
+    nyquist = 0.5 * rate_hz
+    if not 0.0 < f0_hz < nyquist:
+        raise ModelError(f"resonance_freq_hz = {f0_hz:g} Hz must lie between 0 and the "
+                         f"Nyquist frequency {nyquist:g} Hz of the {rate_hz:g} Hz output")
+    if not 0.0 < width_hz < nyquist:
+        raise ModelError(f"resonance_width_hz = {width_hz:g} Hz must lie between 0 and the "
+                         f"Nyquist frequency {nyquist:g} Hz of the {rate_hz:g} Hz output")
+    t = math.tan(math.pi * width_hz / rate_hz)
+    beta = (1.0 - t) / (1.0 + t)
+    b = 0.5 * (1.0 - beta) * np.array([1.0, 0.0, -1.0])
+    a = np.array([1.0, -math.cos(2.0 * math.pi * f0_hz / rate_hz) * (1.0 + beta), beta])
+    return b, a
+
+
+class Resonance(TermGenerator):
+    """Narrowband noise: white noise through :func:`resonance_filter`.
+
+    The input's std is ``sqrt(h fs / 2)`` so that its one-sided PSD ``2 var / fs`` times
+    the peak gain 1 is the peak one-sided PSD ``h`` = ``resonance_height`` (unit^2/Hz) at
+    ``resonance_freq_hz``; the variance is ``h`` times the band-pass's noise bandwidth
+    (about ``pi/2 x resonance_width_hz``, a Lorentzian line). The filter state starts in
+    its stationary distribution (drawn from the solution of the discrete Lyapunov equation
+    of lfilter's transposed direct-form state), so the first samples are not a transient;
+    a change of the sample interval redesigns the filter and draws a new stationary state.
+    """
+
+    def __init__(self, height: float, f0_hz: float, width_hz: float,
+                 rng: np.random.Generator) -> None:
+        self.height = float(height)
+        self.f0_hz = float(f0_hz)
+        self.width_hz = float(width_hz)
+        self.rng = rng
+        self.dt_s: float | None = None
+        self.ba: tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.ones(3))
+        self.std = 0.0
+        self.state = np.zeros(2)
+
+    def _design(self, dt_s: float) -> None:
+        b, a = resonance_filter(self.f0_hz, self.width_hz, 1.0 / dt_s)
+        self.dt_s, self.ba = dt_s, (b, a)
+        self.std = math.sqrt(self.height / (2.0 * dt_s))
+        # lfilter's state z (a0 = 1, b0 = b[0]): z' = A z + B x with
+        # A = [[-a1, 1], [-a2, 0]], B = [b1 - a1 b0, b2 - a2 b0]
+        trans = np.array([[-a[1], 1.0], [-a[2], 0.0]])
+        gain = np.array([b[1] - a[1] * b[0], b[2] - a[2] * b[0]]) * self.std
+        cov = solve_discrete_lyapunov(trans, np.outer(gain, gain))
+        self.state = np.linalg.cholesky(cov) @ self.rng.standard_normal(2)
+
+    def generate(self, n: int, dt_s: float, t_s: np.ndarray) -> np.ndarray:
+        if dt_s != self.dt_s:
+            self._design(dt_s)
+        x = self.rng.standard_normal(n) * self.std
+        y, self.state = lfilter(self.ba[0], self.ba[1], x, zi=self.state)
+        return np.asarray(y)
+
+
 class Outliers(TermGenerator):
     """Poisson impulses: ``k ~ Poisson(rate tau0)`` per sample, each impulse N(0, s^2).
 
@@ -430,6 +509,7 @@ __all__ = [
     "Quantization",
     "Ramp",
     "RandomWalk",
+    "Resonance",
     "Sinusoid",
     "TermGenerator",
     "WhiteNoise",
@@ -442,5 +522,6 @@ __all__ = [
     "avar_sine_sampled",
     "avar_white",
     "markov_adev_peak",
+    "resonance_filter",
     "term_rng",
 ]

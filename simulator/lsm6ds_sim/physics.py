@@ -11,7 +11,7 @@ accel: u = specific force in g), all terms optional (model keys in brackets)::
     y    = s x + bias + temp_coeff dT + temp_coeff2 dT^2
            + (gyro only) sum_j g_sensitivity_j f_j        f = true specific force (g)
            + noise terms (white, flicker, random_walk, ramp, quantization, markov, sine,
-             outliers; see :mod:`lsm6ds_sim.noise`)
+             resonance, outliers; see :mod:`lsm6ds_sim.noise`)
     out  = low-pass(y)   Butterworth of order filter_order, -3 dB at bandwidth_hz
                          (bilinear transform with prewarping, scipy.signal.butter), started
                          in steady state on the first sample; no filter if bandwidth_hz is 0
@@ -48,6 +48,7 @@ from .noise import (
     Quantization,
     Ramp,
     RandomWalk,
+    Resonance,
     Sinusoid,
     TermGenerator,
     WhiteNoise,
@@ -109,6 +110,9 @@ class ChannelNoise:
             )
         if cm.sine_amplitude > 0:
             self.terms.append(Sinusoid(cm.sine_amplitude, cm.sine_freq, term_rng(seed, i, "sine")))
+        if cm.resonance_height > 0:
+            self.terms.append(Resonance(cm.resonance_height, cm.resonance_freq_hz,
+                                        cm.resonance_width_hz, term_rng(seed, i, "resonance")))
         if cm.outlier_rate > 0 and cm.outlier_amplitude > 0:
             self.terms.append(
                 Outliers(

@@ -42,7 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="channels to fit, e.g. gx,gy,gz (default: every channel present)")
     p.add_argument("--terms", default="auto",
                    help="auto (model selection) or a comma list of: white, flicker, "
-                        "random_walk, ramp, quantization, markov, sine, filter")
+                        "random_walk, ramp, quantization, markov, sine, filter, resonance "
+                        "(wls only; at the spectrum's narrowband peak)")
     p.add_argument("--method", choices=METHODS, default="wls",
                    help="wls: GLS on the Allan variance with EDF weights (default); "
                         "tangent: datasheet slope lines; whittle: spectral likelihood; "

@@ -84,7 +84,8 @@ def predict(model: NoiseModel, rate_hz: float, spec: str, n: int | None) -> dict
     for ch in CHANNELS:
         cm = model[ch]
         noise_keys = ("white", "flicker", "random_walk", "ramp", "quantization",
-                      "markov_sigma", "sine_amplitude", "outlier_rate", "output_white")
+                      "markov_sigma", "sine_amplitude", "outlier_rate", "output_white",
+                      "resonance_height")
         if all(getattr(cm, k) == getattr(quiet, k) for k in noise_keys):
             continue
         avar = model_avar_m(cm, m, rate_hz)

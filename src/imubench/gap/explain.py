@@ -122,7 +122,18 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         frac = 1.0 - ga / h["gap_before"]
     else:
         return ""
-    return f"; modelling it closes {_pct(frac)} of the gap on the held-out part"
+    if frac >= 0:
+        return f"; modelling it closes {_pct(frac)} of the gap on the held-out part"
+    gb = h["gap_before"]
+    ga = (after or {}).get("holdout_gap_after", h.get("gap_after"))
+    text = (f"; on the held-out part it does not close the Allan-curve gap "
+            f"({_f(gb)} -> {_f(ga)})")
+    parts = (after or {}).get("holdout_chi2_drop_parts") or {}
+    if parts:
+        best = max(parts, key=lambda k: parts[k])
+        if parts[best] > 0:
+            text += f", the held-out evidence for it is in the {PART_NAMES[best]}"
+    return text
 
 
 def headline(c: dict[str, Any], realisations: int) -> str:

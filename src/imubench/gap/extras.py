@@ -18,12 +18,13 @@ current realisations plus the increment (common random numbers).
   ex. 9-16), so its Allan variance is that of a Gauss-Markov process with
   ``sigma = step / 2`` and ``tau_c = dwell / 2`` (IEEE Std 952-1997 C.6); only the
   amplitude distribution (two levels, excess kurtosis -2) tells it apart.
-* ``resonance``: white noise through a second-order band-pass (RBJ audio-EQ cookbook
-  band-pass, constant 0 dB peak gain) of centre ``resonance_freq_hz`` and -3 dB width
-  ``resonance_width_hz``, scaled so that its peak PSD above the continuum is
-  ``resonance_height`` (unit^2/Hz, one-sided); the band-pass's equivalent noise
-  bandwidth is ``pi/2 * width`` (a Lorentzian line), so the variance is
-  ``height * pi/2 * width``.
+* ``resonance``: the simulator's resonance term (:class:`lsm6ds_sim.noise.Resonance`,
+  model keys of the same names): white noise through a second-order band-pass of centre
+  ``resonance_freq_hz`` and -3 dB width ``resonance_width_hz`` with peak gain 1, the
+  input scaled so that its peak PSD above the continuum is ``resonance_height``
+  (unit^2/Hz, one-sided); the variance is about ``height * pi/2 * width`` (a Lorentzian
+  line). Realised here, as an increment, so that a model that already carries a
+  resonance keeps it when a candidate adds another.
 * ``outliers``: Bernoulli-Gaussian impulses, probability ``outlier_rate / rate_hz`` per
   sample, amplitude ``N(0, outlier_amplitude^2)``, added AFTER the output filter (where
   a bus glitch or an SPI read error appears in the record; the simulator's outlier term
@@ -35,7 +36,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
+from lsm6ds_sim.noise import Resonance
 
 LOCAL_EFFECTS: tuple[str, ...] = ("bias_step", "sine", "telegraph", "resonance", "outliers")
 """Effects realised here rather than by the simulator."""
@@ -96,14 +97,9 @@ def telegraph_signal(rng: np.random.Generator, n: int, rate_hz: float, step: flo
 
 def resonance_noise(rng: np.random.Generator, n: int, rate_hz: float, f0_hz: float,
                     width_hz: float, height: float) -> np.ndarray:
-    """Narrowband noise: white through a 2nd-order band-pass, peak PSD ``height``."""
-    w0 = 2.0 * math.pi * min(f0_hz, 0.49 * rate_hz) / rate_hz
-    q = max(f0_hz / max(width_hz, 1e-9), 0.1)
-    alpha = math.sin(w0) / (2.0 * q)
-    b = np.array([alpha, 0.0, -alpha])
-    a = np.array([1.0 + alpha, -2.0 * math.cos(w0), 1.0 - alpha])
-    warm = int(min(n, 10 * rate_hz / max(width_hz, 1e-3)))
-    x = lfilter(b, a, rng.standard_normal(n + warm))[warm:]
-    target_var = height * 0.5 * math.pi * width_hz
-    v = float(np.var(x))
-    return x * math.sqrt(target_var / v) if v > 0 else x
+    """Narrowband noise of peak one-sided PSD ``height``: the simulator's resonance term
+    (:class:`lsm6ds_sim.noise.Resonance`, the one generator of it). A centre the Welch
+    excess put at or above 0.49 fs is moved to 0.49 fs (the band-pass needs f0 < fs/2)."""
+    f0 = min(f0_hz, 0.49 * rate_hz)
+    width = min(width_hz, 0.49 * rate_hz)
+    return Resonance(height, f0, width, rng).generate(n, 1.0 / rate_hz, np.arange(n) / rate_hz)

@@ -90,10 +90,13 @@ def tau_correlation(cm: ChannelModel, afs: np.ndarray, n: int, rate_hz: float) -
     if cm.markov_sigma > 0 and cm.markov_tau > 0:
         amp2["markov"] = cm.markov_sigma**2
         tau_c = float(cm.markov_tau)
+    if cm.resonance_height > 0:
+        amp2["resonance"] = cm.resonance_height
     m = np.asarray(afs, dtype=np.int64)
     return oavar_correlation(m, n - 2 * m, amp2, rate_hz, tau_c_s=tau_c,
                              bandwidth_hz=float(cm.bandwidth_hz),
-                             filter_order=int(cm.filter_order))
+                             filter_order=int(cm.filter_order),
+                             resonance=(cm.resonance_freq_hz, cm.resonance_width_hz))
 
 
 class PartSetup:

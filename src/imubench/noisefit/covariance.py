@@ -18,7 +18,11 @@ are handled by scale invariance: block means of s samples of white, random walk,
 quantization and (approximately) flicker and Gauss-Markov noise are the same term at the
 sample time s tau0, so the pair (m1, m2) is evaluated at (m1/s, m2/s) with rate/s (the
 output filter is dropped there: it only acts on the shortest taus). Deterministic terms
-(ramp, sine) are left out of the covariance (documented limitation).
+(ramp, sine) are left out of the covariance (documented limitation). The resonance
+(``amp2["resonance"]`` = its PSD height, centre and width in ``resonance``) enters with
+its band-pass spectrum at the original sampling only: block means of s >= 2 samples
+average a resonance near the Nyquist frequency away, so the rescaled pairs leave it out,
+as they leave out the output filter.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from imubench.noisefit.kernels import filter_gain2, term_spectrum
+from imubench.noisefit.kernels import filter_gain2, resonance_psd, term_spectrum
 
 FFT_MAX: int = 1 << 14
 """Longest FFT used for one pair (larger pairs are rescaled)."""
@@ -51,6 +55,15 @@ def _spectrum(term: str, length: int, tau0_s: float, tau_c_s: float) -> np.ndarr
     return term_spectrum(term, np.fft.rfftfreq(length), tau0_s, tau_c_s=tau_c_s)
 
 
+@lru_cache(maxsize=64)
+def _resonance_spectrum(length: int, rate_hz: float, f0_hz: float, width_hz: float
+                        ) -> np.ndarray:
+    """Two-sided PSD per unit normalised frequency of a unit-height resonance on the rfft
+    grid of ``length`` (unit^2/Hz x rate: the module's convention)."""
+    nu = np.fft.rfftfreq(length)
+    return resonance_psd(nu * rate_hz, 1.0, f0_hz, width_hz, rate_hz) * rate_hz
+
+
 @lru_cache(maxsize=512)
 def _weights_fft(m: int, length: int) -> np.ndarray:
     return np.fft.rfft(_allan_weights(m, length))
@@ -64,7 +77,8 @@ def _overlap(n1: int, n2: int, d: np.ndarray) -> np.ndarray:
 
 
 def _pair_cov(m1: int, m2: int, n1: int, n2: int, amp2: Mapping[str, float], rate_hz: float,
-              tau_c_s: float, bandwidth_hz: float, filter_order: int) -> tuple[float, float, float]:
+              tau_c_s: float, bandwidth_hz: float, filter_order: int,
+              resonance: tuple[float, float]) -> tuple[float, float, float]:
     """(Cov11, Cov22, Cov12) up to a common factor for the pair (m1, m2)."""
     s = 1
     while 8 * (m1 + m2) // s > FFT_MAX and 2 * s <= min(m1, m2):
@@ -79,6 +93,9 @@ def _pair_cov(m1: int, m2: int, n1: int, n2: int, amp2: Mapping[str, float], rat
         a2 = float(amp2.get(term, 0.0))
         if a2 > 0 and (term != "markov" or tau_c_s > 0):
             spec += a2 * _spectrum(term, length, tau0, tau_c_s)
+    height = float(amp2.get("resonance", 0.0))
+    if s == 1 and height > 0 and resonance[1] > 0:
+        spec += height * _resonance_spectrum(length, rate_hz, *resonance)
     if s == 1:
         spec *= filter_gain2(nu, bandwidth_hz, filter_order, rate_hz)
     spec += float(amp2.get("output_white", 0.0)) / tau0  # white after the filter
@@ -94,7 +111,8 @@ def _pair_cov(m1: int, m2: int, n1: int, n2: int, amp2: Mapping[str, float], rat
 
 def oavar_correlation(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, float],
                       rate_hz: float, *, tau_c_s: float = 0.0, bandwidth_hz: float = 0.0,
-                      filter_order: int = 1) -> np.ndarray:
+                      filter_order: int = 1, resonance: tuple[float, float] = (0.0, 0.0)
+                      ) -> np.ndarray:
     """Correlation matrix of the OAVAR estimates at averaging factors ``m``.
 
     Args:
@@ -102,21 +120,22 @@ def oavar_correlation(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, flo
         n_terms: number of overlapping terms of each estimate (Stable32 "#": N - 2m).
         amp2: squared amplitudes of the model's stochastic terms by term name
             (``white`` N^2, ``flicker`` B^2, ``random_walk`` K^2, ``quantization`` Q^2,
-            ``markov`` sigma^2), model units.
+            ``markov`` sigma^2; ``resonance`` its PSD height), model units.
         rate_hz: sample rate; tau_c_s: Markov correlation time; bandwidth_hz/filter_order:
-            the output low-pass.
+            the output low-pass; resonance: the resonance's (centre, width) in Hz.
     """
     m = np.asarray(m, dtype=np.int64)
     k = m.size
     corr = np.eye(k)
-    if not any(float(amp2.get(t, 0.0)) > 0 for t in (*_STOCHASTIC, "output_white")):
+    if not any(float(amp2.get(t, 0.0)) > 0 for t in (*_STOCHASTIC, "output_white", "resonance")):
         return corr
     for i in range(k):
         for j in range(i + 1, k):
             if max(m[i], m[j]) > MAX_RATIO * min(m[i], m[j]):
                 continue
             c11, c22, c12 = _pair_cov(int(m[i]), int(m[j]), int(n_terms[i]), int(n_terms[j]),
-                                      amp2, rate_hz, tau_c_s, bandwidth_hz, filter_order)
+                                      amp2, rate_hz, tau_c_s, bandwidth_hz, filter_order,
+                                      resonance)
             if c11 > 0 and c22 > 0:
                 corr[i, j] = corr[j, i] = min(c12 / np.sqrt(c11 * c22), 0.999)
     return corr
@@ -124,7 +143,8 @@ def oavar_correlation(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, flo
 
 def oavar_edf(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, float], avar: np.ndarray,
               rate_hz: float, *, tau_c_s: float = 0.0, bandwidth_hz: float = 0.0,
-              filter_order: int = 1) -> np.ndarray:
+              filter_order: int = 1, resonance: tuple[float, float] = (0.0, 0.0)
+              ) -> np.ndarray:
     """EDF of the OAVAR estimates under the model: 2 A_i^2 / Var(A_i) (SP 1065 eq. 44).
 
     ``avar`` is the model AVAR A_i at the points, ``Var`` the diagonal of the module's
@@ -135,11 +155,11 @@ def oavar_edf(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, float], ava
     """
     m = np.asarray(m, dtype=np.int64)
     out = np.full(m.size, np.inf)
-    if not any(float(amp2.get(t, 0.0)) > 0 for t in (*_STOCHASTIC, "output_white")):
+    if not any(float(amp2.get(t, 0.0)) > 0 for t in (*_STOCHASTIC, "output_white", "resonance")):
         return out
     for i in range(m.size):
         c11, _, _ = _pair_cov(int(m[i]), int(m[i]), int(n_terms[i]), int(n_terms[i]), amp2,
-                              rate_hz, tau_c_s, bandwidth_hz, filter_order)
+                              rate_hz, tau_c_s, bandwidth_hz, filter_order, resonance)
         if c11 > 0:
             out[i] = 2.0 * float(avar[i]) ** 2 / c11
     return out

@@ -6,8 +6,9 @@ Method ``wls`` (default), in four steps:
    taus) with its EDF (Greenhall & Riley, PTTI 2003, per identified noise type), from
    :func:`imubench.stats.oadev`.
 2. **Linear terms.** With the nonlinear settings fixed (Markov correlation time, sine
-   frequency, output filter bandwidth/order), the model AVAR is linear in the squared
-   amplitudes theta = (N^2, B^2, K^2, R^2, Q^2, sigma_M^2, A^2): ``a ~ X theta`` with X the
+   frequency, output filter bandwidth/order, resonance centre/width), the model AVAR is
+   linear in the squared amplitudes theta = (N^2, B^2, K^2, R^2, Q^2, sigma_M^2, A^2) and
+   the resonance's PSD height h (linear itself): ``a ~ X theta`` with X the
    exact sampled-data AVAR of each term at unit amplitude (:mod:`.kernels`). theta >= 0 is
    solved by non-negative generalized least squares with the covariance
    ``Sigma_ij = r_ij sqrt(V_i V_j)``, ``V_i = 2 A_i^2 / edf_i`` (chi-squared variance of an
@@ -16,9 +17,11 @@ Method ``wls`` (default), in four steps:
    (:mod:`.covariance`).
 3. **Model selection** (``terms="auto"``; every term gets a reason in
    :attr:`ChannelFit.reasons` and its statistic in :attr:`ChannelFit.chi2_drop`).
-   (a) Nonlinear extensions (output filter, Gauss-Markov, sine) are searched on log
-   grids (then refined); a subset of them is chosen by GLS chi-squared charged
-   :data:`EXTENSION_DCHI2` per extension (:func:`_select_extensions`). (b) Each chosen
+   (a) Nonlinear extensions (output filter, Gauss-Markov, sine, and a resonance where the
+   spectrum has a narrowband peak: :func:`.spectral_line.find_peak` gives its centre,
+   its width is searched about the peak's) are searched on log grids (then refined); a
+   subset of them is chosen by GLS chi-squared charged :data:`EXTENSION_DCHI2` per
+   extension (:func:`_select_extensions`). (b) Each chosen
    extension must be backed by the data (:func:`_extension_verdict`): Markov tau_c's
    profile interval within the data's taus, the filter's bandwidth interval excluding
    "no filter" and its estimate off the search's lower edge, a sine backed by a
@@ -52,8 +55,15 @@ from scipy.optimize import minimize_scalar, nnls
 from imubench.errors import StatsError
 from imubench.noisefit.covariance import oavar_correlation, oavar_edf
 from imubench.noisefit.errors import FitError
-from imubench.noisefit.kernels import AMPLITUDE_KEY, averaging_factors, term_avar
+from imubench.noisefit.kernels import (
+    AMPLITUDE_KEY,
+    HEIGHT_TERMS,
+    averaging_factors,
+    key_value,
+    term_avar,
+)
 from imubench.noisefit.model_avar import model_avar
+from imubench.noisefit.spectral_line import PeakTest, find_peak
 from imubench.noisefit.units import (
     WHITE_EQUIVALENT,
     term_value,
@@ -63,7 +73,7 @@ from imubench.noisefit.units import (
 )
 
 BASE_TERMS: tuple[str, ...] = ("white", "flicker", "random_walk", "ramp", "quantization")
-EXTENSIONS: tuple[str, ...] = ("filter", "markov", "sine")
+EXTENSIONS: tuple[str, ...] = ("filter", "markov", "sine", "resonance")
 TERM_NAMES: tuple[str, ...] = BASE_TERMS + EXTENSIONS
 Z_PRESENT: float = 1.645
 """One-sided z (5 %) of the upper limit reported for a term judged absent."""
@@ -112,7 +122,7 @@ METHODS: tuple[str, ...] = ("wls", "tangent", "whittle", "exact")
 PARAM_KEYS: tuple[str, ...] = (
     "white", "flicker", "random_walk", "ramp", "quantization", "markov_sigma",
     "markov_tau", "sine_amplitude", "sine_freq", "bandwidth_hz", "filter_order",
-    "output_white",
+    "output_white", "resonance_freq_hz", "resonance_width_hz", "resonance_height",
 )
 
 
@@ -125,6 +135,10 @@ class Structure:
     f0_hz: float = 0.0
     bandwidth_hz: float = 0.0
     filter_order: int = 1
+    res_freq_hz: float = 0.0
+    """Centre of the resonance (Hz), from the spectrum's peak (:attr:`Points.peak`)."""
+    res_width_hz: float = 0.0
+    """-3 dB width of the resonance (Hz); > 0 when the structure carries one."""
 
 
 @dataclass(frozen=True)
@@ -145,6 +159,9 @@ class Points:
     filter_bounded: bool = False
     """The search floor cannot be raised further (:func:`_backed_extensions`): a filter
     pinned at it is kept when the data need its shape, reported as bounded above only."""
+    peak: PeakTest | None = None
+    """The spectrum's narrowband peak (:func:`.spectral_line.find_peak`) the resonance
+    extension is tried at; None: no resonance is tried."""
 
     @property
     def filter_floor_hz(self) -> float:
@@ -228,6 +245,9 @@ class ChannelFit:
                 extra["markov_tau"] = self.params["markov_tau"]
             if term == "sine":
                 extra["sine_freq"] = self.params["sine_freq"]
+            if term == "resonance":
+                extra["resonance_freq_hz"] = self.params["resonance_freq_hz"]
+                extra["resonance_width_hz"] = self.params["resonance_width_hz"]
             out[term] = model_avar(cm0.replace(**extra), tau_s, rate)
         return out
 
@@ -307,17 +327,23 @@ def design(st: Structure, pts: Points) -> np.ndarray:
     """Columns: AVAR of each linear term of ``st`` at unit amplitude at the points."""
     key = pts.m.tobytes()
     cols = [_column(term, key, pts.rate_hz, st.tau_c_s if term == "markov" else 0.0,
-                    st.f0_hz if term == "sine" else 0.0, st.bandwidth_hz, st.filter_order)
+                    _frequency(st, term), st.bandwidth_hz, st.filter_order,
+                    st.res_width_hz if term == "resonance" else 0.0)
             for term in st.terms]
     return np.column_stack(cols) if cols else np.zeros((pts.m.size, 0))
 
 
+def _frequency(st: Structure, term: str) -> float:
+    """The frequency setting (Hz) a term's column is evaluated at (0 when it has none)."""
+    return st.f0_hz if term == "sine" else st.res_freq_hz if term == "resonance" else 0.0
+
+
 @lru_cache(maxsize=4096)
 def _column(term: str, m_bytes: bytes, rate_hz: float, tau_c_s: float, f0_hz: float,
-            bandwidth_hz: float, filter_order: int) -> np.ndarray:
+            bandwidth_hz: float, filter_order: int, width_hz: float) -> np.ndarray:
     m = np.frombuffer(m_bytes, dtype=np.int64)
     return term_avar(term, m, rate_hz, tau_c_s=tau_c_s, f0_hz=f0_hz,
-                     bandwidth_hz=bandwidth_hz, filter_order=filter_order)
+                     bandwidth_hz=bandwidth_hz, filter_order=filter_order, width_hz=width_hz)
 
 
 @dataclass
@@ -354,7 +380,8 @@ def _correlation(st: Structure, sol: _Solution, pts: Points) -> np.ndarray:
     """Model correlation of the OAVAR points for the fitted structure (:mod:`.covariance`)."""
     return oavar_correlation(pts.m, pts.n_terms, _amp2(st, sol.theta), pts.rate_hz,
                              tau_c_s=st.tau_c_s, bandwidth_hz=st.bandwidth_hz,
-                             filter_order=st.filter_order)
+                             filter_order=st.filter_order,
+                             resonance=(st.res_freq_hz, st.res_width_hz))
 
 
 def _with_model_edf(st: Structure, sol: _Solution, pts: Points) -> Points:
@@ -370,7 +397,8 @@ def _with_model_edf(st: Structure, sol: _Solution, pts: Points) -> Points:
     amp2 = _amp2(st, sol.theta)
     model = design(st, pts) @ sol.theta
     edf = oavar_edf(pts.m, pts.n_terms, amp2, model, pts.rate_hz, tau_c_s=st.tau_c_s,
-                    bandwidth_hz=st.bandwidth_hz, filter_order=st.filter_order)
+                    bandwidth_hz=st.bandwidth_hz, filter_order=st.filter_order,
+                    resonance=(st.res_freq_hz, st.res_width_hz))
     return replace(pts, edf=np.minimum(pts.edf, edf))
 
 
@@ -416,10 +444,29 @@ def _grid(kind: str, pts: Points) -> np.ndarray:
         return np.geomspace(2.0 * tau0, span / 30.0, 20)
     if kind == "sine":  # ... and a sine many periods, else it is low-frequency noise
         return np.geomspace(30.0 / span, 0.45 * pts.rate_hz, 160)
+    if kind == "resonance":  # widths about the peak's FWHM (a Welch estimate, widened
+        lo, hi = _resonance_width_range(pts)  # by the window)
+        return np.geomspace(lo, hi, 9)
     return np.geomspace(pts.filter_floor_hz, 0.45 * pts.rate_hz, 14)
 
 
+RESONANCE_WIDTH_SPAN: float = 3.0
+"""The resonance's width is searched within this factor of the peak test's FWHM."""
+
+
+def _resonance_width_range(pts: Points) -> tuple[float, float]:
+    """(lowest, highest) resonance width searched (Hz): :data:`RESONANCE_WIDTH_SPAN`
+    about the peak's FWHM, at most the centre frequency and below 0.45 fs."""
+    assert pts.peak is not None
+    w = pts.peak.width_hz
+    hi = min(w * RESONANCE_WIDTH_SPAN, pts.peak.freq_hz, 0.45 * pts.rate_hz)
+    return min(w / RESONANCE_WIDTH_SPAN, hi), hi
+
+
 def _with(st: Structure, kind: str, value: float, order: int = 1) -> Structure:
+    if kind == "resonance":
+        terms = st.terms if "resonance" in st.terms else (*st.terms, "resonance")
+        return replace(st, terms=terms, res_width_hz=value)
     if kind == "markov":
         terms = st.terms if "markov" in st.terms else (*st.terms, "markov")
         return replace(st, terms=terms, tau_c_s=value)
@@ -473,8 +520,7 @@ def _optimise(st: Structure, kinds: Sequence[str], pts: Points,
 
 
 def _settings(st: Structure, kinds: Sequence[str]) -> list[float]:
-    attr = {"filter": "bandwidth_hz", "markov": "tau_c_s", "sine": "f0_hz"}
-    return [math.log(getattr(st, attr[k])) for k in kinds]
+    return [math.log(getattr(st, _SETTING[k])) for k in kinds]
 
 
 def _polish(st: Structure, kinds: Sequence[str], pts: Points,
@@ -493,6 +539,9 @@ def _polish(st: Structure, kinds: Sequence[str], pts: Points,
             if k == "filter":
                 # the output filter shapes the shortest taus: keep it in its grid's range
                 v = min(max(v, pts.filter_floor_hz), 0.49 * pts.rate_hz)
+            if k == "resonance":  # the width: within its grid's range
+                lo, hi = _resonance_width_range(pts)
+                v = min(max(v, lo), hi)
             cand = _with(cand, k, v, st.filter_order)
         return cand
 
@@ -538,7 +587,8 @@ def _estimate_delta(st: Structure, pts: Points, corr: np.ndarray, n_nonlinear: i
 
 def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
                        ) -> tuple[Structure, Points, dict[str, float]]:
-    """Best subset of the nonlinear extensions (filter, Markov, sine).
+    """Best subset of the nonlinear extensions (filter, Markov, sine, resonance; the
+    resonance only when ``pts.peak`` holds a narrowband peak).
 
     Every subset is fitted (settings by coordinate search with diagonal weights); the best
     fitting one (lowest chi2) is refined and gives the reference covariance (model
@@ -549,7 +599,7 @@ def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
     """
     from itertools import combinations
 
-    kinds = [k for k in EXTENSIONS if k in allowed]
+    kinds = [k for k in EXTENSIONS if k in allowed and (k != "resonance" or pts.peak)]
     subsets = [c for r in range(len(kinds) + 1) for c in combinations(kinds, r)]
     coarse = replace(pts, delta=SEARCH_DELTA)
     fitted = {sub: _optimise(st, sub, coarse) for sub in subsets}
@@ -579,8 +629,7 @@ def _select_extensions(st: Structure, pts: Points, allowed: Sequence[str]
         drops[k] = float(chi2s[without_k] - chi2s[with_k])
     chosen = fitted[best_sub]
     chosen_kinds = tuple(k for k in kinds if (k == "filter" and chosen.bandwidth_hz > 0)
-                         or (k == "markov" and "markov" in chosen.terms)
-                         or (k == "sine" and "sine" in chosen.terms))
+                         or (k != "filter" and k in chosen.terms))
     return _polish(chosen, chosen_kinds, pts, corr), pts, drops
 
 
@@ -761,13 +810,14 @@ def _profile(st: Structure, kind: str, pts: Points, sigma: np.ndarray,
     """
     from scipy.optimize import brentq
 
-    attr = {"markov": "tau_c_s", "sine": "f0_hz", "filter": "bandwidth_hz"}[kind]
-    v0 = float(getattr(st, attr))
+    v0 = float(getattr(st, _SETTING[kind]))
     upper = math.log(0.49 * pts.rate_hz) if kind != "markov" else math.log(
         pts.n_samples / pts.rate_hz)
     # a filter slower than 1/1000 of the rate is no longer "the shortest taus" (and its
     # impulse response gets very long): the profile stops there
     lower = math.log(1e-3 * pts.rate_hz) if kind == "filter" else -math.inf
+    if kind == "resonance":  # the width: within the range searched
+        lower, upper = (math.log(v) for v in _resonance_width_range(pts))
 
     def at(lv: float) -> Structure:
         return _with(st, kind, float(math.exp(lv)), st.filter_order)
@@ -798,9 +848,12 @@ def _profile(st: Structure, kind: str, pts: Points, sigma: np.ndarray,
 
 
 # ------------------------------------------------------------------------ selection
-_SETTING = {"markov": "tau_c_s", "sine": "f0_hz", "filter": "bandwidth_hz"}
-_SETTING_KEY = {"markov": "markov_tau", "sine": "sine_freq", "filter": "bandwidth_hz"}
-_OWN_AMPLITUDE = {"markov": "markov", "sine": "sine", "filter": "output_white"}
+_SETTING = {"markov": "tau_c_s", "sine": "f0_hz", "filter": "bandwidth_hz",
+            "resonance": "res_width_hz"}
+_SETTING_KEY = {"markov": "markov_tau", "sine": "sine_freq", "filter": "bandwidth_hz",
+                "resonance": "resonance_width_hz"}
+_OWN_AMPLITUDE = {"markov": "markov", "sine": "sine", "filter": "output_white",
+                  "resonance": "resonance"}
 SINE_BAND: float = 1.25
 """The spectral line is looked for within this factor of the fitted sine frequency
 (intersected with its profile interval)."""
@@ -813,7 +866,13 @@ EDGE_MARGIN: float = 0.1
 not estimated."""
 
 
-VERDICT_ORDER: tuple[str, ...] = ("markov", "sine", "filter")
+def _filter_pinned(st: Structure, pts: Points) -> bool:
+    """Whether the structure's output filter sits at the bandwidth search's floor (within
+    :data:`EDGE_MARGIN`): an optimum on the search's edge, not one the data fix."""
+    return st.bandwidth_hz <= pts.filter_floor_hz * (1 + EDGE_MARGIN)
+
+
+VERDICT_ORDER: tuple[str, ...] = ("markov", "sine", "resonance", "filter")
 """Order in which extensions are judged and, when several fail, the one excluded first:
 a Markov term with tau_c below the shortest tau competes with the output filter and can
 pin it at the search's edge; without it the filter is searched again."""
@@ -832,7 +891,8 @@ def _without(st: Structure, term: str) -> Structure:
                        filter_order=1)
     return replace(st, terms=tuple(t for t in st.terms if t != term),
                    tau_c_s=0.0 if term == "markov" else st.tau_c_s,
-                   f0_hz=0.0 if term == "sine" else st.f0_hz)
+                   f0_hz=0.0 if term == "sine" else st.f0_hz,
+                   res_width_hz=0.0 if term == "resonance" else st.res_width_hz)
 
 
 def _intervals(st: Structure, sol: _Solution, pts: Points) -> dict[str, tuple[float, float]]:
@@ -850,7 +910,9 @@ def _intervals(st: Structure, sol: _Solution, pts: Points) -> dict[str, tuple[fl
     corr = _correlation(st, sol, pts)
     x = design(st, pts)
     for j, term in enumerate(st.terms):
-        ci[AMPLITUDE_KEY[term]] = _endpoint_ci(x, sol.theta, j, pts, corr)
+        lo_a, hi_a = _endpoint_ci(x, sol.theta, j, pts, corr)
+        # _endpoint_ci maps by the square root; a height is the coefficient itself
+        ci[AMPLITUDE_KEY[term]] = (lo_a**2, hi_a**2) if term in HEIGHT_TERMS else (lo_a, hi_a)
     for kind in _extensions_in(st):
         ci[_SETTING_KEY[kind]], ends = _profile(st, kind, pts, sol.sigma, sol.chi2)
         own = _OWN_AMPLITUDE[kind]
@@ -859,8 +921,8 @@ def _intervals(st: Structure, sol: _Solution, pts: Points) -> dict[str, tuple[fl
             if own in end.terms and AMPLITUDE_KEY[own] in ci:
                 j = end.terms.index(own)
                 se = math.sqrt(max(float(s_end.cov_theta[j, j]), 0.0))
-                lo = math.sqrt(max(s_end.theta[j] - Z95 * se, 0.0))
-                hi = math.sqrt(max(s_end.theta[j] + Z95 * se, 0.0))
+                lo = key_value(own, s_end.theta[j] - Z95 * se)
+                hi = key_value(own, s_end.theta[j] + Z95 * se)
                 old = ci[AMPLITUDE_KEY[own]]
                 ci[AMPLITUDE_KEY[own]] = (min(old[0], lo), max(old[1], hi))
     return ci
@@ -884,7 +946,9 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     (:func:`imubench.noisefit.spectral_line.line_test`) and carry at least
     :data:`SINE_LINE_SHARE` of the fitted amplitude (``amplitude``, unit); without a line,
     a narrowband peak there (:func:`~imubench.noisefit.spectral_line.peak_test`) is named
-    in the reason as a resonance the model cannot hold.
+    in the reason as a resonance (the resonance term's). Resonance: kept (it was tried
+    only at a narrowband peak, and chosen by its chi2 drop); the reason names the peak
+    and the width's profile interval.
     """
     from imubench.noisefit.spectral_line import line_test, peak_test
 
@@ -901,9 +965,8 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
         return False, (f"dropped, tau_c not identified ({where} not within the data's "
                        f"taus [{t0:.3g}, {t1:.3g}] s)"), None
     if kind == "filter":
-        b0 = pts.filter_floor_hz
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
-        pinned = value <= b0 * (1 + EDGE_MARGIN)
+        pinned = _filter_pinned(st, pts)
         if pinned and not pts.filter_bounded:
             return False, (f"dropped, bandwidth not identified ({value:.3g} Hz is the lowest "
                            "searched: the optimum is the search's edge, not the data's)"), None
@@ -916,15 +979,18 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
             return True, f"kept, {head}, {where}, without it chi2 rises {gain:.1f}", None
         return False, (f"dropped, the final model without it fits as well (chi2 rise "
                        f"{gain:.1f} < {EXTENSION_DCHI2:g})"), None
+    if kind == "resonance":  # its chi2 drop passed in _select_extensions; centre fixed
+        where = "" if pts.peak is None else f" at {pts.peak.describe()} (peak test)"
+        return True, (f"kept, {head}{where}; -3 dB width {value:.3g} Hz, profile 95 % "
+                      f"interval [{lo:.3g}, {hi:.3g}] Hz, centre {st.res_freq_hz:.4g} Hz "
+                      "from the peak test"), None
     band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
     test = line_test(arr, pts.rate_hz, *band)
     if not test.present:
         peak = peak_test(arr, pts.rate_hz, value / SINE_BAND, value * SINE_BAND)
         if peak is not None and peak.present:
-            return False, (f"dropped, {test.describe()}; but {peak.describe()}: a resonance, "
-                           "which no term of the noise model describes (its misfit stays in "
-                           "the model discrepancy floor; imubench gap tests it as the "
-                           "'resonance' effect)"), None
+            return False, (f"dropped, {test.describe()}; but {peak.describe()}: a resonance "
+                           "(the 'resonance' term's, not a sine's)"), None
         return False, f"dropped, {test.describe()}", None
     if test.amplitude < SINE_LINE_SHARE * amplitude:
         return False, (f"dropped, the {test.describe()} carries amplitude "
@@ -934,6 +1000,15 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     # when it lies in the line's main lobe, and only roughly placed when it does not
     moved = test.freq_hz if abs(test.freq_hz - value) > 2 * test.resolution_hz else None
     return True, f"kept, {head}, {test.describe()}", moved
+
+
+def _not_chosen(kind: str, drop: float, pts: Points) -> str:
+    """The reason of an extension the subset selection did not choose."""
+    if kind == "resonance" and pts.peak is None:
+        return ("dropped, no narrowband peak in the spectrum (spectral_line.find_peak: none "
+                "significant, 2x the continuum and wider than a line)")
+    where = f" (tried at {pts.peak.describe()})" if kind == "resonance" and pts.peak else ""
+    return f"dropped, chi2 drop {drop:.1f} < {EXTENSION_DCHI2:g} needed{where}"
 
 
 def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, float],
@@ -956,8 +1031,7 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
     reasons = {} if reasons is None else dict(reasons)
     for kind in EXTENSIONS:
         if kind not in _extensions_in(st) and kind not in reasons:
-            d = drops.get(kind, 0.0)
-            reasons[kind] = f"dropped, chi2 drop {d:.1f} < {EXTENSION_DCHI2:g} needed"
+            reasons[kind] = _not_chosen(kind, drops.get(kind, 0.0), pts)
     line_moved = False
     while True:
         sol, _ = _fit_gls(st, pts)
@@ -990,7 +1064,8 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
                     worst = (float(z), term)
             if worst is not None:
                 failed = worst[1]
-                name = "amplitude" if failed in ("markov", "sine") else "95 %"
+                name = {"markov": "amplitude", "sine": "amplitude",
+                        "resonance": "height"}.get(failed, "95 %")
                 reasons[failed] = (f"dropped, {name} interval includes 0 "
                                    f"(upper limit {ci[AMPLITUDE_KEY[failed]][1]:.3g})")
         if failed is None:
@@ -1012,7 +1087,7 @@ def _backed_extensions(pts: Points, arr: np.ndarray
     all_drops: dict[str, float] = {}
     while True:
         allowed = [k for k in EXTENSIONS if k not in banned]
-        st, sel_pts, drops = _select_extensions(Structure(BASE_TERMS), pts, allowed)
+        st, sel_pts, drops = _select_extensions(_base_structure(pts), pts, allowed)
         all_drops.update(drops)
         backed, _, _, why = _validate(st, sel_pts, arr, all_drops, amplitudes=False,
                                       reasons=reasons)
@@ -1022,20 +1097,25 @@ def _backed_extensions(pts: Points, arr: np.ndarray
         # one at a time: the others were judged with settings searched alongside it
         reasons[failed[0]] = why[failed[0]]
         floor = pts.filter_floor_hz * FILTER_FLOOR_STEP
-        if failed[0] == "filter" and "lowest searched" in why["filter"] \
-                and floor < FILTER_FLOOR_MAX * pts.rate_hz:
+        pinned = (failed[0] == "filter" and _filter_pinned(st, pts)
+                  and not pts.filter_bounded)  # refused as "the lowest searched"
+        if pinned and floor < FILTER_FLOOR_MAX * pts.rate_hz:
             # pinned at the search's edge: search above it (a local optimum, or a slow
             # "filter" standing in for a term that is not there)
             pts = replace(pts, filter_min_hz=floor)
             continue
-        if failed[0] == "filter" and "lowest searched" in why["filter"] \
-                and not pts.filter_bounded:
+        if pinned:
             # pinned at every floor: the bandwidth is bounded only from above (an order-1
             # filter over a white floor fits alike at any lower bandwidth); keep the filter
             # if the short taus need its shape (judged by _extension_verdict)
             pts = replace(pts, filter_bounded=True)
             continue
         banned.append(failed[0])
+
+
+def _base_structure(pts: Points, terms: tuple[str, ...] = BASE_TERMS) -> Structure:
+    """``terms`` with the resonance's centre at the spectrum's peak (when there is one)."""
+    return Structure(terms, res_freq_hz=0.0 if pts.peak is None else pts.peak.freq_hz)
 
 
 # ------------------------------------------------------------------------ public
@@ -1045,6 +1125,11 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     arr = check_series(y, rate_hz, channel)
     wanted = parse_terms(terms)
     pts = avar_points(arr, rate_hz, taus, channel)
+    if wanted is None or "resonance" in wanted:
+        pts = replace(pts, peak=find_peak(arr, rate_hz))
+    if wanted is not None and "resonance" in wanted and pts.peak is None:
+        raise FitError(f"fit {channel}: terms: 'resonance' needs a narrowband peak in the "
+                       "spectrum and find_peak found none")
     notes: list[str] = []
     if wanted is None:
         backed, pts, drops, reasons = _backed_extensions(pts, arr)
@@ -1069,7 +1154,7 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
             for k in lost:
                 backed = _without(backed, k)
     else:
-        st = Structure(tuple(t for t in wanted if t in BASE_TERMS))
+        st = _base_structure(pts, tuple(t for t in wanted if t in BASE_TERMS))
         kinds = [k for k in EXTENSIONS if k in wanted]
         st = _polish(_optimise(st, kinds, pts), kinds, pts)
         sol0 = _fit_structure(st, pts, None)
@@ -1086,7 +1171,7 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     present: list[str] = []
     for j, term in enumerate(st.terms):
         key = AMPLITUDE_KEY[term]
-        params[key] = math.sqrt(max(sol.theta[j], 0.0))
+        params[key] = key_value(term, sol.theta[j])
         if sol.theta[j] > 0:
             present.append(key)
     if "markov_sigma" in present:
@@ -1095,6 +1180,10 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     if "sine_amplitude" in present:
         params["sine_freq"] = st.f0_hz
         present.append("sine_freq")
+    if "resonance_height" in present:
+        params["resonance_freq_hz"] = st.res_freq_hz
+        params["resonance_width_hz"] = st.res_width_hz
+        present += ["resonance_freq_hz", "resonance_width_hz"]
     if st.bandwidth_hz > 0:
         params["bandwidth_hz"] = st.bandwidth_hz
         params["filter_order"] = st.filter_order
@@ -1137,7 +1226,7 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
                 reasons[term] = (f"dropped, chi2 drop {d:.1f} < {entry_dchi2(term):g} needed "
                                  f"(one-sided 95 % upper limit {hi:.3g})")
     dof = int(pts.avar.size - len(st.terms) - 2 * sum(
-        1 for v in (st.tau_c_s, st.f0_hz, st.bandwidth_hz) if v > 0))
+        1 for v in (st.tau_c_s, st.f0_hz, st.bandwidth_hz, st.res_width_hz) if v > 0))
     bias = float(np.nanmean(arr))
     if pts.delta > 0:
         notes.append(f"model discrepancy floor delta = {pts.delta:.3g} (relative std added "
@@ -1156,7 +1245,7 @@ def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
         y: rate samples (dps or g), NaN where samples were lost.
         rate_hz: sample rate (Hz).
         terms: "auto" (model selection) or a list / comma string of term names among
-            white flicker random_walk ramp quantization markov sine filter.
+            white flicker random_walk ramp quantization markov sine filter resonance.
         method: "wls" (GLS on the OAVAR curve), "tangent" (datasheet practice) or
             "whittle" (spectral likelihood, :mod:`.whittle`) or "exact" (whittle, then
             flicker and random walk by the exact block-mean likelihood, :mod:`.exactfit`).

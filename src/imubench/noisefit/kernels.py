@@ -34,6 +34,11 @@ sample is the interval mean of a Wiener rate, Var(ybar_{i+k} - ybar_i) = K^2 tau
 
 ``output_white`` (model key) is white noise added after the output filter: N^2/tau.
 
+Resonance (model keys ``resonance_freq_hz``, ``resonance_width_hz``, ``resonance_height``):
+narrowband noise of one-sided PSD ``h |H_bp(f)|^2`` (the simulator's band-pass,
+:func:`lsm6ds_sim.noise.resonance_filter`); its AVAR is linear in the height h itself
+(:data:`HEIGHT_TERMS`) and computed in the frequency domain (:func:`resonance_avar`).
+
 Output filter (model keys ``bandwidth_hz``, ``filter_order``): the Butterworth low-pass of
 the simulator (scipy.signal.butter, bilinear with prewarping) with impulse response h and
 rho(j) = sum_i h_i h_{i+j}; the filtered term has G_f = G * rho (a convolution), which is
@@ -53,7 +58,8 @@ from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import butter, fftconvolve, lfilter
+from lsm6ds_sim.noise import resonance_filter
+from scipy.signal import butter, fftconvolve, freqz, lfilter
 
 LINEAR_TERMS: tuple[str, ...] = (
     "white", "flicker", "random_walk", "ramp", "quantization", "markov", "sine",
@@ -70,8 +76,22 @@ AMPLITUDE_KEY: dict[str, str] = {
     "markov": "markov_sigma",
     "sine": "sine_amplitude",
     "output_white": "output_white",
+    "resonance": "resonance_height",
 }
-"""Model-file key of each term's amplitude (AVAR is proportional to its square)."""
+"""Model-file key of each term's amplitude (AVAR is proportional to its square, except
+for :data:`HEIGHT_TERMS`, where it is proportional to the key's value)."""
+
+HEIGHT_TERMS: frozenset[str] = frozenset({"resonance"})
+"""Terms whose linear coefficient is the model key's value itself (the resonance's peak
+PSD height, unit^2/Hz), not its square."""
+
+
+def key_value(term: str, coefficient: float) -> float:
+    """The model key's value of ``term`` from its linear AVAR coefficient: the square root
+    of it (a squared amplitude), or the coefficient itself for :data:`HEIGHT_TERMS`;
+    a negative coefficient counts as 0."""
+    c = max(float(coefficient), 0.0)
+    return c if term in HEIGHT_TERMS else math.sqrt(c)
 
 
 def _lags(kmax: int) -> np.ndarray:
@@ -197,10 +217,14 @@ def avar_from_gacv(g: np.ndarray, m: np.ndarray) -> np.ndarray:
 
 def term_avar(term: str, m: Sequence[int] | np.ndarray, rate_hz: float, *,
               tau_c_s: float = 0.0, f0_hz: float = 0.0, bandwidth_hz: float = 0.0,
-              filter_order: int = 1) -> np.ndarray:
-    """AVAR at averaging factors ``m`` of ``term`` with unit amplitude, filter included."""
+              filter_order: int = 1, width_hz: float = 0.0) -> np.ndarray:
+    """AVAR at averaging factors ``m`` of ``term`` with unit amplitude, filter included
+    (``f0_hz``: the sine's or the resonance's frequency; ``width_hz``: the resonance's
+    -3 dB width)."""
     m = np.asarray(m, dtype=np.int64)
     tau0 = 1.0 / rate_hz
+    if term == "resonance":
+        return resonance_avar(m, rate_hz, f0_hz, width_hz, bandwidth_hz, filter_order)
     if term == "output_white":  # white noise added after the filter: N^2/tau exactly
         return rate_hz / m.astype(np.float64)
     rho = filter_autocorrelation(float(bandwidth_hz), int(filter_order), float(rate_hz))
@@ -274,6 +298,68 @@ def _avar_short(d: np.ndarray, m: np.ndarray) -> np.ndarray:
     s2 = (at(p1, m) + 2.0 * mf * (at(p0, 2 * m - 1) - at(p0, m))
           - (at(p1, 2 * m - 1) - at(p1, m)))
     return (s1 - s2) / mf**2
+
+
+RESONANCE_GRID_PER_WIDTH: int = 40
+"""Frequency-grid points per resonance width in :func:`resonance_avar`."""
+RESONANCE_FAST_PERIODS: float = 4.0
+"""Above m tau0 = this / width the Allan kernel's sin^4 is replaced by its mean 3/8."""
+
+
+def resonance_gain2(f_hz: np.ndarray, f0_hz: float, width_hz: float, rate_hz: float
+                    ) -> np.ndarray:
+    """|H_bp(f)|^2 of the simulator's resonance band-pass at ``f_hz`` (peak 1 at f0)."""
+    b, a = resonance_filter(f0_hz, width_hz, rate_hz)
+    _, h = freqz(b, a, worN=np.asarray(f_hz, dtype=float), fs=rate_hz)
+    return np.abs(h) ** 2
+
+
+def resonance_avar(m: Sequence[int] | np.ndarray, rate_hz: float, f0_hz: float,
+                   width_hz: float, bandwidth_hz: float = 0.0, filter_order: int = 1
+                   ) -> np.ndarray:
+    """AVAR at averaging factors ``m`` of the resonance of unit height (1 unit^2/Hz).
+
+    The Allan variance of a PSD (IEEE Std 1139-2008 / NIST SP 1065 eq. 65, one-sided
+    S_y): ``AVAR(tau) = 2 int_0^inf S_y(f) sin^4(pi f tau) / (pi f tau)^2 df``; for
+    means of m samples (tau = m tau0) the sinc becomes the Dirichlet kernel and the
+    integral stops at fs/2::
+
+        AVAR(m) = 2 int_0^{fs/2} S(f) sin^4(pi f m tau0) / (m sin(pi f tau0))^2 df
+
+    (the frequency-domain form of the module's G(k) formula; for white noise, S = 2 N^2,
+    it gives N^2/tau exactly). Here S(f) = |H_bp(f)|^2 |H_lp(f)|^2: the simulated
+    band-pass (:func:`resonance_gain2`) and the output low-pass (:func:`filter_gain2`).
+    Trapezoid rule on a uniform grid over [0, fs/2] with :data:`RESONANCE_GRID_PER_WIDTH`
+    points per width. Where the kernel oscillates faster than the grid resolves
+    (m tau0 > :data:`RESONANCE_FAST_PERIODS` / width) sin^4 is replaced by its mean 3/8:
+    the terms dropped, cos(2x)/2 and cos(4x)/8, integrate S(f)/sin^2 against oscillations
+    of period 1/(m tau0), i.e. they are the resonance's autocovariance at lags m and 2m,
+    which has decayed by exp(-pi width m tau0) < 4e-6 there.
+    """
+    m = np.asarray(m, dtype=np.int64)
+    nyquist = 0.5 * rate_hz
+    n = math.ceil(nyquist / width_hz * RESONANCE_GRID_PER_WIDTH) + 1
+    f = np.linspace(0.0, nyquist, n)
+    s = resonance_gain2(f, f0_hz, width_hz, rate_hz) * filter_gain2(
+        f / rate_hz, bandwidth_hz, filter_order, rate_hz)
+    x = np.pi * f / rate_hz
+    sin2 = np.sin(x) ** 2
+    inner = sin2 > 0
+    out = np.zeros(m.size)
+    for i, mi in enumerate(m):
+        num = (np.full(n, 0.375) if mi / rate_hz > RESONANCE_FAST_PERIODS / width_hz
+               else np.sin(mi * x) ** 4)
+        kern = np.zeros(n)
+        kern[inner] = 2.0 * num[inner] / (float(mi) ** 2 * sin2[inner])
+        out[i] = float(np.trapezoid(s * kern, f))
+    return out
+
+
+def resonance_psd(f_hz: np.ndarray, height: float, f0_hz: float, width_hz: float,
+                  rate_hz: float) -> np.ndarray:
+    """Two-sided PSD (unit^2/Hz) of the resonance at ``f_hz``, before the output filter:
+    ``height |H_bp|^2 / 2`` (height is the peak of the one-sided PSD)."""
+    return 0.5 * height * resonance_gain2(f_hz, f0_hz, width_hz, rate_hz)
 
 
 def _sine_closed(m: np.ndarray, nu0: float) -> np.ndarray:
@@ -357,6 +443,7 @@ def filter_gain2(nu: np.ndarray, bandwidth_hz: float, order: int, rate_hz: float
 
 __all__ = [
     "AMPLITUDE_KEY",
+    "HEIGHT_TERMS",
     "LINEAR_TERMS",
     "apply_filter",
     "avar_from_gacv",
@@ -364,6 +451,10 @@ __all__ = [
     "filter_autocorrelation",
     "filter_gain2",
     "gacv_unit",
+    "key_value",
+    "resonance_avar",
+    "resonance_gain2",
+    "resonance_psd",
     "term_avar",
     "term_spectrum",
 ]

@@ -5,7 +5,8 @@ channel's terms (:mod:`imubench.noisefit.kernels`), passes the sum through the o
 low-pass once, and evaluates the exact sampled-data Allan variance at m = round(tau_s *
 rate_hz). Without a filter it equals the closed forms (N^2/tau, K^2 tau/3, R^2 tau^2/2,
 3 Q^2/tau^2, the sampled sine) exactly, and tends to (2 ln2/pi) B^2 (flicker) and IEEE 952
-C.6 (Gauss-Markov) as m grows; with a filter it is what the closed forms cannot give.
+C.6 (Gauss-Markov) as m grows; with a filter it is what the closed forms cannot give. The
+resonance's AVAR is the frequency-domain integral of :func:`kernels.resonance_avar`.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ from imubench.noisefit.kernels import (
 
 
 def channel_terms(cm: ChannelModel) -> list[tuple[str, float, dict[str, float]]]:
-    """(term, squared amplitude, extra kwargs) of every noise term the channel carries."""
+    """(term, linear coefficient, extra kwargs) of every noise term the channel carries:
+    the squared amplitude, or the resonance's height (kernels.HEIGHT_TERMS)."""
     out: list[tuple[str, float, dict[str, float]]] = []
     for term, key in (("white", "white"), ("flicker", "flicker"),
                       ("random_walk", "random_walk"), ("ramp", "ramp"),
@@ -39,6 +41,9 @@ def channel_terms(cm: ChannelModel) -> list[tuple[str, float, dict[str, float]]]
         out.append(("markov", cm.markov_sigma**2, {"tau_c_s": cm.markov_tau}))
     if cm.sine_amplitude > 0 and cm.sine_freq > 0:
         out.append(("sine", cm.sine_amplitude**2, {"f0_hz": cm.sine_freq}))
+    if cm.resonance_height > 0:  # the model file's rules make its centre and width > 0
+        out.append(("resonance", cm.resonance_height,
+                    {"f0_hz": cm.resonance_freq_hz, "width_hz": cm.resonance_width_hz}))
     if cm.outlier_rate > 0 and cm.outlier_amplitude > 0:
         out.append(("outliers", cm.outlier_rate * cm.outlier_amplitude**2, {}))
     return out
@@ -54,7 +59,7 @@ def model_avar_m(cm: ChannelModel, m: np.ndarray, rate_hz: float) -> np.ndarray:
     g = np.zeros(kmax + 1)
     out = np.zeros(m.size)
     for term, amp2, extra in channel_terms(cm):
-        if term in ("markov", "sine"):  # filtered on their own (ratio / gain forms)
+        if term in ("markov", "sine", "resonance"):  # filtered on their own
             out += amp2 * term_avar(term, m, rate_hz, bandwidth_hz=cm.bandwidth_hz,
                                     filter_order=cm.filter_order, **extra)
         else:

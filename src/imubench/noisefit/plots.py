@@ -56,7 +56,7 @@ COLORS: dict[str, str] = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 TERM_LABELS: dict[str, str] = {
     "white": "white N", "flicker": "flicker B", "random_walk": "random walk K",
     "ramp": "ramp R", "quantization": "quantization Q", "markov": "Gauss-Markov",
-    "sine": "sine", "output_white": "output white",
+    "sine": "sine", "output_white": "output white", "resonance": "resonance",
 }
 """Names written on the per-term lines."""
 READOUT_MARKERS: dict[str, str] = {"N": "s", "B": "v", "K": "D"}

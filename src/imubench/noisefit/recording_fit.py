@@ -171,7 +171,8 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
 
 MODEL_FILE_METHOD: str = "model file"
 """``method`` of a :class:`ChannelFit` read from a model file instead of fitted."""
-_COMPANION = {"markov_sigma": ("markov_tau",), "sine_amplitude": ("sine_freq",)}
+_COMPANION = {"markov_sigma": ("markov_tau",), "sine_amplitude": ("sine_freq",),
+              "resonance_height": ("resonance_freq_hz", "resonance_width_hz")}
 
 
 def channel_from_model(cm: ChannelModel, y: np.ndarray, rate_hz: float, channel: str

@@ -39,6 +39,9 @@ OTHER_PARAMS: dict[str, tuple[str, str]] = {
     "bandwidth_hz": ("output low-pass bandwidth", "Hz"),
     "filter_order": ("output low-pass order", ""),
     "output_white": ("white noise after the low-pass", "{u}/√Hz"),
+    "resonance_freq_hz": ("resonance centre", "Hz"),
+    "resonance_width_hz": ("resonance -3 dB width", "Hz"),
+    "resonance_height": ("resonance peak PSD (one-sided, before the low-pass)", "{u}²/Hz"),
 }
 """Model-file keys beyond N, B, K: human label and unit (``{u}`` = dps or g)."""
 

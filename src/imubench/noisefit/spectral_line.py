@@ -26,8 +26,8 @@ Applications", sections 6.16-6.17 and 10.9):
   ~ 1.2533 / sqrt(n K)).
 
 A band with no line can still hold a narrowband *peak*: a resonance a few bins wide
-(:func:`peak_test`). It is not a sine and the noise model has no term for it; the fit
-names it in its reason so that the misfit it leaves is explained.
+(:func:`peak_test`). It is not a sine; the noise model's ``resonance`` term describes it,
+and :func:`find_peak` scans the spectrum for the one the fit tries.
 
 A line of amplitude A (peak) at a bin centre adds (A^2/2) / ENBW to the one-sided PSD,
 ENBW = 1.5 fs / L for the Hann window: with white noise of density N (one-sided PSD
@@ -162,6 +162,8 @@ class PeakTest:
     width_hz: float
     ratio: float
     z: float
+    resolution_hz: float = math.nan
+    """Bin width fs / L of the periodogram (Hz)."""
 
     @property
     def present(self) -> bool:
@@ -216,7 +218,47 @@ def peak_test(y: np.ndarray, rate_hz: float, f_lo_hz: float, f_hi_hz: float
     half = excess > top / 2
     centre = float(np.sum(fb[half] * excess[half]) / np.sum(excess[half])) if top > 0 else \
         float(fb[int(np.argmax(ratio))])
-    return PeakTest(centre, float(half.sum()) * df, float(ratio.max()), z)
+    return PeakTest(centre, float(half.sum()) * df, float(ratio.max()), z, df)
 
 
-__all__ = ["LINE_ALPHA", "LineTest", "PeakTest", "line_test", "peak_test", "segment_length"]
+PEAK_MIN_BINS: int = 3
+"""Bins above half maximum a peak needs in :func:`find_peak` to be a resonance, not a line."""
+SCAN_BAND: float = 1.25
+""":func:`find_peak` tests the bands [fc / SCAN_BAND, fc SCAN_BAND], fc stepped by this
+factor (neighbouring bands overlap by half)."""
+SCAN_LOW_FRACTION: float = 0.01
+"""Lowest band centre of :func:`find_peak`, as a fraction of the sample rate."""
+SCAN_HIGH_FRACTION: float = 0.45
+"""Highest band edge of :func:`find_peak`, as a fraction of the sample rate."""
+
+
+def find_peak(y: np.ndarray, rate_hz: float) -> PeakTest | None:
+    """The most significant narrowband peak wider than a line, or None.
+
+    :func:`peak_test` on the bands [fc / :data:`SCAN_BAND`, fc :data:`SCAN_BAND`] with
+    centres fc from :data:`SCAN_LOW_FRACTION` fs stepped by SCAN_BAND while the band's
+    top stays below :data:`SCAN_HIGH_FRACTION` fs (about 17 bands: the Bonferroni cost of
+    the scan is small against the z > :data:`PEAK_Z`, p ~ 3e-7, a peak needs). Of the
+    present peaks at least :data:`PEAK_MIN_BINS` bins wide at half maximum (a line, the
+    sine's, is one or two: the Hann main lobe), the one of the largest z is tested again
+    in a band centred on it, which places it better than a band it straddles.
+    """
+    def wide(p: PeakTest | None) -> bool:
+        return p is not None and p.present and p.width_hz >= PEAK_MIN_BINS * p.resolution_hz
+
+    best: PeakTest | None = None
+    fc = SCAN_LOW_FRACTION * rate_hz
+    while fc * SCAN_BAND <= SCAN_HIGH_FRACTION * rate_hz:
+        peak = peak_test(y, rate_hz, fc / SCAN_BAND, fc * SCAN_BAND)
+        if peak is not None and wide(peak) and (best is None or peak.z > best.z):
+            best = peak
+        fc *= SCAN_BAND
+    if best is None:
+        return None
+    f0 = min(best.freq_hz, SCAN_HIGH_FRACTION * rate_hz / SCAN_BAND)
+    again = peak_test(y, rate_hz, f0 / SCAN_BAND, f0 * SCAN_BAND)
+    return again if again is not None and wide(again) else best
+
+
+__all__ = ["LINE_ALPHA", "LineTest", "PeakTest", "find_peak", "line_test", "peak_test",
+           "segment_length"]

@@ -18,8 +18,10 @@ sampled-data form the AVAR kernels use (:func:`imubench.noisefit.kernels.term_sp
 which tends to those expressions for f << rate), times the output low-pass |H(f)|^2
 (:func:`~imubench.noisefit.kernels.filter_gain2`; ``output_white`` is added after it). A
 sine is drawn at the band-averaged level the periodogram shows, (A^2/4) / (band width), in
-the band holding f0. The rate ramp (C.5) is deterministic and the mean-removed periodogram
-of one record does not follow its ensemble form R^2/(2 pi f)^3: it is not drawn.
+the band holding f0. The resonance is its band-pass's PSD, height |H_bp(f)|^2 / 2 (its
+height is a one-sided peak), times the output low-pass. The rate ramp (C.5) is
+deterministic and the mean-removed periodogram of one record does not follow its ensemble
+form R^2/(2 pi f)^3: it is not drawn.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imubench.noisefit.fit import ChannelFit
-from imubench.noisefit.kernels import filter_gain2, term_spectrum
+from imubench.noisefit.kernels import filter_gain2, resonance_psd, term_spectrum
 
 BANDS_PER_DECADE: int = 10
 """Log-spaced frequency bands per decade of the smoothed spectrum."""
@@ -99,6 +101,10 @@ def term_psds(fit: ChannelFit, bands: BandPSD) -> dict[str, np.ndarray]:
         g0 = filter_gain2(np.array([f0 * tau0]), float(p.get("bandwidth_hz", 0.0)),
                           int(p.get("filter_order", 1)), rate)[0]
         out["sine"] = np.where(inside, p["sine_amplitude"] ** 2 / 4.0 * g0 / width, 0.0)
+    if "resonance_height" in fit.present:
+        out["resonance"] = gain * resonance_psd(bands.f_hz, p["resonance_height"],
+                                                p["resonance_freq_hz"],
+                                                p["resonance_width_hz"], rate)
     if "output_white" in fit.present and p.get("output_white", 0.0) > 0:
         out["output_white"] = np.full(nu.size, p["output_white"] ** 2)
     return out

@@ -157,6 +157,8 @@ def param_units(channel: str) -> dict[str, str]:
         "white": f"{u}/sqrt(Hz)", "flicker": u, "random_walk": f"{u}/sqrt(s)",
         "ramp": f"{u}/s", "quantization": f"{u}*s", "markov_sigma": u, "markov_tau": "s",
         "sine_amplitude": u, "sine_freq": "Hz", "bandwidth_hz": "Hz", "filter_order": "1",
+        "resonance_freq_hz": "Hz", "resonance_width_hz": "Hz",
+        "resonance_height": f"{u}^2/Hz",
         "output_white": f"{u}/sqrt(Hz)", WHITE_EQUIVALENT: f"{u}/sqrt(Hz)",
         "temp_coeff": f"{u}/degC",
         "temp_coeff2": f"{u}/degC^2", "outlier_rate": "1/s", "outlier_amplitude": u,

@@ -525,6 +525,9 @@ def _explicit(wanted: Sequence[str], bases: _Bases, channel: str) -> _Fit:
         raise FitError(f"fit {channel}: terms {bad} are deterministic and not fitted by the "
                        "whittle method (the periodogram has no place for a ramp or a line); "
                        "use --method wls for them")
+    if "resonance" in wanted:
+        raise FitError(f"fit {channel}: the resonance term is fitted by --method wls only "
+                       "(on the Allan variance, at the spectrum's narrowband peak)")
     st = Structure(tuple(t for t in wanted if t in BASE))
     if not st.terms and "filter" not in wanted and "markov" not in wanted:
         raise FitError(f"fit {channel}: no term to fit among {list(wanted)}")
