@@ -981,9 +981,15 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
                        f"{gain:.1f} < {EXTENSION_DCHI2:g})"), None
     if kind == "resonance":  # its chi2 drop passed in _select_extensions; centre fixed
         where = "" if pts.peak is None else f" at {pts.peak.describe()} (peak test)"
+        w_lo, w_hi = _resonance_width_range(pts)
+        edge = ("lowest" if value <= w_lo * (1 + EDGE_MARGIN) else
+                "highest" if value >= w_hi / (1 + EDGE_MARGIN) else "")
+        shape = (f": the width is the {edge} searched, so the Allan variance does not fix "
+                 "it; the band's power is fitted, the peak's height and width are not "
+                 "(read them from the spectrum)" if edge else "")
         return True, (f"kept, {head}{where}; -3 dB width {value:.3g} Hz, profile 95 % "
                       f"interval [{lo:.3g}, {hi:.3g}] Hz, centre {st.res_freq_hz:.4g} Hz "
-                      "from the peak test"), None
+                      f"from the peak test{shape}"), None
     band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
     test = line_test(arr, pts.rate_hz, *band)
     if not test.present:
