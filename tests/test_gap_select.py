@@ -239,7 +239,7 @@ def test_headline_is_plain_words_with_the_held_out_closure() -> None:
     }
     first = explain_channel(c, 10)[0]
     assert first == ("The rate drifts with temperature, 0.0101 per degC; modelling it "
-                     "closes 86% of the gap on the held-out part.")
+                     "closes 86% of the systematic gap on the held-out part.")
 
 
 # ------------------------------------------------------------------ detection limits

@@ -149,6 +149,10 @@ class ChannelDiagnosis:
     """Whole-record bias-step statistic against the base realisations."""
     drift_t: float = float("nan")
     """Whole-record drift t (:func:`imubench.gap.evidence.drift_statistic`)."""
+    step_fired: bool = False
+    """The whole-record bias-step test fired at the first step."""
+    drift_fired: bool = False
+    """The whole-record drift test fired at the first step."""
     residual_significant: bool = False
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
@@ -174,7 +178,8 @@ class ChannelDiagnosis:
         ff = self.final_fit or self.before
         out: dict[str, Any] = {
             "gap_before": self.before.gap,
-            "significant": self.before.significant,
+            "significant": self.before.significant or self.step_fired or self.drift_fired,
+            "whole_record": {"step_fired": self.step_fired, "drift_fired": self.drift_fired},
             "regions": [r.to_dict() for r in self.before.regions],
             "effects": [c.to_dict(self.before) for c in self.candidates],
             "verdict": self.verdict,
@@ -507,6 +512,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     ev0["psd"] = (fit.f_hz, fit.real.psd, first.feats.psd.mean(axis=0))
     diag = ChannelDiagnosis(channel, first.before, first.hold, ranked0, verdict, ev0,
                             kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
+                            step_fired=first.step_fired, drift_fired=first.drift_fired,
                             residual_significant=residual, background=bg_summary)
     for (rs, rep), b in zip(rep_setups, rep_before, strict=True):
         a = rs.compare(rs.sim_features(variant.realise(channel, rep, seeds))) if kept else None
