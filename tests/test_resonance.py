@@ -236,3 +236,16 @@ def test_fit_writes_the_resonance_and_report_reads_it(tmp_path: Path,
     gz = doc["channels"]["gz"]
     assert gz["params"]["resonance_height"] == pytest.approx(fitted.resonance_height)
     assert {"resonance_height", "resonance_freq_hz", "resonance_width_hz"} <= set(gz["present"])
+
+
+def test_whittle_says_it_does_not_model_a_peak_it_sees() -> None:
+    """--method whittle (auto) on a record with a resonance: a reason and a note say the
+    peak is there and not modelled (it had turned into Markov and quantization terms
+    without a word); on a record without one, no such reason."""
+    y = simulate(NoiseModel.single_term("gz", **TRUTH), 1 << 19, FS, 15, channels=["gz"])["gz"]
+    f = fit_channel(y, FS, channel="gz", method="whittle")
+    assert f.reasons["resonance"].startswith("not fitted: a narrowband peak at 19")
+    assert any("not modelled by --method whittle" in n for n in f.notes)
+    white = simulate(NoiseModel.single_term("gz", white=0.004), 1 << 19, FS, 15,
+                     channels=["gz"])["gz"]
+    assert "resonance" not in fit_channel(white, FS, channel="gz", method="whittle").reasons
