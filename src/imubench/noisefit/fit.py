@@ -1134,8 +1134,10 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     if wanted is None or "resonance" in wanted:
         pts = replace(pts, peak=find_peak(arr, rate_hz))
     if wanted is not None and "resonance" in wanted and pts.peak is None:
-        raise FitError(f"fit {channel}: terms: 'resonance' needs a narrowband peak in the "
-                       "spectrum and find_peak found none")
+        raise FitError(f"fit {channel}: --terms asks for 'resonance', but this channel's "
+                       "spectrum has no narrowband peak (none significant, at least 2x the "
+                       "continuum and wider than a line); fit the channels with a peak "
+                       "separately (--channels)")
     notes: list[str] = []
     if wanted is None:
         backed, pts, drops, reasons = _backed_extensions(pts, arr)
