@@ -72,7 +72,8 @@ def test_negative_width_is_an_error(tmp_path: Path) -> None:
 def test_centre_at_or_above_nyquist_is_refused_when_simulating() -> None:
     model = NoiseModel.single_term("gz", resonance_freq_hz=60.0, resonance_width_hz=2.0,
                                    resonance_height=1e-3)
-    with pytest.raises(ModelError, match=r"resonance_freq_hz = 60 Hz.*Nyquist.*50 Hz"):
+    with pytest.raises(ModelError, match=r"\[channels.gz\] resonance_freq_hz = 60 Hz.*"
+                                         r"Nyquist.*50 Hz"):
         simulate(model, 1000, FS, 1, channels=["gz"])
 
 
