@@ -66,7 +66,7 @@ def test_none_names_the_closest_statistic() -> None:
     c = _entry("none", trend_z=-4.0, holdout=None, gap_after=0.5)
     lines = explain_channel(c, 10)
     assert lines[0].startswith("No unmodelled effect: the model explains the recording")
-    assert lines[1].startswith("Nothing on the fit part exceeds its threshold")
+    assert lines[1].startswith("Nothing exceeds its threshold")
     assert f"closest to its threshold is trend (t 4.0 against {thr:.1f})" in lines[1]
     assert any(s.startswith("Verdict none") for s in lines)
     assert not any(s.startswith("Held-out") for s in lines)
@@ -166,6 +166,39 @@ def test_headline_never_claims_a_negative_closure() -> None:
     c = _entry("temperature", effects=[TEMP_EFFECT], kept=[kept], holdout=hold)
     first = explain_channel(c, 10)[0]
     assert "closes" not in first and "%" not in first
-    assert ("on the held-out part it does not close the Allan-curve gap (0.182 -> 0.243), "
-            "the held-out evidence for it is in the line, tail, temperature, trend and "
-            "level statistics.") in first
+    assert ("on the held-out part the Allan-curve gap does not close (0.182 -> 0.243); "
+            "the held-out check's evidence for it is in the line, tail, temperature, trend "
+            "and level statistics (chi-squared falls by 9.5).") in first
+
+
+def test_whole_record_and_whole_curve_detections_are_named() -> None:
+    """A ramp found by the whole-record drift test, or a departure seen only by the
+    whole-curve test, is named as what fired (the text said 'nothing on the fit part
+    exceeds its threshold' next to a kept ramp)."""
+    c = _entry("ramp", significant=True, drift_t=12.7, bias_step_z=0.3,
+               whole_record={"step_fired": False, "drift_fired": True},
+               effects=[{**RW_EFFECT, "effect": "ramp", "params": {"ramp": 9.9e-5}}])
+    lines = explain_channel(c, 10)
+    assert lines[1] == "On the whole record: a drift (t 12.7)."
+    g = {"fired": True, "chi2": 30.0, "threshold": 28.0, "dof": 16, "chi2_smooth": 21.2,
+         "threshold_smooth": 16.5, "dof_smooth": 4}
+    lines = explain_channel(_entry("unexplained", effects=[RW_EFFECT], **{"global": g}), 10)
+    assert lines[1].startswith("Significant on the fit part: the whole Allan curve's shape "
+                               "(chi-squared 21.2 against 16.5; 30.0 against 28.0 over all "
+                               "16 taus)")
+
+
+def test_headline_closure_names_what_it_measures() -> None:
+    """'closes N %' says it is the systematic gap; a bias step (located on the whole
+    record) is not said to close 0 % of the held-out gap."""
+    kept = {**TEMP_EFFECT, "holdout_gap_after": 0.137, "holdout_gap_excess_after": 0.10}
+    hold = {"gap_before": 0.253, "gap_after": 0.137, "gap_excess_before": 0.22,
+            "gap_excess_after": 0.10, "gap_null": 0.1}
+    first = explain_channel(_entry("temperature", kept=[kept], holdout=hold), 10)[0]
+    assert "closes 55% of the systematic gap on the held-out part" in first
+    step = {"effect": "bias_step", "params": {"step_size": 0.1, "step_time_s": 900.0},
+            "gap_after": 0.1, "holdout_gap_after": 0.2, "holdout_gap_excess_after": 0.15}
+    hold = {"gap_before": 0.2, "gap_after": 0.2, "gap_excess_before": 0.15,
+            "gap_excess_after": 0.15, "gap_null": 0.1}
+    first = explain_channel(_entry("bias_step", kept=[step], holdout=hold), 10)[0]
+    assert "held-out part is not its test" in first and "0%" not in first

@@ -88,10 +88,10 @@ def test_telegraph_is_two_level_and_gaussian_markov_is_not() -> None:
 
 def test_telegraph_is_named_only_when_the_amplitudes_favour_two_levels() -> None:
     """Markov and telegraph share their Allan curve and spectrum; the telegraph is refused
-    (with a reason) unless its shape z is smaller in magnitude than the Markov's, whatever
-    the rest of the scores say, and a tie goes to the Gaussian process."""
+    (with a reason) unless its shape fits better than the Markov's by TWO_LEVEL_MARGIN in
+    shape_z^2, whatever the rest of the scores say."""
     from imubench.gap.candidates import Candidate
-    from imubench.gap.diagnose import _shape_scores
+    from imubench.gap.diagnose import TWO_LEVEL_MARGIN, _shape_scores
 
     def pair(z_markov: float, z_tel: float) -> tuple[Candidate, Candidate]:
         m = Candidate("markov", {"markov_sigma": 1e-3, "markov_tau": 5.0}, 2, score=40.0,
@@ -104,9 +104,11 @@ def test_telegraph_is_named_only_when_the_amplitudes_favour_two_levels() -> None
     m, t = pair(-0.3, 0.5)  # near the limit: the telegraph's lower score is chance
     assert t.refusal.startswith("two levels are not shown") and not m.refusal
     assert m.score == pytest.approx(40.0) and t.score == pytest.approx(38.0 + 0.5**2 - 0.3**2)
-    m, t = pair(-1.7, -0.5)  # two levels fit better (real telegraph on an ADIS hour)
+    m, t = pair(-3.1, 0.5)  # two levels fit clearly better (a clear blind telegraph)
     assert not t.refusal and t.score < m.score
+    assert pair(-0.8, 0.6)[1].refusal  # slightly better is not enough (a random walk)
     assert pair(0.4, -0.4)[1].refusal  # a tie goes to the Gaussian process
+    assert pytest.approx(3.84, abs=0.01) == TWO_LEVEL_MARGIN
 
 
 def test_resonance_fit_finds_centre_width_height() -> None:
@@ -237,7 +239,7 @@ def test_headline_is_plain_words_with_the_held_out_closure() -> None:
     }
     first = explain_channel(c, 10)[0]
     assert first == ("The rate drifts with temperature, 0.0101 per degC; modelling it "
-                     "closes 86% of the gap on the held-out part.")
+                     "closes 86% of the systematic gap on the held-out part.")
 
 
 # ------------------------------------------------------------------ detection limits

@@ -340,6 +340,7 @@ class SensorPhysics:
 
     def _make_noise(self, dt_s: float) -> None:
         if self._noise is None:
+            self._check_resonances(dt_s)
             taps = math.ceil(self.duration_hint_s / dt_s)
             # one flicker FFT block for the whole hinted record, with room for the
             # look-ahead and a reader that runs a little past the end
@@ -348,6 +349,20 @@ class SensorPhysics:
                 ch: ChannelNoise(self.model[ch], self.seed, CHANNELS.index(ch), taps, length)
                 for ch in self.noisy_channels
             }
+
+    def _check_resonances(self, dt_s: float) -> None:
+        """A resonance must lie below the output's Nyquist frequency, which is known only
+        now; the error names the model file, the channel and the key."""
+        nyquist = 0.5 / dt_s
+        for ch in self.noisy_channels:
+            cm = self.model[ch]
+            for key in ("resonance_freq_hz", "resonance_width_hz"):
+                value = float(getattr(cm, key))
+                if cm.resonance_height > 0 and not value < nyquist:
+                    raise ModelError(
+                        f"{self.model.source}: [channels.{ch}] {key} = {value:g} Hz must lie "
+                        f"below the Nyquist frequency {nyquist:g} Hz of the {2 * nyquist:g} "
+                        "Hz output")
 
     def prepare(self, dt_s: float) -> None:
         """Do the slow set-up of samples spaced ``dt_s`` now (the first flicker blocks),

@@ -49,6 +49,23 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
         if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
             out.append(f"{names[key]} (t {z:.1f} against the threshold "
                        f"{t_threshold(z_norm, stat_dof(key, dof)):.1f})")
+    g = c.get("global") or {}
+    if g.get("fired") and not c["regions"]:
+        out.append(f"the whole Allan curve's shape (chi-squared {g['chi2_smooth']:.1f} "
+                   f"against {g['threshold_smooth']:.1f}; {g['chi2']:.1f} against "
+                   f"{g['threshold']:.1f} over all {g['dof']} taus)")
+    return out
+
+
+def _whole_record(c: dict[str, Any]) -> list[str]:
+    """The whole-record tests (bias step, drift) that fired."""
+    whole = c.get("whole_record") or {}
+    out = []
+    if whole.get("step_fired"):
+        out.append(f"a bias step (step statistic {c['bias_step_z']:.1f} against the "
+                   "realisations)")
+    if whole.get("drift_fired"):
+        out.append(f"a drift (t {c['drift_t']:.1f})")
     return out
 
 
@@ -108,7 +125,10 @@ def describe(effect: str, p: dict[str, Any]) -> str:
 
 
 def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
-    """'closes N % of the gap on the held-out half' (systematic part when it is there)."""
+    """What modelling the effect does on the held-out part, in words: 'closes N % of the
+    systematic gap' (or of the gap, when it has no systematic part), or, when the
+    held-out Allan gap does not close, that it does not, with where the held-out
+    evidence is (a line, a step or a tail barely moves the Allan curve)."""
     if not h or h.get("gap_before") is None:
         return ""
     eb = h.get("gap_excess_before")
@@ -117,22 +137,25 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
     else:
         ea, ga = h.get("gap_excess_after"), h.get("gap_after")
     if eb is not None and eb > 0.05 and ea is not None:
-        frac = 1.0 - ea / eb
+        frac, what = 1.0 - ea / eb, "the systematic gap"
     elif ga is not None and h["gap_before"]:
-        frac = 1.0 - ga / h["gap_before"]
+        frac, what = 1.0 - ga / h["gap_before"], "the gap"
     else:
         return ""
-    if frac >= 0:
-        return f"; modelling it closes {_pct(frac)} of the gap on the held-out part"
-    gb = h["gap_before"]
-    ga = (after or {}).get("holdout_gap_after", h.get("gap_after"))
-    text = (f"; on the held-out part it does not close the Allan-curve gap "
-            f"({_f(gb)} -> {_f(ga)})")
+    if frac >= 0.05:
+        return f"; modelling it closes {_pct(frac)} of {what} on the held-out part"
+    if (after or {}).get("effect") == "bias_step":
+        return ("; the step is located on the whole record, so the held-out part is not "
+                "its test")
+    ga = ga if ga is not None else h.get("gap_after")
+    text = (f"; on the held-out part the Allan-curve gap does not close "
+            f"({_f(h['gap_before'])} -> {_f(ga)})")
     parts = (after or {}).get("holdout_chi2_drop_parts") or {}
-    if parts:
-        best = max(parts, key=lambda k: parts[k])
-        if parts[best] > 0:
-            text += f", the held-out evidence for it is in the {PART_NAMES[best]}"
+    best = max(parts, key=lambda k: parts[k]) if parts else ""
+    if best and parts[best] > 0:
+        text += (f"; the held-out check's evidence for it is in the {PART_NAMES[best]} "
+                 f"(chi-squared falls by {parts[best]:.1f}")
+        text += (", the short taus weighing most)" if best == "allan" else ")")
     return text
 
 
@@ -156,13 +179,14 @@ def headline(c: dict[str, Any], realisations: int) -> str:
     main = next((k for k in kept if k["effect"] == verdict), None)
     ranked = next((e for e in c.get("effects", []) if e["effect"] == verdict), None)
     text = describe(verdict, (main or ranked or {}).get("params", {}))
-    text = text[0].upper() + text[1:] + _closed(c.get("holdout"), main if len(kept) == 1
-                                                else None) + "."
+    # the held-out figures of the verdict's effect alone (kept dicts are cumulative)
+    alone = _closed(c.get("holdout"), main) if kept and kept[0] is main else ""
+    text = text[0].upper() + text[1:] + alone + "."
     others = [k for k in kept if k is not main]
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"]) for k in others)
         text += " (all kept effects together" + _closed(c.get("holdout"), None).replace(
-            "; modelling it closes", " close") + ")."
+            "; modelling it closes", " close").replace("; on", " on") + ")."
     return text
 
 
@@ -238,11 +262,16 @@ def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
     lines: list[str] = [headline(c, realisations)]
     found = _detections(c, dof)
     verdict = c["verdict"]
-    if found:
-        lines.append("Significant on the fit part: " + "; ".join(found) + ".")
+    whole = _whole_record(c)
+    if found or whole:
+        lines.append("; ".join(
+            [f"Significant on the fit part: {'; '.join(found)}"] * bool(found)
+            + [f"on the whole record: {'; '.join(whole)}"] * bool(whole)) + ".")
+        lines[-1] = lines[-1][0].upper() + lines[-1][1:]
     else:
-        lines.append("Nothing on the fit part exceeds its threshold (family-wise Allan and "
-                     "band limits, line, tails, temperature, trend)"
+        lines.append("Nothing exceeds its threshold (family-wise Allan and band limits, "
+                     "whole-curve test, line, tails, temperature, trend, whole-record step "
+                     "and drift)"
                      + _strongest(c, dof) + ".")
     effects = c["effects"]
     if verdict == "none":

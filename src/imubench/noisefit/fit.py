@@ -981,9 +981,15 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
                        f"{gain:.1f} < {EXTENSION_DCHI2:g})"), None
     if kind == "resonance":  # its chi2 drop passed in _select_extensions; centre fixed
         where = "" if pts.peak is None else f" at {pts.peak.describe()} (peak test)"
+        w_lo, w_hi = _resonance_width_range(pts)
+        edge = ("lowest" if value <= w_lo * (1 + EDGE_MARGIN) else
+                "highest" if value >= w_hi / (1 + EDGE_MARGIN) else "")
+        shape = (f": the width is the {edge} searched, so the Allan variance does not fix "
+                 "it; the band's power is fitted, the peak's height and width are not "
+                 "(read them from the spectrum)" if edge else "")
         return True, (f"kept, {head}{where}; -3 dB width {value:.3g} Hz, profile 95 % "
                       f"interval [{lo:.3g}, {hi:.3g}] Hz, centre {st.res_freq_hz:.4g} Hz "
-                      "from the peak test"), None
+                      f"from the peak test{shape}"), None
     band = (max(lo, value / SINE_BAND), min(hi, value * SINE_BAND))
     test = line_test(arr, pts.rate_hz, *band)
     if not test.present:
@@ -1128,8 +1134,10 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     if wanted is None or "resonance" in wanted:
         pts = replace(pts, peak=find_peak(arr, rate_hz))
     if wanted is not None and "resonance" in wanted and pts.peak is None:
-        raise FitError(f"fit {channel}: terms: 'resonance' needs a narrowband peak in the "
-                       "spectrum and find_peak found none")
+        raise FitError(f"fit {channel}: --terms asks for 'resonance', but this channel's "
+                       "spectrum has no narrowband peak (none significant, at least 2x the "
+                       "continuum and wider than a line); fit the channels with a peak "
+                       "separately (--channels)")
     notes: list[str] = []
     if wanted is None:
         backed, pts, drops, reasons = _backed_extensions(pts, arr)

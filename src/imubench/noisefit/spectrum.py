@@ -19,7 +19,8 @@ which tends to those expressions for f << rate), times the output low-pass |H(f)
 (:func:`~imubench.noisefit.kernels.filter_gain2`; ``output_white`` is added after it). A
 sine is drawn at the band-averaged level the periodogram shows, (A^2/4) / (band width), in
 the band holding f0. The resonance is its band-pass's PSD, height |H_bp(f)|^2 / 2 (its
-height is a one-sided peak), times the output low-pass. The rate ramp (C.5) is
+height is a one-sided peak), times the output low-pass, averaged over each band (a peak
+narrower than a band would be missed by the band centre). The rate ramp (C.5) is
 deterministic and the mean-removed periodogram of one record does not follow its ensemble
 form R^2/(2 pi f)^3: it is not drawn.
 """
@@ -78,6 +79,10 @@ def band_psd(y: np.ndarray, rate_hz: float, per_decade: int = BANDS_PER_DECADE) 
                    sums[used] / counts[used], counts[used], float(rate_hz) / x.size)
 
 
+BAND_AVERAGE_POINTS = 256
+"""Points per band at which the resonance's PSD is averaged (:func:`term_psds`)."""
+
+
 def term_psds(fit: ChannelFit, bands: BandPSD) -> dict[str, np.ndarray]:
     """Two-sided PSD (unit^2/Hz) of each present term of ``fit`` at the band centres
     (module docstring); the sine only in its band (zero elsewhere)."""
@@ -102,9 +107,16 @@ def term_psds(fit: ChannelFit, bands: BandPSD) -> dict[str, np.ndarray]:
                           int(p.get("filter_order", 1)), rate)[0]
         out["sine"] = np.where(inside, p["sine_amplitude"] ** 2 / 4.0 * g0 / width, 0.0)
     if "resonance_height" in fit.present:
-        out["resonance"] = gain * resonance_psd(bands.f_hz, p["resonance_height"],
-                                                p["resonance_freq_hz"],
-                                                p["resonance_width_hz"], rate)
+        # averaged over each band as the periodogram is: a peak narrower than a band
+        # sampled at the band centres was missed (a 0.5 Hz wide peak at 20.8 Hz drawn at
+        # half the measured band level)
+        u = (np.arange(BAND_AVERAGE_POINTS) + 0.5) / BAND_AVERAGE_POINTS
+        f = bands.f_low_hz[:, None] + (bands.f_high_hz - bands.f_low_hz)[:, None] * u
+        g = filter_gain2(f.ravel() * tau0, float(p.get("bandwidth_hz", 0.0)),
+                         int(p.get("filter_order", 1)), rate).reshape(f.shape)
+        out["resonance"] = np.mean(g * resonance_psd(f, p["resonance_height"],
+                                                     p["resonance_freq_hz"],
+                                                     p["resonance_width_hz"], rate), axis=1)
     if "output_white" in fit.present and p.get("output_white", 0.0) > 0:
         out["output_white"] = np.full(nu.size, p["output_white"] ** 2)
     return out

@@ -94,6 +94,7 @@ from imubench.noisefit.fit import (
     parse_terms,
 )
 from imubench.noisefit.kernels import AMPLITUDE_KEY, filter_gain2, gacv_unit
+from imubench.noisefit.spectral_line import find_peak
 from imubench.noisefit.units import (
     WHITE_EQUIVALENT,
     white_equivalent,
@@ -336,8 +337,12 @@ def _fit_linear(st: Structure, bases: _Bases, max_iter: int = 500) -> _Fit:
     floor = 1e-300
     f = np.maximum(x @ theta, floor)
     nll = _nll(f, sp)
+    # weights 1/f: a candidate whose spectrum vanishes in some bands (f at the 1e-300
+    # floor) overflowed the normal equations; 1e-9 of the data's median cannot matter
+    # where the model is meaningful
+    w_floor = 1e-9 * float(np.median(sp.pgram))
     for _ in range(max_iter):
-        new = _wnnls(x, sp.pgram, sw / f)
+        new = _wnnls(x, sp.pgram, sw / np.maximum(f, w_floor))
         step = 1.0
         while True:
             cand = theta + step * (new - theta)
@@ -526,8 +531,9 @@ def _explicit(wanted: Sequence[str], bases: _Bases, channel: str) -> _Fit:
                        "whittle method (the periodogram has no place for a ramp or a line); "
                        "use --method wls for them")
     if "resonance" in wanted:
-        raise FitError(f"fit {channel}: the resonance term is fitted by --method wls only "
-                       "(on the Allan variance, at the spectrum's narrowband peak)")
+        raise FitError("--method whittle/exact: the resonance term is fitted by --method wls "
+                       "only (on the Allan variance, at the spectrum's narrowband peak; the "
+                       "spectral likelihood here models a smooth spectrum)")
     st = Structure(tuple(t for t in wanted if t in BASE))
     if not st.terms and "filter" not in wanted and "markov" not in wanted:
         raise FitError(f"fit {channel}: no term to fit among {list(wanted)}")
@@ -556,6 +562,14 @@ def fit_whittle(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "
     reasons: dict[str, str] = {}
     if wanted is None:
         fit = _select(bases, reasons)
+        peak = find_peak(arr, rate_hz)
+        if peak is not None:
+            reasons["resonance"] = (
+                f"not fitted: {peak.describe()} is in the spectrum, and this method has no "
+                "resonance term, so the terms fitted here absorb it (use --method wls)")
+            notes.append(f"{peak.describe()} is not modelled by --method whittle/exact: "
+                         "the white-equivalent density and the short-tau terms include it; "
+                         "--method wls fits it as a resonance")
     else:
         fit = _explicit(wanted, bases, channel)
         reasons = {t: "fitted as asked (terms list, no selection)" for t in wanted}
