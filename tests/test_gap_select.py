@@ -392,3 +392,19 @@ def test_resonance_candidate_needs_a_peak_over_the_model() -> None:
         rf = fit_resonance(f, real, model)
         assert rf is not None and abs(rf.resonance_freq_hz - 20.0) < 0.2
         assert is_peak(rf, f, model) is want
+
+
+def test_tail_statistic_weighs_at_most_its_cap_in_chi_squared() -> None:
+    """A heavy-tailed real sensor puts the impulse count thousands of sigmas off (S5 gyro:
+    tail z 2425); uncapped, a candidate's side effect on it (2425 -> 2400) moved the total
+    by 1.2e5 and decided the ranking. Capped at TAIL_Z_CAP: the tail weighs 100, side
+    effects beyond the cap nothing, and an outliers fit that removes it gains the 100."""
+    from dataclasses import replace
+
+    from imubench.gap.curves import TAIL_Z_CAP
+
+    base = _cmp([0.0, 1.0, -1.0])
+    far, farther = replace(base, tail_z=2400.0), replace(base, tail_z=2425.0)
+    assert farther.chi2 == pytest.approx(far.chi2)
+    assert far.chi2 - base.chi2 == pytest.approx(TAIL_Z_CAP**2) == pytest.approx(100.0)
+    assert replace(base, tail_z=4.0).chi2 - base.chi2 == pytest.approx(16.0)

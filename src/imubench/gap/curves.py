@@ -280,7 +280,8 @@ class Comparison:
         slopes = [v**2 for v in (self.temp_z, self.trend_z, self.level_z)
                   if math.isfinite(v)]
         return float(
-            np.sum(zz**2) + max(self.line_z, 0.0) ** 2 + max(self.tail_z, 0.0) ** 2
+            np.sum(zz**2) + max(self.line_z, 0.0) ** 2
+            + min(max(self.tail_z, 0.0), TAIL_Z_CAP) ** 2
             + sum(slopes)
         )
 
@@ -352,6 +353,14 @@ same per-test false-alarm rate as Z_SLOPE; 4.0 before, which left sines with a l
 of 6 at K = 10 undetected)."""
 Z_TAIL = 5.0
 """z of the impulse count against the realisations that flags impulsive outliers."""
+TAIL_Z_CAP = 2.0 * Z_TAIL
+"""The impulse count's z enters :attr:`Comparison.chi2` at most this far. Its null
+spread is a Poisson-like allowance, so on a sensor with heavy-tailed noise it is
+thousands of sigmas off (Samsung S5 gyro: tail z 2425-8008, chi-squared 6e6-6e7); the
+uncapped square then ranked every candidate by its side effect on the impulse count (a
+correctly fitted sine of line z 55 raised the total and was never examined). Capped, a
+tail far beyond its threshold still weighs 100 (the outliers candidate that removes it
+gains that), and no other candidate can win or lose more than that through it."""
 Z_SLOPE = 3.5
 """|z| of the temperature slope or of the linear trend against the realisations."""
 STAT_TESTS: tuple[tuple[str, float, bool], ...] = (
