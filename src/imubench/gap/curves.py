@@ -11,7 +11,8 @@ can stray from it. Per tau the difference
 is compared with the combined band ``s = sqrt(((s_ci^2 + s_sim^2) / 2) (1 + 1/K))``: the
 single-record spread estimated twice (from the real curve's confidence interval, one
 sigma in ln ADEV, and from the realisations' standard deviation of ln ADEV), inflated by
-the uncertainty of a mean of K. ``z = d / s``.
+the uncertainty of a mean of K. ``z`` is the normal equivalent of the AVAR ratio
+``exp(2 d)`` under its chi-squared law (:func:`wilson_hilferty_z`; ``d / s`` for small d).
 
 The **gap** is ``sqrt(mean(d^2))`` over the analysed taus (the issue's measure).
 A **region** is a maximal run of consecutive taus with ``|z| > Z_EDGE`` of one sign that
@@ -412,7 +413,8 @@ def global_chi2(z: np.ndarray, corr: np.ndarray, tau_s: np.ndarray
                 ) -> tuple[float, int, float]:
     """Whole-curve statistics of the per-tau z: (omnibus, its dof, smooth part).
 
-    ``z_i = d_i / s_i`` with ``s_i`` the one-sigma spread of ln ADEV; ``R`` the correlation
+    ``z_i`` from :func:`wilson_hilferty_z` (``d_i / s_i`` for small ``d_i``, ``s_i`` the
+    one-sigma spread of ln ADEV); ``R`` the correlation
     of the OAVAR estimates (:func:`imubench.noisefit.covariance.oavar_correlation`, equal to
     that of ln ADEV to first order). Omnibus: ``z' R^-1 z``, chi-squared with m dof under
     the null (Mardia, Kent & Bibby, Multivariate Analysis, sec. 3.4). Smooth part: the
@@ -841,10 +843,11 @@ def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.
     ``real_ci_s``: the real curve's one-sigma spread in ln ADEV from its confidence
     interval (NaN where unknown; the realisations' spread is used alone there).
     ``corr``: the model correlation of the OAVAR estimates at ``tau_s`` for the global test
-    (:func:`global_chi2`; None skips it). That test compares ln ADEV with the realisations'
-    MEAN ln ADEV, which is unbiased under the null (ln of the mean AVAR is not: at a few
-    degrees of freedom E[ln AVAR] lies well below ln E[AVAR], the same sign at every
-    long tau, which a sum over taus would count as a gap).
+    (:func:`global_chi2`; None skips it). It uses the same per-tau z as the regions,
+    :func:`wilson_hilferty_z` of the ratio to the mean AVAR, which is centred under the
+    null (a plain ``d / s`` against ln of the mean AVAR is not: at a few degrees of
+    freedom E[ln AVAR] lies well below ln E[AVAR], the same sign at every long tau, which
+    a sum over taus would count as a gap).
     """
     k = sims.k
     mean_avar = sims.avar.mean(axis=0)
