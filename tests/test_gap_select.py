@@ -408,3 +408,46 @@ def test_tail_statistic_weighs_at_most_its_cap_in_chi_squared() -> None:
     assert farther.chi2 == pytest.approx(far.chi2)
     assert far.chi2 - base.chi2 == pytest.approx(TAIL_Z_CAP**2) == pytest.approx(100.0)
     assert replace(base, tail_z=4.0).chi2 - base.chi2 == pytest.approx(16.0)
+
+
+def test_quantization_is_refused_where_the_short_taus_do_not_follow_its_law() -> None:
+    """Quantization (3 Q^2 / tau^2, IEEE 952 C.2) over a changed white level fits the
+    short-tau excess; the Samsung S5 gyro's departure (decimation filter: real / model
+    AVAR 1.77, 1.03, 0.74, 0.78 at 1, 2, 4, 8 tau0, measured) does not, and was named
+    `quantization` on a null. Excess drawn with noise at the stated one-sigma."""
+    from scipy.stats import chi2
+
+    from imubench.gap.avarfit import quantization_law
+    from imubench.gap.candidates import QUANTIZATION_LAW_ALPHA
+
+    tau = np.array([1, 2, 4, 8]) / RATE
+    model = WHITE**2 / tau
+    s = np.full(4, 0.01)  # one sigma of ln ADEV: 2 % in AVAR
+    rng = np.random.default_rng(5)
+    need = chi2.isf(QUANTIZATION_LAW_ALPHA, 2)
+    misfits = []
+    for _ in range(200):  # quantization +20 % at tau0, white 3 % lower
+        real = model * (0.97 + 0.2 / (tau * RATE)) * (1 + 2 * s * rng.standard_normal(4))
+        misfits.append(quantization_law(tau, real, model, s)[0])
+    assert np.mean(np.array(misfits) > need) < 0.01
+    assert np.mean(misfits) == pytest.approx(2.0, rel=0.3)  # chi-squared, 2 dof
+    s5 = model * np.array([1.77, 1.03, 0.74, 0.78])
+    c2, dof = quantization_law(tau, s5, model, s)
+    assert dof == 2 and c2 > 5 * need
+
+
+def test_base_model_refit_adds_white_to_a_model_without_it() -> None:
+    """A fit that took a decimated record's white noise for a short Markov process has no
+    white term; the base model's refit must still be able to add one (it kept 0)."""
+    from imubench.gap.avarfit import fit_base_model
+    from imubench.noisefit import model_avar
+
+    cm = NoiseModel.single_term("gx", markov_sigma=0.04, markov_tau=1.2)["gx"]
+    tau = np.geomspace(0.1, 100.0, 13)
+    real = model_avar(cm.replace(white=0.0025), tau, 10.0)
+    _, _, w = fit_base_model(cm, tau, 10.0, real, model_avar(cm, tau, 10.0),
+                             np.full(tau.size, 0.02))
+    assert w == pytest.approx(0.0025, rel=0.02)
+    _, _, w0 = fit_base_model(cm, tau, 10.0, model_avar(cm, tau, 10.0),
+                              model_avar(cm, tau, 10.0), np.full(tau.size, 0.02))
+    assert w0 < 0.0025 / 30

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel
+from scipy.stats import chi2 as chi2_dist
 
 from imubench.gap import avarfit, evidence, extras
 from imubench.gap.curves import Comparison, SimFeatures, line_segment, t_threshold
@@ -213,6 +214,30 @@ def deterministic(effect: str, params: dict[str, float], cm: ChannelModel, serie
     return None
 
 
+QUANTIZATION_LAW_ALPHA = 1e-3
+"""Level at which the short-tau excess is declared not to follow the quantization law
+(:func:`imubench.gap.avarfit.quantization_law`)."""
+
+
+def _quantization_refusal(tau_s: np.ndarray, real_avar: np.ndarray, model_avar: np.ndarray,
+                          sigma_ln_adev: np.ndarray) -> str:
+    """Why a quantization term cannot be the cause (empty when the law holds).
+
+    Quantization and a base-model mismatch (white level, filter) both depart at the
+    shortest taus; quantization is named only when the excess follows its own law there
+    (:func:`imubench.gap.avarfit.quantization_law`), as a sine needs a spectral line."""
+    c2, dof = avarfit.quantization_law(tau_s, real_avar, model_avar, sigma_ln_adev)
+    if dof < 1:
+        return ""
+    need = float(chi2_dist.isf(QUANTIZATION_LAW_ALPHA, dof))
+    if c2 <= need:
+        return ""
+    return (f"the short-tau excess does not follow the quantization law (3 Q^2 / tau^2 "
+            f"over any white level) on the first {dof + 2} taus: misfit chi-squared "
+            f"{c2:.1f} on {dof} dof, above {need:.1f}; the shortest taus depart as a "
+            f"filter or the white level would")
+
+
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
                    cur: SimFeatures, effects: tuple[str, ...], step_fired: bool
                    ) -> tuple[list[Candidate], dict[str, Any]]:
@@ -232,6 +257,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             p = avarfit.fit_single(eff, fit.tau_s, fit.real.avar, model_avar, sig)
             p0 = getattr(cm, eff)
             cands.append(Candidate(eff, {eff: math.sqrt(p0 * p0 + p * p)}, 1))
+            if eff == "quantization":
+                cands[-1].refusal = _quantization_refusal(fit.tau_s, fit.real.avar,
+                                                          model_avar, sig)
         elif eff == "ramp":
             cands.append(Candidate(eff, {"ramp": cm.ramp + fit.real.trend_slope
                                          - float(np.nanmean(cur.trend_slope))}, 1))
