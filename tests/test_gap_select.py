@@ -451,3 +451,21 @@ def test_base_model_refit_adds_white_to_a_model_without_it() -> None:
     _, _, w0 = fit_base_model(cm, tau, 10.0, model_avar(cm, tau, 10.0),
                               model_avar(cm, tau, 10.0), np.full(tau.size, 0.02))
     assert w0 < 0.0025 / 30
+
+
+def test_a_transient_excursion_is_not_a_bias_step() -> None:
+    """A step shifts every later level; a ten-minute excursion that comes back (Samsung S5
+    gy, -50 mdps, named `bias_step` on a null) does not."""
+    from imubench.gap.evidence import STEP_PERSISTENCE, fit_bias_step, step_persistence
+
+    rng = np.random.default_rng(21)
+    n = int(3600 * RATE)
+    t = np.arange(n) / RATE
+    step = white(rng, n) + np.where(t > 1000.0, 0.02, 0.0)
+    fit = fit_bias_step(step, RATE)
+    assert fit.step_time_s == pytest.approx(1000.0, abs=5.0)
+    assert step_persistence(step, RATE, fit) == pytest.approx(1.0, abs=0.1)
+    bump = white(rng, n) + np.where((t > 1000.0) & (t < 1600.0), 0.02, 0.0)
+    fit = fit_bias_step(bump, RATE)
+    assert abs(fit.step_size) > 0.015  # locally it looks like a step
+    assert step_persistence(bump, RATE, fit) < STEP_PERSISTENCE

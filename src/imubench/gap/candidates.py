@@ -319,5 +319,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             st = evidence.fit_bias_step(whole.y, whole.rate_hz)
             cands.append(Candidate(eff, {"step_time_s": st.step_time_s,
                                          "step_size": st.step_size}, 2))
+            kept_share = evidence.step_persistence(whole.y, whole.rate_hz, st)
+            if kept_share < evidence.STEP_PERSISTENCE:
+                cands[-1].refusal = (
+                    f"the level does not stay shifted: far from the step the record's "
+                    f"levels keep {kept_share:.0%} of its size (needs "
+                    f"{evidence.STEP_PERSISTENCE:.0%}); a transient excursion or a "
+                    f"wandering level, not a bias step")
     return cands, ev
 

@@ -216,6 +216,31 @@ def fit_bias_step(y: np.ndarray, rate_hz: float) -> StepFit:
     return StepFit(k / rate_hz, size)
 
 
+STEP_PERSISTENCE = 0.5
+"""Share of a located step's size that the record's far levels must keep
+(:func:`step_persistence`)."""
+
+
+def step_persistence(y: np.ndarray, rate_hz: float, step: StepFit) -> float:
+    """How much of a located step the levels far from it keep (1 for a clean step).
+
+    ``(median after - median before) / step_size`` over the STEP_BLOCKS block means of
+    the whole record, leaving out the block the step falls in and its neighbours (the
+    median, not the mean: a transient or an outlier burst moves a few blocks only). A
+    bias step shifts every later level; a transient excursion (Samsung S5 gyro: -50 mdps
+    for ten minutes, then back) gives a local size but no lasting shift, and a
+    wandering background returns ~0 on average. NaN when a side holds fewer than three
+    blocks (a step at the very edge is kept on its local size)."""
+    n_block = max(1, len(y) // STEP_BLOCKS)
+    m = block_means_of(y, n_block)
+    jb = int(step.step_time_s * rate_hz) // n_block
+    before, after = m[: max(0, jb - 1)], m[jb + 2:]
+    before, after = before[np.isfinite(before)], after[np.isfinite(after)]
+    if before.size < 3 or after.size < 3 or step.step_size == 0:
+        return float("nan")
+    return float((np.median(after) - np.median(before)) / step.step_size)
+
+
 def smoothed_kurtosis(y: np.ndarray, window: int) -> float:
     """Excess kurtosis of the means of consecutive windows of ``window`` samples.
 
