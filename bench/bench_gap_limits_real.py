@@ -38,7 +38,12 @@ with a zero-phase filter, so taus below ~0.5 s are the filter's):
    differences taken 1 s apart (beyond the decimation filter's memory; a Gaussian model,
    which the fit always is, gives 0 with standard error sqrt(24/m)) above 5 standard
    errors; ``sine``/``resonance`` -> ``imubench.noisefit.spectral_line.peak_test`` within
-   25 % of the fitted frequency. Every other named effect on a null is a false alarm.
+   25 % of the fitted frequency; a noise term (``random_walk``, ``flicker``,
+   ``quantization``, ``markov``) -> the noise fit of the segment itself
+   (``imubench.noisefit.fit_channel``, the engine of ``imubench fit``, not the gap's
+   Allan-residual fit) finds the term present with its 95 % interval above the model's
+   value (added 2026-11-27, after a run with the quantization-law rule showed a
+   ``random_walk`` on a null). Every other named effect on a null is a false alarm.
 5. Shown beside top-1 (not the issue's figure): the first kept unmodelled effect after
    skipping the effect the same segment's null named and the independent check found
    (an effect the real background already has, e.g. heavy tails named ``outliers``).
@@ -116,10 +121,30 @@ def heavy_tails(y: np.ndarray, fs: float) -> tuple[bool, str]:
     return k / se > KURT_Z, f"diff excess kurtosis {k:.2f} ({k / se:.0f} SE, m={len(d)})"
 
 
-def independent_check(verdict: str, params: dict[str, float], y: np.ndarray, fs: float
-                      ) -> tuple[bool, str]:
+FIT_TERMS = {"random_walk": "random_walk", "flicker": "flicker",
+             "quantization": "quantization", "markov": "markov_sigma"}
+"""Verdicts that are noise terms of ``imubench fit``, by model key."""
+
+
+def fit_larger(key: str, model_value: float, y: np.ndarray, fs: float, ch: str
+               ) -> tuple[bool, str]:
+    """The noise fit of the segment itself (``imubench fit``'s engine, not the gap's
+    Allan-residual fit) finds the term present with a 95 % interval above the model's."""
+    from imubench.noisefit import fit_channel
+
+    fit = fit_channel(y, fs, terms="auto", channel=ch)
+    lo, hi = fit.ci.get(key, (math.nan, math.nan))
+    ok = key in fit.present and lo > model_value
+    return ok, (f"noise fit of the segment: {key} {fit.params.get(key, 0.0):.3g} "
+                f"[{lo:.3g}, {hi:.3g}] against the model's {model_value:.3g}")
+
+
+def independent_check(verdict: str, params: dict[str, float], y: np.ndarray, fs: float,
+                      model_value: float = 0.0, ch: str = "") -> tuple[bool, str]:
     if verdict == "outliers":
         return heavy_tails(y, fs)
+    if verdict in FIT_TERMS:
+        return fit_larger(FIT_TERMS[verdict], model_value, y, fs, ch)
     if verdict in ("sine", "resonance"):
         from imubench.noisefit.spectral_line import peak_test
 
@@ -209,7 +234,10 @@ def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
     c = Case(ch, seg, "null", None, d.verdict, [k.effect for k in d.kept], d.reason,
              seconds=sec)
     if d.verdict not in NULL_OK and d.winner is not None:
-        c.in_data, c.check = independent_check(d.verdict, d.winner.params, y, fs)
+        key = FIT_TERMS.get(d.verdict, "")
+        c.in_data, c.check = independent_check(
+            d.verdict, d.winner.params, y, fs,
+            float(getattr(model[ch], key)) if key else 0.0, ch)
         c.check = f"independent check: {'IN DATA' if c.in_data else 'not found'} ({c.check})"
     elif d.verdict not in NULL_OK:
         c.check = "no effect named" if d.verdict == "unexplained" else ""
