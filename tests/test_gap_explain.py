@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from imubench.commands.gap import gap_units
 from imubench.gap.curves import Z_SLOPE, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
 from imubench.gap.explain import explain_channel
@@ -39,12 +40,13 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     c = _entry("temperature", temperature_slope_z=11.7, effects=[TEMP_EFFECT, RW_EFFECT],
                regions=[{"tau_min_s": 20.0, "tau_max_s": 315.0, "direction": "real_above",
                          "gap": 1.3, "z_max": 7.4}])
-    text = "\n".join(explain_channel(c, 10))
+    units = gap_units(["gx"])["params"]["gx"]  # type: ignore[index]
+    text = "\n".join(explain_channel(c, 10, units))
     assert f"correlation with temperature (t 11.7 against the threshold {thr:.1f})" in text
     assert "Allan curve real above over 20-315 s (largest |z| 7.4" in text
     assert ("Verdict temperature (temp_coeff = 0.0081): it removes 97% of the significant "
             f"excess chi-squared (the verdict needs {MIN_CLOSURE:.0%}; 93% of the total)") in text
-    assert text.startswith("The rate drifts with temperature, 0.0081 per degC")
+    assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
     assert "runner-up random_walk scores 71.0" in text
     assert "systematic part is 0.49 -> 0.07" in text
     assert "over the fit part's regions 0.9 -> 0.1" in text

@@ -238,8 +238,11 @@ def test_headline_is_plain_words_with_the_held_out_closure() -> None:
                     "gap_excess_after": 0.06},
     }
     first = explain_channel(c, 10)[0]
-    assert first == ("The rate drifts with temperature, 0.0101 per degC; modelling it "
+    assert first == ("The rate drifts with temperature, 0.0101; modelling it "
                      "closes 86% of the systematic gap on the held-out part.")
+    units = {"temp_coeff": "dps/degC"}  # the JSON's units.params.<channel>
+    assert explain_channel(c, 10, units)[0].startswith(
+        "The rate drifts with temperature, 0.0101 dps/degC; modelling it")
 
 
 # ------------------------------------------------------------------ detection limits

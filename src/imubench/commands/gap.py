@@ -86,14 +86,20 @@ def gap_units(channels: list[str]) -> dict[str, object]:
     """The units of a ``gap`` JSON document's numbers: the gaps are dimensionless (RMS
     over the taus of ln(ADEV_real / ADEV_sim)); each channel's effect parameters are in
     the noise model's units of that channel (docs/noise-model.md)."""
+    from imubench.batch import UNITS
     from imubench.noisefit.units import param_units
+
+    def effect_units(ch: str) -> dict[str, str]:  # the gap's own effects' parameters
+        return {"step_size": UNITS[ch], "step_time_s": "s", "telegraph_step": UNITS[ch],
+                "telegraph_dwell_s": "s"}
 
     ln = "1 (RMS over taus of ln(ADEV_real/ADEV_sim))"
     return {"rate_hz": "Hz", "samples": "samples", "holdout_fraction": "1",
             **{k: ln for k in ("gap_before", "gap_after", "gap_null", "gap_excess_before",
                                "gap_excess_after", "holdout_gap_after",
                                "holdout_gap_excess_after")},
-            "params": {ch: param_units(ch) for ch in channels if ch != "temp"}}
+            "params": {ch: {**param_units(ch), **effect_units(ch)}
+                       for ch in channels if ch != "temp"}}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -126,6 +132,6 @@ def run(args: argparse.Namespace) -> int:
     for ch, c in out["channels"].items():
         print(f"{ch}: verdict {c['verdict']}, gap {c['gap_before']:.3f} -> "
               f"{c['gap_after']:.3f}", file=summary)
-        for line in explain_channel(c, out["realisations"]):
+        for line in explain_channel(c, out["realisations"], out["units"]["params"][ch]):
             print(f"  {line}", file=summary)
     return 0

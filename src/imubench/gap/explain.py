@@ -16,6 +16,7 @@ part; the numbers behind it follow.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from imubench.gap.curves import STAT_TESTS, stat_dof, stat_fired, t_threshold
@@ -94,33 +95,40 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
     return f"; the closest to its threshold is {n} (t {z:.1f} against {thr:.1f})"
 
 
-def describe(effect: str, p: dict[str, Any]) -> str:
-    """What an effect with parameters ``p`` does, in plain words (channel units)."""
-    g = lambda k: _f(p.get(k), 3)  # noqa: E731
+def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
+    """What an effect with parameters ``p`` does, in plain words; each value is followed
+    by its unit from ``units`` (the JSON's ``units.params.<channel>``) when given."""
+    u = units or {}
+
+    def g(k: str) -> str:
+        return _f(p.get(k), 3) + (f" {u[k]}" if k in u and u[k] != "1" else "")
+
+    bw = p.get("bandwidth_hz")
+    filt = (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
+            if bw is not None and bw > 0 else "no output filter")
     return {
-        "temperature": f"the rate drifts with temperature, {g('temp_coeff')} per degC",
+        "temperature": f"the rate drifts with temperature, {g('temp_coeff')}",
         "sine": f"a sinusoidal disturbance of amplitude {g('sine_amplitude')} at "
-                f"{g('sine_freq')} Hz",
-        "random_walk": f"the bias wanders as a random walk (K = {g('random_walk')} per "
-                       "sqrt(s))",
+                f"{_f(p.get('sine_freq'), 3)} Hz",
+        "random_walk": f"the bias wanders as a random walk (K = {g('random_walk')})",
         "flicker": f"the bias instability (flicker) is larger than modelled (B = "
                    f"{g('flicker')})",
-        "ramp": f"the rate drifts linearly in time, {g('ramp')} per s",
+        "ramp": f"the rate drifts linearly in time, {g('ramp')}",
         "quantization": f"quantization noise is larger than modelled (Q = "
                         f"{g('quantization')})",
         "markov": f"a correlated bias (Gauss-Markov) of sigma {g('markov_sigma')} with "
-                  f"correlation time {g('markov_tau')} s",
+                  f"correlation time {_f(p.get('markov_tau'), 3)} s",
         "telegraph": f"the bias jumps between two levels {g('telegraph_step')} apart "
-                     f"(telegraph noise), mean dwell {g('telegraph_dwell_s')} s",
-        "resonance": f"a narrowband resonance at {g('resonance_freq_hz')} Hz, width "
-                     f"{g('resonance_width_hz')} Hz, peak PSD {g('resonance_height')} "
-                     "per Hz above the model",
-        "outliers": f"impulsive outliers, {g('outlier_rate')} per s of amplitude "
+                     f"(telegraph noise), mean dwell {_f(p.get('telegraph_dwell_s'), 3)} s",
+        "resonance": f"a narrowband resonance at {_f(p.get('resonance_freq_hz'), 3)} Hz, "
+                     f"width {_f(p.get('resonance_width_hz'), 3)} Hz, peak PSD "
+                     f"{g('resonance_height')} above the model",
+        "outliers": f"impulsive outliers, {_f(p.get('outlier_rate'), 3)} per s of amplitude "
                     f"{g('outlier_amplitude')}",
-        "bias_step": f"the bias steps by {g('step_size')} at t = {g('step_time_s')} s",
-        "base_model": f"the base model is off (refit: white {g('white')} per sqrt(Hz), "
-                      f"output filter {g('bandwidth_hz')} Hz, order {g('filter_order')}); "
-                      "refit the model rather than add an effect",
+        "bias_step": f"the bias steps by {g('step_size')} at t = "
+                     f"{_f(p.get('step_time_s'), 3)} s",
+        "base_model": f"the base model is off (refit: white {g('white')}, {filt}); refit "
+                      "the model rather than add an effect",
     }.get(effect, effect)
 
 
@@ -159,8 +167,10 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
     return text
 
 
-def headline(c: dict[str, Any], realisations: int) -> str:
-    """The verdict in plain words, numbers after."""
+def headline(c: dict[str, Any], realisations: int,
+             units: Mapping[str, str] | None = None) -> str:
+    """The verdict in plain words, numbers after (values with ``units``, see
+    :func:`describe`)."""
     verdict, reason = c["verdict"], c.get("reason", "")
     kept = c.get("kept", [])
     if verdict == "none":
@@ -178,13 +188,14 @@ def headline(c: dict[str, Any], realisations: int) -> str:
                 "on both the fit and the held-out part.")
     main = next((k for k in kept if k["effect"] == verdict), None)
     ranked = next((e for e in c.get("effects", []) if e["effect"] == verdict), None)
-    text = describe(verdict, (main or ranked or {}).get("params", {}))
+    text = describe(verdict, (main or ranked or {}).get("params", {}), units)
     # the held-out figures of the verdict's effect alone (kept dicts are cumulative)
     alone = _closed(c.get("holdout"), main) if kept and kept[0] is main else ""
     text = text[0].upper() + text[1:] + alone + "."
     others = [k for k in kept if k is not main]
     if others:
-        text += " Also kept: " + "; ".join(describe(k["effect"], k["params"]) for k in others)
+        text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units)
+                                           for k in others)
         text += " (all kept effects together" + _closed(c.get("holdout"), None).replace(
             "; modelling it closes", " close").replace("; on", " on") + ")."
     return text
@@ -256,10 +267,12 @@ def _kept_lines(c: dict[str, Any]) -> list[str]:
     return out
 
 
-def explain_channel(c: dict[str, Any], realisations: int) -> list[str]:
-    """Sentences explaining the verdict of one channel's JSON entry."""
+def explain_channel(c: dict[str, Any], realisations: int,
+                    units: Mapping[str, str] | None = None) -> list[str]:
+    """Sentences explaining the verdict of one channel's JSON entry; ``units``: the
+    JSON's ``units.params.<channel>`` (each value is followed by its unit)."""
     dof = max(int(realisations) - 1, 1)
-    lines: list[str] = [headline(c, realisations)]
+    lines: list[str] = [headline(c, realisations, units)]
     found = _detections(c, dof)
     verdict = c["verdict"]
     whole = _whole_record(c)

@@ -150,7 +150,9 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
             f"held out {_num(hold.get('gap_before'))} &rarr; {_num(hold.get('gap_after'))}; "
             f"regions: {html.escape(_regions(c['regions']))}</p>"
             "<ul>" + "".join(f"<li>{html.escape(s)}</li>"
-                             for s in explain_channel(c, result["realisations"])) + "</ul>"
+                             for s in explain_channel(c, result["realisations"],
+                                                      result["units"]["params"][ch]))
+            + "</ul>"
             f"<img src='{ch}_adev.png'><img src='{ch}_evidence.png'>"
             "<table border=1><tr><th>effect</th><th>params</th><th>gap after</th>"
             f"<th>held-out gap after</th><th>score</th><th>kept?</th></tr>{eff_rows}</table>"
