@@ -277,3 +277,17 @@ def test_cli_check_and_print_quickstart(tmp_path: Path) -> None:
                          capture_output=True, text=True, timeout=60, env=env, check=True)
     assert ref.stdout.strip() == reference_markdown()
     assert re.search(r"^\| `mqtt\.password` \| \(none\) \|", ref.stdout, re.M)
+
+
+def test_a_sim_model_resonance_above_the_sources_nyquist_is_refused_at_load(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`run --check` said "valid" for a model whose resonance the sim source's ODR cannot
+    carry; the daemon then refused it only when the first sample was drawn."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.toml").write_text("[channels.gz]\nresonance_freq_hz = 60.0\n"
+                                     "resonance_width_hz = 2.0\nresonance_height = 1e-3\n")
+    msg = refused(write(tmp_path, '[source]\nuri = "sim://lsm6dsl?odr_hz=104&model=m.toml"\n'))
+    assert "source.uri" in msg and "m.toml: [channels.gz] resonance_freq_hz = 60 Hz" in msg
+    assert "Nyquist frequency 52 Hz" in msg, msg
+    ok = write(tmp_path, '[source]\nuri = "sim://lsm6dsl?odr_hz=208&model=m.toml"\n')
+    assert load_config(ok).source.uri.endswith("model=m.toml")

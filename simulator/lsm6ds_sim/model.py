@@ -45,7 +45,7 @@ import dataclasses
 import math
 import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from importlib import resources
 from importlib.resources.abc import Traversable
@@ -189,6 +189,20 @@ class NoiseModel:
             raise ModelError(
                 f"{self.source}: no channel {channel!r}; channels are {', '.join(CHANNELS)}"
             ) from None
+
+    def check_nyquist(self, rate_hz: float, channels: Iterable[str] = CHANNELS) -> None:
+        """Every resonance of ``channels`` lies below the Nyquist frequency of samples at
+        ``rate_hz``; a ModelError naming the model file, the channel and the key."""
+        nyquist = 0.5 * rate_hz
+        for ch in channels:
+            cm = self[ch]
+            for key in ("resonance_freq_hz", "resonance_width_hz"):
+                value = float(getattr(cm, key))
+                if cm.resonance_height > 0 and not value < nyquist:
+                    raise ModelError(
+                        f"{self.source}: [channels.{ch}] {key} = {value:g} Hz must lie "
+                        f"below the Nyquist frequency {nyquist:g} Hz of the {rate_hz:g} "
+                        "Hz output")
 
     def with_channel(self, channel: str, **overrides: float) -> NoiseModel:
         """A copy where ``channel`` has some keys changed, e.g. ``with_channel("gx", white=0)``."""

@@ -352,17 +352,8 @@ class SensorPhysics:
 
     def _check_resonances(self, dt_s: float) -> None:
         """A resonance must lie below the output's Nyquist frequency, which is known only
-        now; the error names the model file, the channel and the key."""
-        nyquist = 0.5 / dt_s
-        for ch in self.noisy_channels:
-            cm = self.model[ch]
-            for key in ("resonance_freq_hz", "resonance_width_hz"):
-                value = float(getattr(cm, key))
-                if cm.resonance_height > 0 and not value < nyquist:
-                    raise ModelError(
-                        f"{self.model.source}: [channels.{ch}] {key} = {value:g} Hz must lie "
-                        f"below the Nyquist frequency {nyquist:g} Hz of the {2 * nyquist:g} "
-                        "Hz output")
+        now (:meth:`NoiseModel.check_nyquist`)."""
+        self.model.check_nyquist(1.0 / dt_s, self.noisy_channels)
 
     def prepare(self, dt_s: float) -> None:
         """Do the slow set-up of samples spaced ``dt_s`` now (the first flicker blocks),

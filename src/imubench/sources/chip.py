@@ -365,7 +365,8 @@ per-call cost of the FIFO read loop; the values do not depend on it)."""
 def sim_options(uri: SourceURI) -> ChipOptions:
     opts = _chip_options(uri, SIM_PARAMS, uri.target.strip("/").lower() or "lsm6dsl")
     v = opts.values
-    check_model_param(uri, v["model"])
+    base_hz = max(float(v["odr_hz"]), float(v["accel_odr_hz"] or v["odr_hz"]))
+    check_model_param(uri, v["model"], base_hz)  # the physics samples at the faster ODR
     _fault_plan(uri, v)
     return opts
 

@@ -142,15 +142,20 @@ class Backend:
         return any(p.name == name for p in self.params)
 
 
-def check_model_param(uri: SourceURI, model: str | None) -> None:
-    """A simulator's ``model=`` (a noise model file or ``datasheet:CHIP``) loads; a
-    SourceError naming the URI and the model otherwise."""
+def check_model_param(uri: SourceURI, model: str | None, rate_hz: float | None = None
+                      ) -> None:
+    """A simulator's ``model=`` (a noise model file or ``datasheet:CHIP``) loads, and its
+    resonances lie below the Nyquist frequency of ``rate_hz`` (the rate the simulator
+    generates at, when the URI fixes it); a SourceError naming the URI and the model
+    (with the file, channel and key) otherwise."""
     if not model:
         return
     from lsm6ds_sim.model import load_model
 
     try:
-        load_model(model)
+        loaded = load_model(model)
+        if rate_hz is not None:
+            loaded.check_nyquist(rate_hz)
     except Exception as exc:  # ModelError and file errors, reported with the URI
         raise SourceError(f"source URI {uri.text!r}: model {model!r}: {exc}") from None
 
