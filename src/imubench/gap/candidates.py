@@ -20,6 +20,7 @@ from scipy.stats import chi2 as chi2_dist
 from imubench.gap import avarfit, evidence, extras
 from imubench.gap.curves import Comparison, SimFeatures, line_segment, t_threshold
 from imubench.gap.parts import PartSetup, Series, simulate_channel
+from imubench.noisefit.spectral_line import SCAN_LOW_FRACTION
 
 EFFECTS: tuple[str, ...] = (
     "flicker", "random_walk", "ramp", "quantization", "markov", "telegraph", "sine",
@@ -289,7 +290,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             above = any(b["direction"] == "real_above" for b in before.bands)
             if above or before.line_z > Z_LINE_CANDIDATE:
                 model_psd = cur.psd.mean(axis=0)
-                rf = evidence.fit_resonance(fit.f_hz, fit.real.psd, model_psd)
+                rf = evidence.fit_resonance(fit.f_hz, fit.real.psd, model_psd,
+                                            SCAN_LOW_FRACTION * s.rate_hz)
                 if rf is not None and is_peak(rf, fit.f_hz, model_psd):
                     cands.append(Candidate(eff, {
                         "resonance_freq_hz": rf.resonance_freq_hz,

@@ -263,17 +263,37 @@ class ResonanceFit:
     resonance_height: float
 
 
-def fit_resonance(f_hz: np.ndarray, psd_real: np.ndarray, psd_model: np.ndarray
-                  ) -> ResonanceFit | None:
+RESONANCE_WINDOW_WIDTHS = 8.0
+"""Half-width of the window of the Lorentzian fit, in first-guess widths (at least
+RESONANCE_WINDOW_BINS bins): the half-maximum run of a noisy Welch excess ends early."""
+RESONANCE_WINDOW_BINS = 40
+
+
+def _lorentzian(f: np.ndarray, fc: float, width: float, height: float) -> np.ndarray:
+    return height / (1.0 + (2.0 * (f - fc) / width) ** 2)
+
+
+def fit_resonance(f_hz: np.ndarray, psd_real: np.ndarray, psd_model: np.ndarray,
+                  f_min_hz: float = 0.0) -> ResonanceFit | None:
     """Centre, -3 dB width and peak height (unit^2/Hz) of the largest spectral excess.
 
-    The excess ``psd_real - psd_model`` (Welch, one-sided) smoothed over three bins; its
-    highest bin above the first two; the width is the contiguous run of bins above half
-    the peak (full width at half maximum of a Lorentzian line, at least one bin); the
-    centre the excess-weighted mean frequency of that run. None when there is no excess.
+    First guess: the excess ``psd_real - psd_model`` (Welch, one-sided) smoothed over
+    three bins, its highest bin at or above ``f_min_hz`` (and above the first two), the
+    contiguous run of bins above half of it. Then a Lorentzian line ``H / (1 + (2 (f -
+    fc) / w)^2)`` (peak H, full width at half maximum w) is fitted to the unsmoothed
+    excess by weighted least squares over fc +- RESONANCE_WINDOW_WIDTHS first-guess
+    widths, each bin weighted by the inverse of the smoothed real PSD (a Welch estimate's
+    spread is proportional to its mean). The half-maximum run alone stopped at the first
+    noisy dip: an injected 1 Hz wide peak at 8 Hz, 2-31 times the continuum, 30 min at
+    104 Hz, came out 0.08-0.28 Hz wide with the peak 30-50 % high (measured, 12 seeds).
+    None when there is no excess.
     """
-    ex = np.convolve(psd_real - psd_model, np.ones(3) / 3.0, mode="same")
+    from scipy.optimize import curve_fit
+
+    ex_raw = psd_real - psd_model
+    ex = np.convolve(ex_raw, np.ones(3) / 3.0, mode="same")
     ex[:2] = -np.inf
+    ex[f_hz < f_min_hz] = -np.inf
     i = int(np.argmax(ex))
     h = float(ex[i])
     if not h > 0:
@@ -287,7 +307,22 @@ def fit_resonance(f_hz: np.ndarray, psd_real: np.ndarray, psd_model: np.ndarray
     df = float(f_hz[1] - f_hz[0])
     w = ex[j0:j1 + 1]
     fc = float(np.sum(f_hz[j0:j1 + 1] * w) / np.sum(w))
-    return ResonanceFit(fc, max((j1 - j0 + 1) * df, df), h)
+    width = max((j1 - j0 + 1) * df, df)
+    half = max(RESONANCE_WINDOW_WIDTHS * width, RESONANCE_WINDOW_BINS * df)
+    win = (np.abs(f_hz - fc) <= half) & (f_hz >= max(f_min_hz, float(f_hz[2])))
+    sd = np.convolve(psd_real, np.ones(9) / 9.0, mode="same")[win]
+    if win.sum() > 6 and np.all(sd > 0):
+        lo, hi = float(f_hz[win][0]), float(f_hz[win][-1])
+        try:
+            (fc_l, w_l, h_l), _ = curve_fit(
+                _lorentzian, f_hz[win], ex_raw[win], p0=(fc, width, h), sigma=sd,
+                bounds=([lo, df, 0.0], [hi, 2.0 * half, np.inf]), maxfev=2000)
+        except (RuntimeError, ValueError):
+            pass
+        else:
+            if h_l > 0:
+                return ResonanceFit(float(fc_l), float(w_l), float(h_l))
+    return ResonanceFit(fc, width, h)
 
 
 DRIFT_BLOCKS = 32
