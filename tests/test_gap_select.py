@@ -493,3 +493,31 @@ def test_a_transient_excursion_is_not_a_bias_step() -> None:
     fit = fit_bias_step(bump, RATE)
     assert abs(fit.step_size) > 0.015  # locally it looks like a step
     assert step_persistence(bump, RATE, fit) < STEP_PERSISTENCE
+
+
+def test_evidence_plot_draws_the_kept_resonance() -> None:
+    """The evidence panel of a resonance verdict overlays model + the fitted line at its
+    centre (it showed the real and model spectra only)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from imubench.gap.report import _evidence
+
+    rng = np.random.default_rng(8)
+    n = int(1200 * RATE)
+    res = increment("resonance", {"resonance_freq_hz": 12.0, "resonance_width_hz": 1.0,
+                                  "resonance_height": 3e-4}, n, RATE, 8)
+    d = diagnose_channel(MODEL, "gx", Series(white(rng, n) + res, None, RATE, "res"),
+                         GapOptions(seed=3, realisations=4, effects=("resonance",)))
+    assert d.verdict == "resonance"
+    fig, ax = plt.subplots()
+    _evidence(ax, d)
+    overlay = [ln for ln in ax.get_lines() if ln.get_label().startswith("model + resonance")]
+    assert len(overlay) == 1
+    f, y = overlay[0].get_data()
+    model = next(ln for ln in ax.get_lines() if ln.get_label().startswith("model (mean"))
+    top = float(f[np.argmax(np.asarray(y) / np.asarray(model.get_data()[1]))])
+    assert top == pytest.approx(12.0, abs=0.3)
+    plt.close(fig)

@@ -81,7 +81,7 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         ax.set_ylabel("count")
         return (f"impulses beyond the threshold: rate {of.outlier_rate:.3g}/s, amplitude "
                 f"{of.outlier_amplitude:.3g} {unit}")
-    if eff == "sine" or d.before.bands:
+    if eff in ("sine", "resonance") or d.before.bands:
         f, real, sim = ev["psd"]
         ax.loglog(f[1:], real[1:], "k-", lw=0.7, label="real")
         ax.loglog(f[1:], sim[1:], "b-", lw=1.0, label="model (mean of realisations)")
@@ -89,6 +89,12 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         if eff == "sine" and w is not None:
             ax.axvline(w.params["sine_freq"], color="r", ls="--",
                        label=f"line {w.params['sine_freq']:.4g} Hz")
+        if eff == "resonance" and w is not None:
+            p = w.params
+            fc, width = p["resonance_freq_hz"], p["resonance_width_hz"]
+            line = p["resonance_height"] / (1.0 + (2.0 * (f - fc) / width) ** 2)
+            ax.loglog(f[1:], (sim + line)[1:], "r--", lw=1.0,
+                      label=f"model + resonance {fc:.4g} Hz, -3 dB width {width:.3g} Hz")
         ax.set_xlabel("frequency (Hz)")
         ax.set_ylabel(f"PSD ({unit}^2/Hz)")
         ax.legend(fontsize=7)
