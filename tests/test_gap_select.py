@@ -521,3 +521,40 @@ def test_evidence_plot_draws_the_kept_resonance() -> None:
     top = float(f[np.argmax(np.asarray(y) / np.asarray(model.get_data()[1]))])
     assert top == pytest.approx(12.0, abs=0.3)
     plt.close(fig)
+
+
+def test_heavy_tailed_noise_is_not_called_outliers() -> None:
+    """Outliers are rare impulses. White noise with Student-t (3 dof) samples has heavy
+    tails everywhere; the impulse fit then calls a large share of the samples impulses
+    (Samsung S5 gyro: 22 %) and that candidate is refused with its reason, while sparse
+    impulses (0.1/s of 0.5 dps at 104 Hz) are kept."""
+    rng = np.random.default_rng(12)
+    n = int(1200 * RATE)
+    t3 = rng.standard_t(3, n) / math.sqrt(3.0)  # unit variance
+    heavy = WHITE * math.sqrt(RATE) * t3
+    d = diagnose_channel(MODEL, "gx", Series(heavy, None, RATE, "t3"),
+                         GapOptions(seed=2, realisations=4, effects=("outliers",)))
+    cand = next(c for c in d.candidates if c.effect == "outliers")
+    assert cand.params["outlier_rate"] / RATE > 0.01
+    assert cand.note.startswith("the tail is not sparse impulses")
+    assert d.verdict != "outliers"
+    sparse = white(rng, n)
+    hit = rng.random(n) < 0.1 / RATE
+    sparse[hit] += 0.5 * rng.standard_normal(int(hit.sum()))
+    d = diagnose_channel(MODEL, "gx", Series(sparse, None, RATE, "sparse"),
+                         GapOptions(seed=2, realisations=4, effects=("outliers",)))
+    assert d.verdict == "outliers"
+
+
+def test_a_sine_is_not_called_a_resonance() -> None:
+    """The resonance's Lorentzian fit of a pure line comes out about one Welch bin wide;
+    narrower than PEAK_MIN_BINS bins it is refused as a line, and the sine is named."""
+    rng = np.random.default_rng(13)
+    n = int(1200 * RATE)
+    t = np.arange(n) / RATE
+    y = white(rng, n) + 0.01 * np.sin(2 * math.pi * 7.3 * t + 0.4)
+    d = diagnose_channel(MODEL, "gx", Series(y, None, RATE, "sine"),
+                         GapOptions(seed=2, realisations=4, effects=("resonance", "sine")))
+    assert d.verdict == "sine"
+    res = [c for c in d.candidates if c.effect == "resonance"]
+    assert res and all("a spectral line (the sine's)" in c.refusal for c in res)

@@ -394,8 +394,12 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
         c.score = _cand_chi2(c) + penalty * c.n_params
         c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
         c.evidence_closed = st.evidence_closed(c)
+        if c.refusal:  # never examined (_choose)
+            continue
         best[id(c)] = cs
-        if len(best) > HOLDOUT_TOP:  # keep the realisations of the best few only
+        # keep the realisations of the best few only (one more: the telegraph's refusal
+        # comes with the shape scores, after this loop)
+        if len(best) > HOLDOUT_TOP + 1:
             worst = max((x for x in cands if id(x) in best), key=lambda x: x.score)
             del best[id(worst)]
     _shape_scores(cands)
@@ -411,8 +415,17 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
 def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetup | None,
             st: _Step) -> tuple[Candidate | None, np.ndarray | None]:
     """The best of the first HOLDOUT_TOP candidates that passes :func:`_acceptable`
-    (each examined one gets its held-out comparison and, if refused, its reason)."""
-    for c in ranked[:HOLDOUT_TOP]:
+    (each examined one gets its held-out comparison and, if refused, its reason); a
+    candidate refused whatever its chi-squared (:attr:`Candidate.refusal`) is passed
+    over without taking one of the HOLDOUT_TOP places."""
+    examined = 0
+    for c in ranked:
+        if c.refusal:
+            c.note = c.refusal
+            continue
+        if examined == HOLDOUT_TOP:
+            break
+        examined += 1
         cs = best.get(id(c))
         if cs is None:
             continue
