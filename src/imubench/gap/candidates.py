@@ -131,8 +131,8 @@ class Candidate:
             "gap_excess_after": self.fit.gap_excess,
             "accepted": self.accepted,
         }
-        if self.note:
-            d["rejected_because"] = self.note
+        if self.note or self.refusal:  # a refusal holds whether or not it was examined
+            d["rejected_because"] = self.note or self.refusal
         if math.isfinite(self.shape_z):
             d["shape_z"] = self.shape_z
         d.update(self.holdout_dict())
