@@ -138,7 +138,27 @@ def oavar_correlation(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, flo
                                       resonance)
             if c11 > 0 and c22 > 0:
                 corr[i, j] = corr[j, i] = min(c12 / np.sqrt(c11 * c22), 0.999)
-    return corr
+    return nearest_correlation(corr)
+
+
+CORR_EIG_FLOOR = 1e-6
+"""Smallest eigenvalue :func:`nearest_correlation` leaves in a correlation matrix."""
+
+
+def nearest_correlation(corr: np.ndarray) -> np.ndarray:
+    """``corr`` made positive definite: eigenvalues floored at CORR_EIG_FLOOR, then the
+    diagonal rescaled to one (unchanged when it already is).
+
+    The pairs left at zero beyond MAX_RATIO and the 0.999 clip are approximations that
+    can leave a slightly negative eigenvalue (Samsung S5 accelerometer, 15 taus of a
+    Markov + random-walk structure: -0.018), and the noise fit's Cholesky factorisation of
+    the covariance then failed with a traceback (``imubench fit`` on a real record)."""
+    w, v = np.linalg.eigh(0.5 * (corr + corr.T))
+    if w.min() >= CORR_EIG_FLOOR:
+        return corr
+    c = (v * np.maximum(w, CORR_EIG_FLOOR)) @ v.T
+    d = np.sqrt(np.diag(c))
+    return np.asarray(c / np.outer(d, d))
 
 
 def oavar_edf(m: np.ndarray, n_terms: np.ndarray, amp2: Mapping[str, float], avar: np.ndarray,
