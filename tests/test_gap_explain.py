@@ -44,8 +44,10 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     text = "\n".join(explain_channel(c, 10, units))
     assert f"correlation with temperature (t 11.7 against the threshold {thr:.1f})" in text
     assert "Allan curve real above over 20-315 s (largest |z| 7.4" in text
-    assert ("Verdict temperature (temp_coeff = 0.0081): it removes 97% of the significant "
-            f"excess chi-squared (the verdict needs {MIN_CLOSURE:.0%}; 93% of the total)") in text
+    assert ("Verdict temperature (temp_coeff = 0.0081 dps/degC): it removes 97% of the "
+            f"significant excess chi-squared (the share criterion is {MIN_CLOSURE:.0%}; 93% "
+            "of the total); score") in text
+    assert "other criterion" not in text
     assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
     assert "runner-up random_walk scores 71.0" in text
     assert "systematic part is 0.49 -> 0.07" in text
@@ -204,3 +206,26 @@ def test_headline_closure_names_what_it_measures() -> None:
             "gap_excess_after": 0.15, "gap_null": 0.1}
     first = explain_channel(_entry("bias_step", kept=[step], holdout=hold), 10)[0]
     assert "held-out part is not its test" in first and "0%" not in first
+
+
+def test_verdict_names_the_criterion_it_passed_and_a_refused_runner_up() -> None:
+    """A verdict kept on the likelihood-ratio criterion says so (the text said "removes
+    0% ... (the verdict needs 33%)" for a kept effect), a runner-up refused whatever its
+    score says why, a filterless base-model refit says "no output filter", and a
+    region of one tau reads "at", not "over 0.1-0.1 s" (a reviewer's S5 findings)."""
+    base = {"effect": "base_model", "params": {"bandwidth_hz": 0.0, "filter_order": 1,
+                                               "white": 5.3e-05},
+            "gap_after": 0.2, "n_params": 3, "score": 3440.0, "chi2_closed": 0.81,
+            "evidence_closed": 0.0}
+    quant = {"effect": "quantization", "params": {"quantization": 1e-5}, "gap_after": 0.2,
+             "n_params": 1, "score": 2297.4, "chi2_closed": 0.9, "evidence_closed": 0.0,
+             "rejected_because": "the short-tau excess does not follow the quantization law"}
+    c = _entry("base_model", effects=[quant, base], kept=[base],
+               regions=[{"tau_min_s": 0.1, "tau_max_s": 0.1, "direction": "real_above",
+                         "gap": 0.5, "z_max": 84.6}])
+    text = "\n".join(explain_channel(c, 10, gap_units(["ax"])["params"]["ax"]))  # type: ignore[index]
+    assert "Verdict base_model (no output filter, white = 5.3e-05 g/sqrt(Hz))" in text
+    assert "passed on the other criterion" in text
+    assert ("runner-up quantization scores 2297.4" in text
+            and "but was refused: the short-tau excess does not follow" in text)
+    assert "Allan curve real above at 0.1 s" in text

@@ -342,10 +342,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                                          "step_size": st.step_size}, 2))
             kept_share = evidence.step_persistence(whole.y, whole.rate_hz, st)
             if kept_share < evidence.STEP_PERSISTENCE:
+                moved = (f"keep {kept_share:.0%} of its size" if kept_share >= 0 else
+                         f"move the other way, by {-kept_share:.0%} of its size")
                 cands[-1].refusal = (
                     f"the level does not stay shifted: far from the step the record's "
-                    f"levels keep {kept_share:.0%} of its size (needs "
-                    f"{evidence.STEP_PERSISTENCE:.0%}); a transient excursion or a "
-                    f"wandering level, not a bias step")
+                    f"levels {moved} (needs {evidence.STEP_PERSISTENCE:.0%} in its "
+                    "direction); a transient excursion or a wandering level, not a bias "
+                    "step")
     return cands, ev
 

@@ -15,7 +15,11 @@ Schwarz 1978, Ann. Statist. 6(2)), and keep the best candidate that
 2. reduces the held-out part's chi-squared by more than its scatter
    (``chi2.isf(HOLDOUT_ALPHA, n_params)``, the likelihood-ratio level of a candidate
    whose parameters were fitted elsewhere; the bias step is located on the whole record
-   and exempt). The held-out chi-squared
+   and exempt), and does not raise the held-out part's systematic Allan gap
+   (:attr:`~imubench.gap.curves.Comparison.gap_excess`) by more than its scatter
+   (``gap_null``): a noise term fitted too large widens the realisations' spread, which
+   can lower the chi-squared while the curves move apart (Samsung S5 accelerometer null:
+   a random walk with held-out systematic gap 0 -> 0.24). The held-out chi-squared
    (:meth:`~imubench.gap.curves.Comparison.chi2_check`) counts the Allan curve as the
    whole-curve Mahalanobis statistic (each tau once, with the correlation of the Allan
    estimates) plus the spectral bands and the single statistics; its drop is reported
@@ -77,6 +81,9 @@ TWO_LEVEL_MARGIN = float(chi2_dist.isf(0.05, 1))
 """How much better (in ``shape_z^2``, i.e. -2 ln of the likelihood ratio of the two
 amplitude distributions) the telegraph's shape must fit than the Markov's before a
 telegraph is named (:func:`_shape_scores`): the 5 % level of chi-squared with 1 dof."""
+NOISE_KEYS = ("white", "flicker", "random_walk", "quantization", "markov_sigma",
+              "output_white", "resonance_height")
+"""Model keys of the random terms; a channel needs at least one to be diagnosed."""
 MAX_EFFECTS = 3
 """Most effects kept by the forward selection."""
 STEP_SIGMAS = 5.0
@@ -358,6 +365,11 @@ def _acceptable(c: Candidate, st: _Step) -> str:
             parts = ", ".join(f"{k} {v:.1f}" for k, v in c.holdout_dparts.items())
             return (f"does not reduce the held-out chi-squared beyond its scatter (drop "
                     f"{c.holdout_dchi2:.1f}: {parts}; needs {need:.1f})")
+        before, after = st.hold.gap_excess, c.holdout.gap_excess
+        if after - before > st.hold.gap_null:
+            return (f"makes the held-out Allan curve depart more: its systematic gap rises "
+                    f"{before:.3f} -> {after:.3f}, by more than the scatter "
+                    f"{st.hold.gap_null:.3f}")
     return ""
 
 
@@ -447,6 +459,11 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     """Diagnose one channel of one record (and check the result on replicate records)."""
     opt = options or GapOptions()
     cm0 = model[channel]
+    if not any(getattr(cm0, k) > 0 for k in NOISE_KEYS):
+        raise GapError(
+            f"{model.source}: [channels.{channel}] has no noise term ({', '.join(NOISE_KEYS)} "
+            "are all 0): the diagnosis compares the recording with realisations of the "
+            f"model's noise; fit a model of {channel} first (imubench fit)")
     n = len(series.y)
     n_fit = n if opt.holdout_fraction == 0 else round(n * (1.0 - opt.holdout_fraction))
     if n_fit < 256 or (opt.holdout_fraction > 0 and n - n_fit < 256):

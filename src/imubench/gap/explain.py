@@ -31,16 +31,37 @@ def _pct(v: float | None) -> str:
     return "-" if v is None or not math.isfinite(v) else f"{v:.0%}"
 
 
+def _span(lo: float, hi: float, unit: str) -> str:
+    """'over lo-hi unit', or 'at lo unit' for a single tau (or band)."""
+    a, b = _f(lo), _f(hi)
+    return f"at {a} {unit}" if a == b else f"over {a}-{b} {unit}"
+
+
+def _params(p: dict[str, Any], units: Mapping[str, str] | None) -> str:
+    """``key = value unit, ...`` of an effect's parameters (no filter: said so)."""
+    u = units or {}
+    out = []
+    for k, v in p.items():
+        if k == "filter_order" and not (p.get("bandwidth_hz") or 0) > 0:
+            continue
+        if k == "bandwidth_hz" and not (v or 0) > 0:
+            out.append("no output filter")
+            continue
+        unit = f" {u[k]}" if k in u and u[k] != "1" else ""
+        out.append(f"{k} = {_f(v, 4)}{unit}")
+    return ", ".join(out)
+
+
 def _detections(c: dict[str, Any], dof: int) -> list[str]:
     """The fit part's statistics beyond their thresholds (Student t with ``dof``)."""
     out = []
     for r in c["regions"]:
-        out.append(f"Allan curve {r['direction'].replace('_', ' ')} over "
-                   f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s (largest |z| "
+        out.append(f"Allan curve {r['direction'].replace('_', ' ')} "
+                   f"{_span(r['tau_min_s'], r['tau_max_s'], 's')} (largest |z| "
                    f"{abs(r['z_max']):.1f}, region gap {_f(r['gap'])})")
     for b in c.get("bands", []):
-        out.append(f"spectrum {b['direction'].replace('_', ' ')} over "
-                   f"{_f(b['f_min_hz'])}-{_f(b['f_max_hz'])} Hz")
+        out.append(f"spectrum {b['direction'].replace('_', ' ')} "
+                   f"{_span(b['f_min_hz'], b['f_max_hz'], 'Hz')}")
     names = {"line_z": f"a spectral line at {_f(c['line']['f_hz'], 4)} Hz",
              "tail_z": "impulsive tails", "temp_z": "correlation with temperature",
              "temp_level_z": "correlation of the whitened level with temperature",
@@ -308,17 +329,22 @@ def explain_channel(c: dict[str, Any], realisations: int,
     else:
         w = next((e for e in effects if e["effect"] == verdict), None) or (
             c.get("kept") or [{}])[0]
-        params = ", ".join(f"{k} = {_f(v, 4)}" for k, v in w["params"].items())
-        txt = (f"Verdict {verdict} ({params}):"
-               f" it removes {_pct(w.get('evidence_closed'))} of the significant excess "
-               f"chi-squared (the verdict needs {MIN_CLOSURE:.0%}; "
-               f"{_pct(w.get('chi2_closed'))} of the total) with score "
+        ec = w.get("evidence_closed")
+        share = (f"it removes {_pct(ec)} of the significant excess chi-squared (the "
+                 f"share criterion is {MIN_CLOSURE:.0%}; {_pct(w.get('chi2_closed'))} of "
+                 "the total)")
+        if ec is None or not ec >= MIN_CLOSURE:
+            share += (", and it passed on the other criterion: its chi-squared drop on the "
+                      "fit part beats the likelihood-ratio level (p 0.001)")
+        txt = (f"Verdict {verdict} ({_params(w['params'], units)}): {share}; score "
                f"{_f(w.get('score'), 3)}")
         r = next((e for e in effects if e["effect"] != verdict), None)
         if r is not None and "n_params" in w:
             txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
                     f"BIC penalty ln(n) per parameter, {w['n_params']} against "
                     f"{r['n_params']})")
+            if r.get("rejected_because"):
+                txt += f" but was refused: {r['rejected_because']}"
         lines.append(txt + ".")
     lines.extend(_kept_lines(c))
     g0, ge = c.get("gap_null"), c.get("gap_excess_before")
