@@ -268,3 +268,19 @@ def test_noise_density_is_white_before_and_after_the_filter(
     assert gx["datasheet_units"]["noise_density_mdps_per_sqrt_hz"] == pytest.approx(
         5.0, rel=0.03)
     assert "output_white" in gx["present"] and "white-equivalent density N=" in out, out
+
+
+def test_summary_prints_the_fit_notes() -> None:
+    """A discrepancy floor (the model does not describe the curve within its estimates'
+    scatter) was in the JSON only; a user reading the terminal missed it."""
+    from dataclasses import replace
+
+    from imubench.commands.fit import format_summary
+    from imubench.noisefit import fit_channel
+    from imubench.noisefit.recording_fit import RecordingFit
+
+    y = 0.004 * 10.0 * np.random.default_rng(2).standard_normal(20000)
+    f = fit_channel(y, 100.0, channel="gx")
+    note = "model discrepancy floor delta = 0.235 (relative std added to every AVAR point)"
+    rf = RecordingFit("r.csv", 100.0, None, f.method, {"gx": replace(f, notes=(note,))})
+    assert f"    note: {note}" in format_summary(rf)

@@ -63,8 +63,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def format_summary(result: RecordingFit) -> str:
-    """Per channel: present terms with value and 95 % interval, then why each term was
-    kept or dropped (:func:`short_reasons`)."""
+    """Per channel: present terms with value and 95 % interval, why each term was kept or
+    dropped (:func:`short_reasons`), and the fit's notes (e.g. a model-discrepancy floor:
+    the model does not describe the curve within its estimates' scatter)."""
     lines = [f"# {result.source}  rate={result.rate_hz:g} Hz  method={result.method}"]
     for ch, f in result.fits.items():
         parts = []
@@ -83,6 +84,7 @@ def format_summary(result: RecordingFit) -> str:
                          "tau_c <= 0.1 s together: the datasheet noise density)")
         if f.reasons:
             lines.append("    " + short_reasons(f.reasons))
+        lines.extend(f"    note: {note}" for note in f.notes)
     return "\n".join(lines)
 
 

@@ -1011,8 +1011,8 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
 def _not_chosen(kind: str, drop: float, pts: Points) -> str:
     """The reason of an extension the subset selection did not choose."""
     if kind == "resonance" and pts.peak is None:
-        return ("dropped, no narrowband peak in the spectrum (spectral_line.find_peak: none "
-                "significant, 2x the continuum and wider than a line)")
+        return ("dropped, no narrowband peak in the spectrum (none significant, 2x the "
+                "continuum and wider than a line)")
     where = f" (tried at {pts.peak.describe()})" if kind == "resonance" and pts.peak else ""
     return f"dropped, chi2 drop {drop:.1f} < {EXTENSION_DCHI2:g} needed{where}"
 

@@ -50,6 +50,6 @@ def outlier_warning(channel: str, y: np.ndarray) -> str | None:
         return None
     return (f"{channel}: {count} first differences ({100 * share:.2g} %) lie beyond "
             f"{Z_LIMIT:g} robust standard deviations (Gaussian noise puts ~2e-7 % there): "
-            f"impulsive outliers; the fitted white noise includes them (the differences' "
-            f"standard deviation is {ratio:.3g}x their robust one); imubench gap tests "
-            "them as the 'outliers' effect")
+            f"impulsive outliers or heavy-tailed noise, which the Gaussian noise terms "
+            f"absorb (the differences' standard deviation is {ratio:.3g}x their robust "
+            "one); imubench gap tests sparse impulses as the 'outliers' effect")
