@@ -324,8 +324,10 @@ def explain_channel(c: dict[str, Any], realisations: int,
                 f"chi-squared (the verdict needs {MIN_CLOSURE:.0%}, without raising the "
                 "total)")
             lines.append(
-                f"Verdict unexplained: the best candidate, {best['effect']}, {why}; an "
-                "effect outside the candidate list is likely.")
+                f"Verdict unexplained: the best candidate, {best['effect']}, {why}; the "
+                "departure comes from an effect outside the candidate list, or from a part "
+                "of the base model its refit (white level, output filter) cannot change "
+                "(e.g. a Markov or flicker term of the wrong size).")
     else:
         w = next((e for e in effects if e["effect"] == verdict), None) or (
             c.get("kept") or [{}])[0]
