@@ -229,3 +229,21 @@ def test_verdict_names_the_criterion_it_passed_and_a_refused_runner_up() -> None
     assert ("runner-up quantization scores 2297.4" in text
             and "but was refused: the short-tau excess does not follow" in text)
     assert "Allan curve real above at 0.1 s" in text
+
+
+def test_a_verdict_kept_after_the_base_model_quotes_its_kept_fit() -> None:
+    """The verdict line quoted the first step's fit of the effect (K = 0.000841) while the
+    kept list and the headline gave the kept one (0.000864): one effect, three values."""
+    base = {"effect": "base_model", "params": {"bandwidth_hz": 0.0, "filter_order": 1,
+                                               "white": 0.0024},
+            "gap_after": 0.2, "gap_excess_after": 0.1, "evidence_closed": 0.6}
+    rw_kept = {"effect": "random_walk", "params": {"random_walk": 0.000864},
+               "gap_after": 0.1, "gap_excess_after": 0.0, "evidence_closed": 0.7}
+    rw_first = {"effect": "random_walk", "params": {"random_walk": 0.000841},
+                "gap_after": 0.3, "n_params": 1, "score": 3326.3, "chi2_closed": 0.2,
+                "evidence_closed": 0.1}
+    c = _entry("random_walk", effects=[rw_first], kept=[base, rw_kept])
+    text = "\n".join(explain_channel(c, 10, gap_units(["gy"])["params"]["gy"]))  # type: ignore[index]
+    assert ("Verdict random_walk (random_walk = 0.000864 dps/sqrt(s)) kept at step 2, "
+            "after base_model: it removes 70%") in text
+    assert "0.000841" not in text

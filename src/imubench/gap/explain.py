@@ -267,15 +267,15 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
     return out
 
 
-def _kept_lines(c: dict[str, Any]) -> list[str]:
+def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> list[str]:
     kept = c.get("kept", [])
     if not kept:
         return []
     h = c.get("holdout") or {}
     parts = []
     for i, k in enumerate(kept, 1):
-        params = ", ".join(f"{n} = {_f(v, 4)}" for n, v in k["params"].items())
-        txt = f"{i}. {k['effect']} ({params}): fit-part gap {_f(k['gap_after'])}"
+        txt = (f"{i}. {k['effect']} ({_params(k['params'], units)}): fit-part gap "
+               f"{_f(k['gap_after'])}")
         if k.get("holdout_gap_after") is not None:
             txt += f", held-out gap {_f(k['holdout_gap_after'])}"
         parts.append(txt)
@@ -329,17 +329,23 @@ def explain_channel(c: dict[str, Any], realisations: int,
                 "of the base model its refit (white level, output filter) cannot change "
                 "(e.g. a Markov or flicker term of the wrong size).")
     else:
-        w = next((e for e in effects if e["effect"] == verdict), None) or (
-            c.get("kept") or [{}])[0]
+        kept = c.get("kept") or []
+        step = next((i for i, k in enumerate(kept) if k["effect"] == verdict), 0)
+        w = (next((e for e in effects if e["effect"] == verdict), None) if step == 0
+             else None) or (kept[step] if kept else {})
         ec = w.get("evidence_closed")
         share = (f"it removes {_pct(ec)} of the significant excess chi-squared (the "
-                 f"share criterion is {MIN_CLOSURE:.0%}; {_pct(w.get('chi2_closed'))} of "
-                 "the total)")
+                 f"share criterion is {MIN_CLOSURE:.0%}")
+        share += (f"; {_pct(w.get('chi2_closed'))} of the total)" if "chi2_closed" in w
+                  else ")")
         if ec is None or not ec >= MIN_CLOSURE:
             share += (", and it passed on the other criterion: its chi-squared drop on the "
                       "fit part beats the likelihood-ratio level (p 0.001)")
-        txt = (f"Verdict {verdict} ({_params(w['params'], units)}): {share}; score "
-               f"{_f(w.get('score'), 3)}")
+        after = ("" if step == 0 else " kept at step " + str(step + 1) + ", after "
+                 + ", ".join(k["effect"] for k in kept[:step]))
+        txt = f"Verdict {verdict} ({_params(w['params'], units)}){after}: {share}"
+        if "score" in w:
+            txt += f"; score {_f(w.get('score'), 3)}"
         r = next((e for e in effects if e["effect"] != verdict), None)
         if r is not None and "n_params" in w:
             txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
@@ -348,7 +354,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
             if r.get("rejected_because"):
                 txt += f" but was refused: {r['rejected_because']}"
         lines.append(txt + ".")
-    lines.extend(_kept_lines(c))
+    lines.extend(_kept_lines(c, units))
     g0, ge = c.get("gap_null"), c.get("gap_excess_before")
     if g0 is not None and ge is not None:
         lines.append(
