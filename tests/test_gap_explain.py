@@ -247,3 +247,17 @@ def test_a_verdict_kept_after_the_base_model_quotes_its_kept_fit() -> None:
     assert ("Verdict random_walk (random_walk = 0.000864 dps/sqrt(s)) kept at step 2, "
             "after base_model: it removes 70%") in text
     assert "0.000841" not in text
+
+
+def test_report_table_marks_an_effect_kept_at_a_later_step() -> None:
+    """The report's table left the verdict's effect unmarked when it was kept after the
+    base model (its first-step entry is not the kept one) and showed nothing for
+    candidates never examined."""
+    from imubench.gap.report import _kept_cell
+
+    kept = ["base_model", "random_walk"]
+    assert _kept_cell({"effect": "base_model", "accepted": True}, kept) == "kept"
+    assert _kept_cell({"effect": "random_walk", "accepted": False}, kept) == (
+        "kept at step 2 (refitted after base_model)")
+    assert _kept_cell({"effect": "flicker", "accepted": False}, kept) == "not examined"
+    assert _kept_cell({"effect": "quantization", "rejected_because": "law"}, kept) == "law"

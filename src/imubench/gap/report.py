@@ -144,10 +144,11 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
             fig.savefig(out_dir / f"{ch}_evidence.{ext}", dpi=110)
         plt.close(fig)
         c = result["channels"][ch]
+        kept = [k["effect"] for k in c.get("kept", [])]
         eff_rows = "".join(
             f"<tr><td>{html.escape(e['effect'])}</td><td>{html.escape(_fmt(e['params']))}"
             f"</td><td>{_num(e['gap_after'])}</td><td>{_num(e.get('holdout_gap_after'))}"
-            f"</td><td>{_num(e['score'])}</td><td>{_kept_cell(e)}</td></tr>"
+            f"</td><td>{_num(e['score'])}</td><td>{_kept_cell(e, kept)}</td></tr>"
             for e in c["effects"])
         hold = c.get("holdout") or {}
         rows.append(
@@ -190,8 +191,16 @@ def _regions(regs: list[dict[str, Any]]) -> str:
                      for r in regs)
 
 
-def _kept_cell(e: dict[str, Any]) -> str:
-    return "kept" if e.get("accepted") else html.escape(e.get("rejected_because", ""))
+def _kept_cell(e: dict[str, Any], kept: list[str]) -> str:
+    """'kept' (step 1), 'kept at step k' (the effect was refitted and kept after the
+    effects before it), the refusal, or 'not examined' (a better-scoring candidate was
+    kept at that step)."""
+    if e.get("accepted"):
+        return "kept"
+    if e["effect"] in kept[1:]:
+        return f"kept at step {kept.index(e['effect']) + 1} (refitted after " + html.escape(
+            ", ".join(kept[:kept.index(e["effect"])])) + ")"
+    return html.escape(e.get("rejected_because") or "not examined")
 
 
 def _limits_table(lim: dict[str, Any] | None) -> str:
