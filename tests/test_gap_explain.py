@@ -161,7 +161,7 @@ def test_held_out_check_and_unmoved_gap_are_reconciled() -> None:
 def test_headline_never_claims_a_negative_closure() -> None:
     """A kept effect whose held-out Allan gap rises (its held-out evidence is in the
     statistics) is not said to 'close -54 %' of the gap: the headline says the Allan gap
-    does not close, with the numbers, and where the held-out evidence is."""
+    widens, with the numbers, and where the held-out evidence is."""
     kept = {**TEMP_EFFECT, "holdout_gap_after": 0.243, "holdout_gap_excess_after": 0.228,
             "holdout_chi2_drop": 8.8,
             "holdout_chi2_drop_parts": {"allan": 0.0, "bands": -0.7, "statistics": 9.5}}
@@ -170,7 +170,7 @@ def test_headline_never_claims_a_negative_closure() -> None:
     c = _entry("temperature", effects=[TEMP_EFFECT], kept=[kept], holdout=hold)
     first = explain_channel(c, 10)[0]
     assert "closes" not in first and "%" not in first
-    assert ("on the held-out part the Allan-curve gap does not close (0.182 -> 0.243); "
+    assert ("on the held-out part the Allan-curve gap widens (0.182 -> 0.243); "
             "the held-out check's evidence for it is in the line, tail, temperature, trend "
             "and level statistics (chi-squared falls by 9.5).") in first
 
@@ -261,3 +261,20 @@ def test_report_table_marks_an_effect_kept_at_a_later_step() -> None:
         "kept at step 2 (refitted after base_model)")
     assert _kept_cell({"effect": "flicker", "accepted": False}, kept) == "not examined"
     assert _kept_cell({"effect": "quantization", "rejected_because": "law"}, kept) == "law"
+
+
+def test_all_kept_effects_sentence_reads_whole_when_the_held_out_gap_widens() -> None:
+    """It read "(all kept effects together on the held-out part the Allan-curve gap does
+    not close (0.122 -> 0.268))" for a gap that doubled."""
+    from imubench.gap.explain import headline
+
+    base = {"effect": "base_model", "params": {"bandwidth_hz": 0.0, "white": 5e-5},
+            "gap_after": 0.2, "holdout_gap_after": 0.13, "holdout_gap_excess_after": 0.0}
+    rw = {"effect": "random_walk", "params": {"random_walk": 6e-6}, "gap_after": 0.2,
+          "holdout_gap_after": 0.268, "holdout_gap_excess_after": 0.0}
+    c = _entry("random_walk", kept=[base, rw],
+               holdout={"gap_before": 0.122, "gap_after": 0.268, "gap_excess_before": 0.0,
+                        "gap_excess_after": 0.0})
+    text = headline(c, 10)
+    assert ("(with all kept effects on the held-out part the Allan-curve gap widens "
+            "(0.122 -> 0.268))." in text), text

@@ -177,7 +177,8 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         return ("; the step is located on the whole record, so the held-out part is not "
                 "its test")
     ga = ga if ga is not None else h.get("gap_after")
-    text = (f"; on the held-out part the Allan-curve gap does not close "
+    moves = "widens" if ga is not None and ga > 1.05 * h["gap_before"] else "does not close"
+    text = (f"; on the held-out part the Allan-curve gap {moves} "
             f"({_f(h['gap_before'])} -> {_f(ga)})")
     parts = (after or {}).get("holdout_chi2_drop_parts") or {}
     best = max(parts, key=lambda k: parts[k]) if parts else ""
@@ -217,8 +218,14 @@ def headline(c: dict[str, Any], realisations: int,
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units)
                                            for k in others)
-        text += " (all kept effects together" + _closed(c.get("holdout"), None).replace(
-            "; modelling it closes", " close").replace("; on", " on") + ")."
+        together = _closed(c.get("holdout"), None)
+        if together.startswith("; modelling it closes "):
+            text += (" (all kept effects together close "
+                     + together.removeprefix("; modelling it closes ") + ").")
+        elif together:
+            text += " (with all kept effects" + together.lstrip(";").replace(";", ",") + ")."
+        else:
+            text += "."
     return text
 
 
