@@ -278,3 +278,16 @@ def test_all_kept_effects_sentence_reads_whole_when_the_held_out_gap_widens() ->
     text = headline(c, 10)
     assert ("(with all kept effects on the held-out part the Allan-curve gap widens "
             "(0.122 -> 0.268))." in text), text
+
+
+def test_held_out_check_of_a_bias_step_is_said_not_to_apply() -> None:
+    """It read "chi-squared fell by 0.0 ... its largest drop is in the Allan curve"."""
+    step = {"effect": "bias_step", "params": {"step_time_s": 2860.0, "step_size": 0.195},
+            "gap_after": 0.1, "holdout_gap_after": 0.1, "holdout_chi2_drop": 0.0,
+            "holdout_chi2_drop_parts": {"allan": 0.0, "bands": 0.0, "statistics": 0.0}}
+    c = _entry("bias_step", kept=[step], holdout={"gap_before": 0.1, "gap_after": 0.1,
+                                                  "gap_excess_before": 0.0,
+                                                  "gap_excess_after": 0.0})
+    text = "\n".join(explain_channel(c, 10))
+    assert "Held-out check of bias_step: not applied" in text
+    assert "fell by 0.0" not in text

@@ -252,6 +252,10 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
         drop, parts = k.get("holdout_chi2_drop"), k.get("holdout_chi2_drop_parts") or {}
         if drop is None or not math.isfinite(drop):
             continue
+        if k["effect"] == "bias_step":
+            out.append("Held-out check of bias_step: not applied (the step is located and "
+                       "tested on the whole record).")
+            continue
         txt = (f"Held-out check of {k['effect']}: chi-squared fell by {drop:.1f}"
                + (" (" + ", ".join(f"{PART_NAMES.get(n, n)} {v:.1f}"
                                    for n, v in parts.items()) + ")" if parts else ""))
