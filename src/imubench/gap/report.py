@@ -87,8 +87,8 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         ax.loglog(f[1:], sim[1:], "b-", lw=1.0, label="model (mean of realisations)")
         w = d.winner
         if eff == "sine" and w is not None:
-            ax.axvline(w.params["sine_freq"], color="r", ls="--",
-                       label=f"line {w.params['sine_freq']:.4g} Hz")
+            ax.axvline(w.params["sine_freq"], color="r", ls=":", lw=0.8, alpha=0.6,
+                       label=f"line {w.params['sine_freq']:.4g} Hz")  # the peak stays visible
         if eff == "resonance" and w is not None:
             p = w.params
             fc, width = p["resonance_freq_hz"], p["resonance_width_hz"]
