@@ -291,3 +291,17 @@ def test_held_out_check_of_a_bias_step_is_said_not_to_apply() -> None:
     text = "\n".join(explain_channel(c, 10))
     assert "Held-out check of bias_step: not applied" in text
     assert "fell by 0.0" not in text
+
+
+def test_a_replicate_that_the_kept_effects_move_away_is_said_not_to_share_them() -> None:
+    """Samsung S5 gy, segment 2 with segment 3 as --holdout: a random walk kept on the
+    record (its held-out half confirms it) took the replicate's gap 0.203 -> 0.717; the
+    text said nothing about it."""
+    rw = {"effect": "random_walk", "params": {"random_walk": 8.6e-4}, "gap_after": 0.19}
+    h = {"gap_before": 0.413, "gap_after": 0.263, "gap_excess_before": 0.391,
+         "gap_excess_after": 0.218,
+         "recordings": [{"recording": "seg3.csv", "gap_before": 0.203, "gap_after": 0.717,
+                         "gap_null": 0.133, "gap_excess_before": 0.154,
+                         "significant": True}]}
+    text = "\n".join(explain_channel(_entry("random_walk", kept=[rw], holdout=h), 10))
+    assert "the replicate does not share them" in text

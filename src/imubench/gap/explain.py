@@ -390,6 +390,12 @@ def explain_channel(c: dict[str, Any], realisations: int,
                     f"{_f(r.get('gap_excess_before'))}; "
                     f"{'significant' if r.get('significant') else 'not significant'} "
                     "departures from the model)")
+        ga, gb, g0 = r.get("gap_after"), r.get("gap_before"), r.get("gap_null")
+        if ga is not None and gb is not None and g0 is not None and ga - gb > g0:
+            txt += (": the kept effects widen the replicate's gap beyond its scatter, so "
+                    "the replicate does not share them; they belong to this recording "
+                    "(recording-to-recording variation), not to every recording of the "
+                    "sensor")
         lines.append(txt + ".")
     lim = c.get("limits")
     if lim:
