@@ -592,3 +592,24 @@ def test_real_null_does_not_keep_an_effect_that_moves_the_held_out_curve_away(
     assert d.verdict in ("none", "base_model", "unexplained"), (d.verdict, d.reason)
     h = d.to_dict()["holdout"]
     assert h["gap_excess_after"] <= h["gap_excess_before"] + h["gap_null"]
+
+
+def test_a_noise_process_the_replicate_does_not_share_is_not_kept() -> None:
+    """A random walk in this recording only (its own held-out half confirms it) is kept
+    without replicates and refused when a replicate of the sensor does not show it (its
+    systematic gap would rise beyond its scatter): recording-to-recording variation, not
+    a property of the sensor (Samsung S5 gy, segment 2 with segment 3 as --holdout)."""
+    rng = np.random.default_rng(31)
+    n = int(1800 * RATE)
+    walk = np.cumsum(3e-4 * math.sqrt(1.0 / RATE) * rng.standard_normal(n))
+    rec = Series(white(rng, n) + walk, None, RATE, "rec")
+    rep = Series(white(rng, n), None, RATE, "rep")
+    opt = GapOptions(seed=4, realisations=6, effects=("random_walk", "flicker"))
+    alone = diagnose_channel(MODEL, "gx", rec, opt)
+    assert alone.verdict == "random_walk"
+    checked = diagnose_channel(MODEL, "gx", rec, opt, [rep])
+    assert checked.verdict != "random_walk"
+    shared = diagnose_channel(MODEL, "gx", rec, opt, [Series(
+        white(rng, n) + np.cumsum(3e-4 * math.sqrt(1.0 / RATE) * rng.standard_normal(n)),
+        None, RATE, "rep2")])
+    assert shared.verdict == "random_walk"

@@ -39,7 +39,9 @@ unmodelled effect's name; ``base_model`` when only the base model's refit is kep
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -425,7 +427,8 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
 
 
 def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetup | None,
-            st: _Step) -> tuple[Candidate | None, np.ndarray | None]:
+            st: _Step, replicate_check: Callable[[Candidate], str] | None = None
+            ) -> tuple[Candidate | None, np.ndarray | None]:
     """The best of the first HOLDOUT_TOP candidates that passes :func:`_acceptable`
     (each examined one gets its held-out comparison and, if refused, its reason); a
     candidate refused whatever its chi-squared (:attr:`Candidate.refusal`) is passed
@@ -448,9 +451,37 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
             c.holdout_dparts = {k: pb[k] - pa[k] for k in pb}
             c.holdout_dchi2 = float(sum(c.holdout_dparts.values()))
         c.note = _acceptable(c, st)
+        if not c.note and replicate_check is not None:
+            c.note = replicate_check(c)
         if not c.note:
             return c, cs
     return None, None
+
+
+REPLICATE_EFFECTS = frozenset({"flicker", "random_walk", "quantization", "markov",
+                               "telegraph"})
+"""Noise processes: a property of the sensor, so a replicate recording of it should show
+them too. Deterministic or recording-bound effects (a sine, a step, a ramp, temperature,
+outliers) and the base model's refit are not checked on replicates."""
+
+
+def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
+                       reps: list[tuple[PartSetup, Series]], now: list[Comparison],
+                       seeds: list[int]) -> str:
+    """Why a noise-process candidate is refused by the replicates (empty if it is not):
+    with it, a replicate's systematic Allan gap rises by more than its scatter, i.e. the
+    replicate does not share it (Samsung S5 gy: a random walk of one segment took the
+    next segment's gap 0.20 -> 0.72)."""
+    if c.effect not in REPLICATE_EFFECTS:
+        return ""
+    v = variant.add(channel, c)
+    for (rs, rep), b in zip(reps, now, strict=True):
+        a = rs.compare(rs.sim_features(v.realise(channel, rep, seeds)))
+        if a.gap_excess - b.gap_excess > b.gap_null:
+            return (f"replicate {rep.name} does not share it: its systematic Allan gap "
+                    f"rises {b.gap_excess:.3f} -> {a.gap_excess:.3f}, by more than the "
+                    f"scatter {b.gap_null:.3f} (recording-to-recording variation)")
+    return ""
 
 
 def diagnose_channel(model: NoiseModel, channel: str, series: Series,
@@ -480,6 +511,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     rep_setups = [(PartSetup(r, cm0), r) for r in replicates or []]
     rep_before = [rs.compare(rs.sim_features(simulate_channel(model, channel, r, seeds)))
                   for rs, r in rep_setups]
+    rep_now = rep_before
 
     first: _Step | None = None
     ranked0: list[Candidate] = []
@@ -509,7 +541,10 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             tuple(e for e in opt.effects if e not in done))
         if k == 0:
             ranked0, ev0 = ranked, ev
-        chosen, chosen_sims = _choose(ranked, best_sims, hold, st)
+        check = (functools.partial(_replicate_refusal, variant=variant, channel=channel,
+                                   reps=rep_setups, now=rep_now, seeds=seeds)
+                 if rep_setups else None)
+        chosen, chosen_sims = _choose(ranked, best_sims, hold, st, check)
         if chosen is None or chosen_sims is None:
             residual = True
             break
@@ -520,6 +555,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             det_sum = det_sum + det
         variant = variant.add(channel, chosen)
         sims = chosen_sims
+        rep_now = [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
+                   for rs, rep in rep_setups]
     else:
         residual = _Step(fit, hold, sims, series, det_sum).significant
     assert first is not None
@@ -544,9 +581,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
                             step_fired=first.step_fired, drift_fired=first.drift_fired,
                             residual_significant=residual, background=bg_summary)
-    for (rs, rep), b in zip(rep_setups, rep_before, strict=True):
-        a = rs.compare(rs.sim_features(variant.realise(channel, rep, seeds))) if kept else None
-        diag.replicates.append((rep.name, b, a))
+    for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
+        diag.replicates.append((rep.name, b, a if kept else None))
     return diag
 
 
