@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import pytest
@@ -133,6 +134,22 @@ def test_to_toml_round_trip(tmp_path: Path) -> None:
     back = load_model(p)
     assert back.channels == m2.channels
     assert back.meta == m2.meta
+
+
+def test_written_model_states_the_units_of_its_keys() -> None:
+    """A model file read by a person had no units (a reviewer's finding): every key of a
+    channel table is named in the header comment with its unit."""
+    from dataclasses import fields
+
+    from lsm6ds_sim.model import UNITS_HEADER, ChannelModel
+
+    text = NoiseModel.single_term("gx", white=0.004).to_toml()
+    assert text.startswith(UNITS_HEADER) and "random_walk: u/sqrt(s)" in text
+    for f in fields(ChannelModel):
+        if f.name == "filter_order":  # a count
+            continue
+        key = f.name[:-2] + "_x/y/z" if f.name.endswith(("_x", "_y", "_z")) else f.name
+        assert re.search(rf"(?<![\w/]){re.escape(key)}(?![\w])", UNITS_HEADER), f.name
 
 
 def test_from_dict_names_its_source() -> None:

@@ -302,8 +302,23 @@ class NoiseModel:
         return out
 
     def to_toml(self) -> str:
-        """TOML text that :func:`load_model` reads back into an equal model."""
-        return tomli_w.dumps(self.to_dict())
+        """TOML text that :func:`load_model` reads back into an equal model, headed by a
+        comment with the units of the keys (:data:`UNITS_HEADER`)."""
+        return UNITS_HEADER + tomli_w.dumps(self.to_dict())
+
+
+UNITS_HEADER = """\
+# Noise model (docs/noise-model.md). u = dps for gx gy gz, g for ax ay az.
+# white, output_white: u/sqrt(Hz); flicker, markov_sigma, sine_amplitude,
+# outlier_amplitude, bias: u; random_walk: u/sqrt(s); ramp: u/s; quantization: u*s;
+# markov_tau: s; sine_freq, resonance_freq_hz, resonance_width_hz, bandwidth_hz: Hz;
+# resonance_height: u^2/Hz; outlier_rate: 1/s; temp_coeff: u/degC; temp_coeff2: u/degC^2;
+# temp_ref: degC; scale_error, cross_x/y/z: fraction; scale_temp_coeff: 1/degC;
+# scale_temp_coeff2: 1/degC^2; nonlinearity: 1/u; g_sensitivity_x/y/z: dps/g.
+
+"""
+"""Comment at the head of every model file :meth:`NoiseModel.to_toml` writes (a model
+file read by a person had no units)."""
 
 
 DATASHEET_PREFIX = "datasheet:"
