@@ -340,7 +340,8 @@ class SensorPhysics:
 
     def _make_noise(self, dt_s: float) -> None:
         if self._noise is None:
-            self._check_resonances(dt_s)
+            # a resonance must lie below the Nyquist frequency, known only now
+            self.model.check_nyquist(1.0 / dt_s, self.noisy_channels)
             taps = math.ceil(self.duration_hint_s / dt_s)
             # one flicker FFT block for the whole hinted record, with room for the
             # look-ahead and a reader that runs a little past the end
@@ -349,11 +350,6 @@ class SensorPhysics:
                 ch: ChannelNoise(self.model[ch], self.seed, CHANNELS.index(ch), taps, length)
                 for ch in self.noisy_channels
             }
-
-    def _check_resonances(self, dt_s: float) -> None:
-        """A resonance must lie below the output's Nyquist frequency, which is known only
-        now (:meth:`NoiseModel.check_nyquist`)."""
-        self.model.check_nyquist(1.0 / dt_s, self.noisy_channels)
 
     def prepare(self, dt_s: float) -> None:
         """Do the slow set-up of samples spaced ``dt_s`` now (the first flicker blocks),

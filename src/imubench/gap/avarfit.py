@@ -115,8 +115,10 @@ def fit_base_model(cm: ChannelModel, tau_s: np.ndarray, rate_hz: float,
         res = minimize_scalar(loss, bounds=(lw_lo, lw_hi), method="bounded",
                               options={"xatol": 1e-3})
         val, white = float(res.fun), float(10.0 ** res.x)
-        if cm.white == 0 and loss(-300.0) <= val:
-            val, white = loss(-300.0), 0.0
+        if cm.white == 0:  # keeping no white at all is a candidate too
+            none = loss(-300.0)
+            if none <= val:
+                val, white = none, 0.0
         if val < best[0]:
             best = (val, bw, order, white)
     return best[1], best[2], best[3]

@@ -116,6 +116,8 @@ class Candidate:
     note: str = ""
     """Why the candidate was not accepted (empty when accepted or not examined)."""
     replicates: list[Comparison] = field(default_factory=list)
+    """The replicate recordings against the model with this candidate (filled by the
+    replicate check of a noise process; empty otherwise)."""
 
     def to_dict(self, before: Comparison) -> dict[str, Any]:
         assert self.fit is not None

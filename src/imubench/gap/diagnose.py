@@ -471,12 +471,14 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
     """Why a noise-process candidate is refused by the replicates (empty if it is not):
     with it, a replicate's systematic Allan gap rises by more than its scatter, i.e. the
     replicate does not share it (Samsung S5 gy: a random walk of one segment took the
-    next segment's gap 0.20 -> 0.72)."""
+    next segment's gap 0.20 -> 0.72). The replicates' comparisons with the candidate are
+    kept in :attr:`Candidate.replicates` (reused when it is kept)."""
     if c.effect not in REPLICATE_EFFECTS:
         return ""
     v = variant.add(channel, c)
-    for (rs, rep), b in zip(reps, now, strict=True):
-        a = rs.compare(rs.sim_features(v.realise(channel, rep, seeds)))
+    c.replicates = [rs.compare(rs.sim_features(v.realise(channel, rep, seeds)))
+                    for rs, rep in reps]
+    for (_, rep), b, a in zip(reps, now, c.replicates, strict=True):
         if a.gap_excess - b.gap_excess > b.gap_null:
             return (f"replicate {rep.name} does not share it: its systematic Allan gap "
                     f"rises {b.gap_excess:.3f} -> {a.gap_excess:.3f}, by more than the "
@@ -555,8 +557,9 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             det_sum = det_sum + det
         variant = variant.add(channel, chosen)
         sims = chosen_sims
-        rep_now = [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
-                   for rs, rep in rep_setups]
+        rep_now = chosen.replicates or [
+            rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
+            for rs, rep in rep_setups]
     else:
         residual = _Step(fit, hold, sims, series, det_sum).significant
     assert first is not None

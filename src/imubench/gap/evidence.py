@@ -30,7 +30,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
+from scipy.optimize import brentq, curve_fit
 from scipy.stats import norm
 
 from imubench.gap.curves import (
@@ -288,8 +288,6 @@ def fit_resonance(f_hz: np.ndarray, psd_real: np.ndarray, psd_model: np.ndarray,
     104 Hz, came out 0.08-0.28 Hz wide with the peak 30-50 % high (measured, 12 seeds).
     None when there is no excess.
     """
-    from scipy.optimize import curve_fit
-
     ex_raw = psd_real - psd_model
     ex = np.convolve(ex_raw, np.ones(3) / 3.0, mode="same")
     ex[:2] = -np.inf

@@ -37,9 +37,15 @@ def _span(lo: float, hi: float, unit: str) -> str:
     return f"at {a} {unit}" if a == b else f"over {a}-{b} {unit}"
 
 
+def _valued(p: dict[str, Any], key: str, units: Mapping[str, str] | None,
+            digits: int = 3) -> str:
+    """``p[key]`` followed by its unit from ``units`` (none for a dimensionless '1')."""
+    unit = (units or {}).get(key, "1")
+    return _f(p.get(key), digits) + ("" if unit == "1" else f" {unit}")
+
+
 def _params(p: dict[str, Any], units: Mapping[str, str] | None) -> str:
     """``key = value unit, ...`` of an effect's parameters (no filter: said so)."""
-    u = units or {}
     out = []
     for k, v in p.items():
         if k == "filter_order" and not (p.get("bandwidth_hz") or 0) > 0:
@@ -47,8 +53,7 @@ def _params(p: dict[str, Any], units: Mapping[str, str] | None) -> str:
         if k == "bandwidth_hz" and not (v or 0) > 0:
             out.append("no output filter")
             continue
-        unit = f" {u[k]}" if k in u and u[k] != "1" else ""
-        out.append(f"{k} = {_f(v, 4)}{unit}")
+        out.append(f"{k} = {_valued(p, k, units, 4)}")
     return ", ".join(out)
 
 
@@ -119,10 +124,8 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
 def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
     """What an effect with parameters ``p`` does, in plain words; each value is followed
     by its unit from ``units`` (the JSON's ``units.params.<channel>``) when given."""
-    u = units or {}
-
     def g(k: str) -> str:
-        return _f(p.get(k), 3) + (f" {u[k]}" if k in u and u[k] != "1" else "")
+        return _valued(p, k, units)
 
     bw = p.get("bandwidth_hz")
     filt = (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
@@ -390,8 +393,8 @@ def explain_channel(c: dict[str, Any], realisations: int,
                     f"{_f(r.get('gap_excess_before'))}; "
                     f"{'significant' if r.get('significant') else 'not significant'} "
                     "departures from the model)")
-        ga, gb, g0 = r.get("gap_after"), r.get("gap_before"), r.get("gap_null")
-        if ga is not None and gb is not None and g0 is not None and ga - gb > g0:
+        ra, rb, r0 = r.get("gap_after"), r.get("gap_before"), r.get("gap_null")
+        if ra is not None and rb is not None and r0 is not None and ra - rb > r0:
             txt += (": the kept effects widen the replicate's gap beyond its scatter, so "
                     "the replicate does not share them; they belong to this recording "
                     "(recording-to-recording variation), not to every recording of the "

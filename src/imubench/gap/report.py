@@ -198,8 +198,8 @@ def _kept_cell(e: dict[str, Any], kept: list[str]) -> str:
     if e.get("accepted"):
         return "kept"
     if e["effect"] in kept[1:]:
-        return f"kept at step {kept.index(e['effect']) + 1} (refitted after " + html.escape(
-            ", ".join(kept[:kept.index(e["effect"])])) + ")"
+        i = kept.index(e["effect"])
+        return f"kept at step {i + 1} (refitted after " + html.escape(", ".join(kept[:i])) + ")"
     return html.escape(e.get("rejected_because") or "not examined")
 
 
