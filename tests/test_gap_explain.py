@@ -305,3 +305,20 @@ def test_a_replicate_that_the_kept_effects_move_away_is_said_not_to_share_them()
                          "significant": True}]}
     text = "\n".join(explain_channel(_entry("random_walk", kept=[rw], holdout=h), 10))
     assert "the replicate does not share them" in text
+
+
+def test_a_verdict_after_another_effect_says_why_it_is_the_verdict() -> None:
+    fl = {"effect": "flicker", "params": {"flicker": 0.0004}, "gap_after": 0.3,
+          "gap_excess_after": 0.2, "evidence_closed": 0.4, "chi2_rise_without": 31.5}
+    ramp = {"effect": "ramp", "params": {"ramp": 2e-6}, "gap_after": 0.1,
+            "gap_excess_after": 0.0, "evidence_closed": 0.8, "chi2_rise_without": 1351.9}
+    dropped = [{"effect": "random_walk", "params": {"random_walk": 1e-5},
+                "reason": "made redundant by the effects kept after it: without it the "
+                          "fit part's chi-squared rises by 2.0 (needs 10.8)"}]
+    c = _entry("ramp", effects=[], kept=[fl, ramp], dropped=dropped)
+    text = "\n".join(explain_channel(c, 10, gap_units(["gx"])["params"]["gx"]))  # type: ignore[index]
+    assert ("Verdict ramp (ramp = 2e-06 dps/s) kept at step 2, after flicker (named as the "
+            "verdict: taking it out of the kept effects raises the fit part's chi-squared by "
+            "1351.9, against 31.5 for flicker)") in text
+    assert ("Kept first, then dropped: random_walk (random_walk = 1e-05 dps/sqrt(s)), made "
+            "redundant") in text

@@ -109,6 +109,10 @@ class Candidate:
     (:meth:`imubench.gap.curves.Comparison.chi2_check`)."""
     holdout_dparts: dict[str, float] = field(default_factory=dict)
     """:attr:`holdout_dchi2` by source (``allan``, ``bands``, ``statistics``)."""
+    unique_chi2: float = float("nan")
+    """Rise of the fit part's total chi-squared when this effect alone is taken out of
+    the final set of kept effects (its unique contribution; NaN unless two or more were
+    kept)."""
     refusal: str = ""
     """Why the candidate cannot be accepted whatever its chi-squared (set before the
     checks; e.g. a telegraph whose two levels the amplitude distribution does not show)."""

@@ -32,8 +32,9 @@ excess remains (at most :data:`MAX_EFFECTS`).
 
 Verdict: ``none`` when nothing is significant, or when the departure is within the
 recording's own variation (:mod:`imubench.gap.background`: replicates first, then the two
-halves of the record when no candidate is kept; ``reason`` says which); the first kept
-unmodelled effect's name; ``base_model`` when only the base model's refit is kept;
+halves of the record when no candidate is kept; ``reason`` says which); the kept
+unmodelled effect whose removal costs most (:func:`_main_effect`, after the backward
+step :func:`_prune`); ``base_model`` when only the base model's refit is kept;
 ``unexplained`` when no candidate is accepted.
 """
 
@@ -49,7 +50,7 @@ import numpy as np
 from lsm6ds_sim.model import NoiseModel
 from scipy.stats import chi2 as chi2_dist
 
-from imubench.gap import background, evidence, extras
+from imubench.gap import avarfit, background, evidence, extras
 from imubench.gap.candidates import (
     EFFECTS,
     MAIN_PARAM,
@@ -165,11 +166,14 @@ class ChannelDiagnosis:
     residual_significant: bool = False
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
+    pruned: list[Candidate] = field(default_factory=list)
+    """Effects the forward selection kept and the backward step dropped
+    (:func:`_prune`), each with its ``note``."""
     replicates: list[tuple[str, Comparison, Comparison | None]] = field(default_factory=list)
 
     @property
     def winner(self) -> Candidate | None:
-        """The verdict's effect (the first kept unmodelled effect, or the base model)."""
+        """The verdict's effect (a kept unmodelled effect, or the base model)."""
         for c in self.kept:
             if c.effect == self.verdict:
                 return c
@@ -194,6 +198,8 @@ class ChannelDiagnosis:
             "verdict": self.verdict,
             "reason": self.reason,
             "kept": [_kept_dict(c) for c in self.kept],
+            "dropped": [{"effect": c.effect, "params": c.params, "reason": c.note}
+                        for c in self.pruned],
             "residual_significant": self.residual_significant,
             "gap_after": ff.gap,
             "gap_null": self.before.gap_null,
@@ -244,6 +250,8 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
     d: dict[str, Any] = {"effect": c.effect, "params": c.params, "gap_after": c.fit.gap,
                          "gap_excess_after": c.fit.gap_excess,
                          "evidence_closed": c.evidence_closed, **c.holdout_dict()}
+    if math.isfinite(c.unique_chi2):
+        d["chi2_rise_without"] = c.unique_chi2
     return d
 
 
@@ -486,6 +494,130 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
     return ""
 
 
+PRUNE_REASON = "made redundant by the effects kept after it"
+
+
+def _realised_step(model: NoiseModel, channel: str, series: Series, seeds: list[int],
+                   fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]) -> _Step:
+    """The step against the model with ``kept`` (realised afresh, same seeds)."""
+    variant = Variant(model)
+    det_sum: np.ndarray | float = 0.0
+    for c in kept:
+        det = deterministic(c.effect, c.params, variant.model[channel], series)
+        if det is not None:
+            det_sum = det_sum + det
+        variant = variant.add(channel, c)
+    return _Step(fit, hold, variant.realise(channel, series, seeds), series, det_sum)
+
+
+def _refit_base(model: NoiseModel, channel: str, series: Series, seeds: list[int],
+                fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]
+                ) -> list[Candidate]:
+    """``kept`` with the base model's refit (if kept) fitted again against the other
+    effects: the reduced model of a likelihood-ratio test is refitted, not just
+    shortened. The white level is what trades off most with the other terms (Samsung S5
+    accelerometer: a flicker kept first took the short-tau excess of the first segment's
+    model, which has no white term, so the base model's refit that followed set white
+    at half of what it sets alone)."""
+    base = next((c for c in kept if c.effect == "base_model"), None)
+    if base is None:
+        return kept
+    rest = [c for c in kept if c is not base]
+    variant = Variant(model)
+    for c in rest:
+        variant = variant.add(channel, c)
+    st = _realised_step(model, channel, series, seeds, fit, hold, rest)
+    bw, order, white = avarfit.fit_base_model(
+        variant.model[channel], fit.tau_s, series.rate_hz, fit.real.avar,
+        st.feats.avar.mean(axis=0), st.before.sigma)
+    new = Candidate("base_model", {"bandwidth_hz": bw, "filter_order": order,
+                                   "white": white}, base.n_params, accepted=True)
+    return [new if c is base else c for c in kept]
+
+
+def _prune(model: NoiseModel, channel: str, series: Series, seeds: list[int],
+           fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]
+           ) -> tuple[list[Candidate], list[Candidate]]:
+    """Backward elimination after the forward selection (Efroymson's stepwise method):
+    an effect kept early is dropped when, with the effects kept after it, removing it
+    (and refitting the base model's refit, :func:`_refit_base`) raises neither the fit part's total chi-squared beyond the likelihood-ratio level
+    FIT_ALPHA nor the held-out chi-squared beyond HOLDOUT_ALPHA (its ``n_params``
+    dof each). A look-alike kept first can take part of a later effect's excess (Samsung
+    S5 accelerometer: flicker named before an injected ramp or bias step, which was then
+    kept second); once the later effect is in, the look-alike carries only its own part.
+    The least needed effect goes first; repeat while one is redundant.
+
+    Returns the kept effects (in their order, re-scored as a sequence when one was
+    dropped) and the dropped ones, each with its ``note``."""
+    dropped: list[Candidate] = []
+    while len(kept) >= 2:
+        full = _realised_step(model, channel, series, seeds, fit, hold, kept)
+        worst: tuple[float, Candidate, str] | None = None
+        reduced: dict[int, list[Candidate]] = {}
+        for c in kept:
+            reduced[id(c)] = _refit_base(model, channel, series, seeds, fit, hold,
+                                         [x for x in kept if x is not c])
+            st = _realised_step(model, channel, series, seeds, fit, hold, reduced[id(c)])
+            rise = c.unique_chi2 = st.chi2() - full.chi2()
+            need = float(chi2_dist.isf(FIT_ALPHA, c.n_params))
+            if rise > need:
+                continue
+            text = (f"{PRUNE_REASON}: without it the fit part's chi-squared rises by "
+                    f"{rise:.1f} (needs {need:.1f})")
+            if full.hold is not None and st.hold is not None:
+                hold_rise = st.hold.chi2_check - full.hold.chi2_check
+                hold_need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))
+                if hold_rise > hold_need:
+                    continue
+                text += f" and the held-out one by {hold_rise:.1f} (needs {hold_need:.1f})"
+            if worst is None or rise / need < worst[0]:
+                worst = (rise / need, c, text)
+        if worst is None:
+            break
+        _, c, c.note = worst
+        c.accepted = False
+        dropped.append(c)
+        at = kept.index(c)
+        kept = reduced[id(c)]
+        at = min([at] + [i for i, x in enumerate(kept) if x.effect == "base_model"])
+        for i in range(at, len(kept)):
+            _rescore(model, channel, series, seeds, fit, hold, kept[:i], kept[i])
+    if len(kept) == 1:
+        kept[0].unique_chi2 = math.nan
+    return kept, dropped
+
+
+def _main_effect(kept: list[Candidate]) -> Candidate | None:
+    """The verdict's effect: of the kept unmodelled effects (not the base model's refit),
+    the one whose removal from the final set costs the most, i.e. the smallest p-value of
+    its unique chi-squared contribution (:attr:`Candidate.unique_chi2`, with its
+    ``n_params`` dof; Wilks 1938). The forward selection's first pick is not always
+    that one: a look-alike that covers part of two departures scores best alone (Samsung
+    S5 accelerometer: a flicker the first segment's model lacks, too weak alone to be
+    kept on the null, was picked before an injected random walk, ramp or bias step at 2x
+    its detection limit, and stayed needed after it)."""
+    main = [c for c in kept if c.effect != "base_model"]
+    if len(main) < 2 or not all(math.isfinite(c.unique_chi2) for c in main):
+        return main[0] if main else None
+    return min(main, key=lambda c: (float(chi2_dist.logsf(c.unique_chi2, c.n_params)),
+                                    main.index(c)))
+
+
+def _rescore(model: NoiseModel, channel: str, series: Series, seeds: list[int],
+             fit: PartSetup, hold: PartSetup | None, before: list[Candidate],
+             c: Candidate) -> None:
+    """Recompute ``c``'s comparisons as the effect kept after ``before``."""
+    st = _realised_step(model, channel, series, seeds, fit, hold, before)
+    after = _realised_step(model, channel, series, seeds, fit, hold, [*before, c])
+    c.fit, c.step_z, c.drift_t = after.before, after.step_z, after.drift_t
+    c.evidence_closed = st.evidence_closed(c)
+    if st.hold is not None and after.hold is not None:
+        c.holdout = after.hold
+        pb, pa = st.hold.chi2_parts(), c.holdout.chi2_parts()
+        c.holdout_dparts = {k: pb[k] - pa[k] for k in pb}
+        c.holdout_dchi2 = float(sum(c.holdout_dparts.values()))
+
+
 def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                      options: GapOptions | None = None,
                      replicates: list[Series] | None = None) -> ChannelDiagnosis:
@@ -563,15 +695,26 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     else:
         residual = _Step(fit, hold, sims, series, det_sum).significant
     assert first is not None
+    pruned: list[Candidate] = []
+    if len(kept) >= 2:
+        kept, pruned = _prune(model, channel, series, seeds, fit, hold, kept)
+        if pruned:
+            residual = _realised_step(model, channel, series, seeds, fit, hold,
+                                      kept).significant
+            variant = Variant(model)
+            for c in kept:
+                variant = variant.add(channel, c)
+            rep_now = [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
+                       for rs, rep in rep_setups]
 
     if not first.significant:
         verdict, reason = "none", "within the scatter of the realisations"
     elif reason == "replicate variation":
         verdict = "none"
     elif kept:
-        main = [c.effect for c in kept if c.effect != "base_model"]
-        verdict = main[0] if main else "base_model"
-        reason = "effect" if main else "base model mismatch"
+        main = _main_effect(kept)
+        verdict = main.effect if main is not None else "base_model"
+        reason = "effect" if main is not None else "base model mismatch"
     else:
         verdict, reason = "unexplained", "no candidate accepted"
         if first.hold is not None:
@@ -583,7 +726,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     diag = ChannelDiagnosis(channel, first.before, first.hold, ranked0, verdict, ev0,
                             kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
                             step_fired=first.step_fired, drift_fired=first.drift_fired,
-                            residual_significant=residual, background=bg_summary)
+                            residual_significant=residual, background=bg_summary,
+                            pruned=pruned)
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag

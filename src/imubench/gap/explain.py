@@ -286,6 +286,8 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if not kept:
         return []
     h = c.get("holdout") or {}
+    dropped = [f"{d['effect']} ({_params(d['params'], units)}), {d['reason']}"
+               for d in c.get("dropped", [])]
     parts = []
     for i, k in enumerate(kept, 1):
         txt = (f"{i}. {k['effect']} ({_params(k['params'], units)}): fit-part gap "
@@ -297,6 +299,8 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
              if h else "Effects kept in order: ")
     out = [first + "; ".join(parts) + "."]
     out.extend(_check_lines(kept, h))
+    if dropped:
+        out.append("Kept first, then dropped: " + "; ".join(dropped) + ".")
     if c.get("residual_significant") and c["verdict"] not in ("none",):
         out.append("A significant departure remains after the kept effects.")
     return out
@@ -357,6 +361,12 @@ def explain_channel(c: dict[str, Any], realisations: int,
                       "fit part beats the likelihood-ratio level (p 0.001)")
         after = ("" if step == 0 else " kept at step " + str(step + 1) + ", after "
                  + ", ".join(k["effect"] for k in kept[:step]))
+        rises = [f"{k['chi2_rise_without']:.1f} for {k['effect']}" for k in kept
+                 if "chi2_rise_without" in k and k["effect"] not in (verdict, "base_model")]
+        if rises and "chi2_rise_without" in w:
+            after += (f" (named as the verdict: taking it out of the kept effects raises the "
+                      f"fit part's chi-squared by {w['chi2_rise_without']:.1f}, against "
+                      + ", ".join(rises) + ")")
         txt = f"Verdict {verdict} ({_params(w['params'], units)}){after}: {share}"
         if "score" in w:
             txt += f"; score {_f(w.get('score'), 3)}"
