@@ -540,12 +540,14 @@ def _prune(model: NoiseModel, channel: str, series: Series, seeds: list[int],
            ) -> tuple[list[Candidate], list[Candidate]]:
     """Backward elimination after the forward selection (Efroymson's stepwise method):
     an effect kept early is dropped when, with the effects kept after it, removing it
-    (and refitting the base model's refit, :func:`_refit_base`) raises neither the fit part's total chi-squared beyond the likelihood-ratio level
-    FIT_ALPHA nor the held-out chi-squared beyond HOLDOUT_ALPHA (its ``n_params``
-    dof each). A look-alike kept first can take part of a later effect's excess (Samsung
-    S5 accelerometer: flicker named before an injected ramp or bias step, which was then
-    kept second); once the later effect is in, the look-alike carries only its own part.
-    The least needed effect goes first; repeat while one is redundant.
+    (and refitting the base model's refit, :func:`_refit_base`) raises neither the fit
+    part's total chi-squared beyond the likelihood-ratio level FIT_ALPHA nor the held-out
+    chi-squared beyond HOLDOUT_ALPHA (its ``n_params`` dof each). A look-alike kept
+    first can take part of a later effect's excess (Samsung S5 accelerometer: flicker
+    kept before an injected ramp or bias step, with the base model's white then refitted
+    at half its level); once the later effect is in, and the white level refitted, the
+    look-alike is not needed. The least needed effect goes first; repeat while one is
+    redundant.
 
     Returns the kept effects (in their order, re-scored as a sequence when one was
     dropped) and the dropped ones, each with its ``note``."""
