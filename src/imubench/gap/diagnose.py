@@ -497,9 +497,9 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
 PRUNE_REASON = "made redundant by the effects kept after it"
 
 
-def _realised_step(model: NoiseModel, channel: str, series: Series, seeds: list[int],
-                   fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]) -> _Step:
-    """The step against the model with ``kept`` (realised afresh, same seeds)."""
+def _variant_of(model: NoiseModel, channel: str, series: Series, kept: list[Candidate]
+                ) -> tuple[Variant, np.ndarray | float]:
+    """The model with ``kept`` added in order, and the sum of their deterministic parts."""
     variant = Variant(model)
     det_sum: np.ndarray | float = 0.0
     for c in kept:
@@ -507,6 +507,13 @@ def _realised_step(model: NoiseModel, channel: str, series: Series, seeds: list[
         if det is not None:
             det_sum = det_sum + det
         variant = variant.add(channel, c)
+    return variant, det_sum
+
+
+def _realised_step(model: NoiseModel, channel: str, series: Series, seeds: list[int],
+                   fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]) -> _Step:
+    """The step against the model with ``kept`` (realised afresh, same seeds)."""
+    variant, det_sum = _variant_of(model, channel, series, kept)
     return _Step(fit, hold, variant.realise(channel, series, seeds), series, det_sum)
 
 
@@ -523,10 +530,8 @@ def _refit_base(model: NoiseModel, channel: str, series: Series, seeds: list[int
     if base is None:
         return kept
     rest = [c for c in kept if c is not base]
-    variant = Variant(model)
-    for c in rest:
-        variant = variant.add(channel, c)
-    st = _realised_step(model, channel, series, seeds, fit, hold, rest)
+    variant, det_sum = _variant_of(model, channel, series, rest)
+    st = _Step(fit, hold, variant.realise(channel, series, seeds), series, det_sum)
     bw, order, white = avarfit.fit_base_model(
         variant.model[channel], fit.tau_s, series.rate_hz, fit.real.avar,
         st.feats.avar.mean(axis=0), st.before.sigma)
@@ -710,9 +715,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         if pruned:
             residual = _realised_step(model, channel, series, seeds, fit, hold,
                                       kept).significant
-            variant = Variant(model)
-            for c in kept:
-                variant = variant.add(channel, c)
+            variant = _variant_of(model, channel, series, kept)[0]
             rep_now = [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
                        for rs, rep in rep_setups]
 
