@@ -456,8 +456,30 @@ def test_quantization_is_refused_where_the_short_taus_do_not_follow_its_law() ->
     assert np.mean(np.array(misfits) > need) < 0.01
     assert np.mean(misfits) == pytest.approx(2.0, rel=0.3)  # chi-squared, 2 dof
     s5 = model * np.array([1.77, 1.03, 0.74, 0.78])
-    c2, dof = quantization_law(tau, s5, model, s)
+    c2, dof, _ = quantization_law(tau, s5, model, s)
     assert dof == 2 and c2 > 5 * need
+
+
+def test_quantization_needs_its_own_part_beyond_a_white_level_change() -> None:
+    """A white level 5 % higher follows the law with b = 0: its quantization part adds
+    nothing (chi-squared 1 dof); a real 3 Q^2 / tau^2 (+20 % at tau0) adds a lot."""
+    from scipy.stats import chi2
+
+    from imubench.gap.avarfit import quantization_law
+    from imubench.gap.candidates import QUANTIZATION_LAW_ALPHA
+
+    tau = np.array([1, 2, 4, 8]) / RATE
+    model = WHITE**2 / tau
+    s = np.full(4, 0.01)
+    rng = np.random.default_rng(6)
+    need = chi2.isf(QUANTIZATION_LAW_ALPHA, 1)
+    white = [quantization_law(tau, model * 1.05 * (1 + 2 * s * rng.standard_normal(4)),
+                              model, s)[2] for _ in range(300)]
+    assert np.mean(np.array(white) > need) < 0.01
+    quant = [quantization_law(tau, model * (1 + 0.2 / (tau * RATE))
+                              * (1 + 2 * s * rng.standard_normal(4)), model, s)[2]
+             for _ in range(50)]
+    assert min(quant) > need
 
 
 def test_base_model_refit_adds_white_to_a_model_without_it() -> None:
