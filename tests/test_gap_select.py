@@ -695,3 +695,18 @@ def test_backward_step_refits_the_base_model_of_the_reduced_set() -> None:
     assert out[1] is ramp and out[0] is not base and out[0].effect == "base_model"
     assert out[0].params["white"] == pytest.approx(WHITE, rel=0.1)
     assert _refit_base(low, "gx", s, seeds, fit, hold, [ramp]) == [ramp]
+
+
+def test_verdict_is_the_kept_effect_whose_removal_costs_most() -> None:
+    from imubench.gap.candidates import Candidate
+    from imubench.gap.diagnose import _main_effect
+    fl = Candidate("flicker", {"flicker": 1e-4}, 1, unique_chi2=60.0)
+    ramp = Candidate("ramp", {"ramp": 1e-6}, 1, unique_chi2=1350.0)
+    base = Candidate("base_model", {"white": 1e-3}, 3, unique_chi2=4500.0)
+    assert _main_effect([fl, ramp, base]) is ramp  # the base model's refit is not a verdict
+    assert _main_effect([base, fl]) is fl
+    assert _main_effect([base]) is None
+    # the p-value decides between different dof: 14 on 1 dof beats 16 on 3
+    sine = Candidate("sine", {"sine_amplitude": 0.01, "sine_freq": 2.0}, 3, unique_chi2=16.0)
+    fl.unique_chi2 = 14.0
+    assert _main_effect([sine, fl]) is fl
