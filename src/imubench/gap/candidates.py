@@ -339,8 +339,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     if rf.resonance_width_hz < PEAK_MIN_BINS * df:
                         cands[-1].refusal = (
                             f"narrower than {PEAK_MIN_BINS} bins of the spectrum "
-                            f"({rf.resonance_width_hz:.3g} Hz against bins of {df:.3g} Hz): "
-                            "a spectral line (the sine's), not a resonance")
+                            f"({rf.resonance_width_hz:.3g} Hz against {PEAK_MIN_BINS} x "
+                            f"{df:.3g} Hz): a spectral line (the sine's), not a resonance")
         elif eff == "temperature":
             gate = t_threshold(Z_TEMP_CANDIDATE, dof)
             if s.has_temperature and (abs(before.temp_z) > gate
