@@ -322,3 +322,21 @@ def test_a_verdict_after_another_effect_says_why_it_is_the_verdict() -> None:
             "1351.9, against 31.5 for flicker)") in text
     assert ("Kept first, then dropped: random_walk (random_walk = 1e-05 dps/sqrt(s)), made "
             "redundant") in text
+
+
+def test_a_none_verdict_says_when_the_held_out_part_departs() -> None:
+    """A reviewer's CATS gz: verdict none on the fit part while the held-out part's
+    systematic gap was 0.215 against a scatter of 0.095; the text said the model explains
+    the recording."""
+    hold = {"gap_before": 0.3, "gap_after": 0.3, "gap_excess_before": 0.215,
+            "gap_excess_after": 0.215, "gap_null": 0.095, "significant": True,
+            "regions": [{"tau_min_s": 1.0, "tau_max_s": 32.0, "direction": "real_above",
+                         "gap": 0.2, "z_max": 4.1}]}
+    c = _entry("none", reason="within the scatter of the realisations", holdout=hold)
+    text = "\n".join(explain_channel(c, 10))
+    assert text.startswith("No unmodelled effect on the fit part")
+    assert "explains the recording" not in text
+    assert ("The held-out part departs from the model (1-32 s real above) where the fit "
+            "part does not (systematic gap 0.215 against a scatter of 0.095)") in text
+    hold["significant"] = False
+    assert explain_channel(c, 10)[0].startswith("No unmodelled effect: the model explains")

@@ -233,6 +233,8 @@ class ChannelDiagnosis:
                 "gap_excess_after": ha.gap_excess,
                 "chi2_check_before": hb.chi2_check,
                 "chi2_check_after": ha.chi2_check,
+                "significant": hb.significant,
+                "regions": [r.to_dict() for r in hb.regions],
             }
         if self.replicates:
             reps = [{"recording": name, "gap_before": b.gap,

@@ -206,6 +206,10 @@ def headline(c: dict[str, Any], realisations: int,
             return ("No unmodelled effect: the recording departs from the model at "
                     f"{_f(bg.get('tau_min_s'))}-{_f(bg.get('tau_max_s'))} s by no more than "
                     f"{src} differ (replicate variation).")
+        if (c.get("holdout") or {}).get("significant"):
+            return (f"No unmodelled effect on the fit part (within the scatter of "
+                    f"{realisations} realisations), but the held-out part departs from the "
+                    "model.")
         return (f"No unmodelled effect: the model explains the recording within the scatter "
                 f"of {realisations} realisations.")
     if verdict == "unexplained":
@@ -330,8 +334,20 @@ def explain_channel(c: dict[str, Any], realisations: int,
         lines.append("Verdict none: " + (
             "the departure is within the recording's own variation."
             if c.get("reason") == "replicate variation" else
-            f"the model explains the recording within the scatter of {realisations} "
+            f"the model explains the fit part within the scatter of {realisations} "
             "realisations."))
+        h = c.get("holdout") or {}
+        if h.get("significant") and c.get("reason") != "replicate variation":
+            regs = "; ".join(f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s "
+                             f"{r['direction'].replace('_', ' ')}"
+                             for r in h.get("regions", []))
+            lines.append(
+                "The held-out part departs from the model"
+                + (f" ({regs})" if regs else "")
+                + f" where the fit part does not (systematic gap {_f(h.get('gap_excess_before'))}"
+                f" against a scatter of {_f(h.get('gap_null'))}): the recording changes "
+                "within itself; candidates are fitted on the fit part only, so this is not "
+                "diagnosed (try --holdout-fraction 0 to diagnose the whole record).")
     elif verdict == "unexplained":
         best = effects[0] if effects else None
         if best is None:
