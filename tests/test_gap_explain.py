@@ -340,3 +340,15 @@ def test_a_none_verdict_says_when_the_held_out_part_departs() -> None:
             "part does not (systematic gap 0.215 against a scatter of 0.095)") in text
     hold["significant"] = False
     assert explain_channel(c, 10)[0].startswith("No unmodelled effect: the model explains")
+
+
+def test_the_whole_curve_test_is_listed_beside_the_regions() -> None:
+    """A reviewer found global.fired true with no mention of it next to an Allan region."""
+    g = {"chi2": 30.0, "dof": 16, "threshold": 44.1, "chi2_smooth": 19.9, "dof_smooth": 3,
+         "threshold_smooth": 16.5, "fired": True}
+    c = _entry("none", reason="replicate variation", **{"global": g},
+               regions=[{"tau_min_s": 512.0, "tau_max_s": 2048.0, "direction": "real_below",
+                         "gap": 0.3, "z_max": 4.0}])
+    text = "\n".join(explain_channel(c, 10))
+    assert "Allan curve real below over 512-2.05e+03 s" in text
+    assert "the whole Allan curve's shape (chi-squared 19.9 against 16.5" in text

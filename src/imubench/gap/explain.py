@@ -77,7 +77,7 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
             out.append(f"{names[key]} (t {z:.1f} against the threshold "
                        f"{t_threshold(z_norm, stat_dof(key, dof)):.1f})")
     g = c.get("global") or {}
-    if g.get("fired") and not c["regions"]:
+    if g.get("fired"):
         out.append(f"the whole Allan curve's shape (chi-squared {g['chi2_smooth']:.1f} "
                    f"against {g['threshold_smooth']:.1f}; {g['chi2']:.1f} against "
                    f"{g['threshold']:.1f} over all {g['dof']} taus)")
