@@ -105,7 +105,8 @@ def _stat(c: dict[str, Any], key: str) -> float:
 
 
 def _strongest(c: dict[str, Any], dof: int) -> str:
-    """The statistic closest to its threshold, as 'name t/threshold' (for `none`)."""
+    """The single statistic closest to its threshold, as 'name t/threshold' (for `none`;
+    the Allan, band, whole-curve and whole-record tests are not ranked with them)."""
     names = {"line_z": "line", "tail_z": "tails", "temp_z": "temperature", "trend_z": "trend",
              "temp_level_z": "temperature level"}
     ratios = []
@@ -118,7 +119,8 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
     if not ratios:
         return ""
     _, n, z, thr = max(ratios)
-    return f"; the closest to its threshold is {n} (t {z:.1f} against {thr:.1f})"
+    return (f"; of the single statistics (line, tails, temperature, trend) the closest to "
+            f"its threshold is {n} (t {z:.1f} against {thr:.1f})")
 
 
 def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
