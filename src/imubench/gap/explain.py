@@ -205,9 +205,11 @@ def headline(c: dict[str, Any], realisations: int,
         if reason == "replicate variation":
             src = {"replicates": "its replicates"}.get(
                 str(bg.get("source")), "the two halves of the record")
+            every = (" (the whole-curve test fired, so every tau is counted)"
+                     if (c.get("global") or {}).get("fired") else "")
             return ("No unmodelled effect: the recording departs from the model at "
-                    f"{_f(bg.get('tau_min_s'))}-{_f(bg.get('tau_max_s'))} s by no more than "
-                    f"{src} differ (replicate variation).")
+                    f"{_f(bg.get('tau_min_s'))}-{_f(bg.get('tau_max_s'))} s{every} by no "
+                    f"more than {src} differ (replicate variation).")
         if (c.get("holdout") or {}).get("significant"):
             return (f"No unmodelled effect on the fit part (within the scatter of "
                     f"{realisations} realisations), but the held-out part departs from the "
