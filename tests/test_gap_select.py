@@ -710,3 +710,22 @@ def test_verdict_is_the_kept_effect_whose_removal_costs_most() -> None:
     sine = Candidate("sine", {"sine_amplitude": 0.01, "sine_freq": 2.0}, 3, unique_chi2=16.0)
     fl.unique_chi2 = 14.0
     assert _main_effect([sine, fl]) is fl
+
+
+def test_a_curvature_far_from_temp_ref_is_not_offered() -> None:
+    """Temperatures 5.2-5.7 degC against temp_ref 25: the quadratic's coefficients at 25
+    degC are an extrapolation (a reviewer read -39.3 dps/degC); the linear one stays."""
+    from imubench.gap.candidates import _curvature_refusal
+    cold = np.linspace(5.15, 5.72, 50)
+    assert "too narrow and too far from temp_ref 25" in _curvature_refusal(cold, 25.0, -39.3)
+    assert _curvature_refusal(np.linspace(20.0, 30.0, 50), 25.0, 0.01) == ""
+    assert _curvature_refusal(np.linspace(15.0, 20.0, 50), 25.0, 0.01) == ""  # one span away
+    n = int(900 * RATE)
+    t = np.arange(n) / RATE
+    temp = 5.4 + 0.28 * np.sin(2 * math.pi * t / 300.0)
+    y = white(np.random.default_rng(41), n) + 0.02 * (temp - 5.4)
+    d = diagnose_channel(MODEL, "gx", Series(y, temp, RATE, "cold"),
+                         GapOptions(seed=3, realisations=5))
+    assert d.verdict == "temperature"
+    assert d.kept[0].params["temp_coeff2"] == 0.0
+    assert d.kept[0].params["temp_coeff"] == pytest.approx(0.02, rel=0.1)

@@ -260,6 +260,23 @@ def _quantization_refusal(tau_s: np.ndarray, real_avar: np.ndarray, model_avar: 
             f"filter or the white level would")
 
 
+def _curvature_refusal(temp_c: np.ndarray, temp_ref: float, coeff: float) -> str:
+    """Why the quadratic temperature response cannot be offered (empty when it can): its
+    coefficients are stated at ``temp_ref`` (the model file's convention), and when the
+    recorded temperatures lie farther from it than their own span, they are an
+    extrapolation of a curvature the record does not fix (a reviewer's CATS tag hour at
+    5.2-5.7 degC against temp_ref 25 degC: -39.3 dps/degC and -1.03 dps/degC^2, which
+    cancel over the record). The linear response stays a candidate."""
+    lo, hi = float(np.nanmin(temp_c)), float(np.nanmax(temp_c))
+    span = hi - lo
+    if lo - span <= temp_ref <= hi + span:
+        return ""
+    return (f"the fit part's temperatures ({lo:.2f}-{hi:.2f} degC) are too narrow and too "
+            f"far from temp_ref {temp_ref:g} degC to fix a curvature: its coefficients "
+            f"there would be an extrapolation (temp_coeff {coeff:.3g}); the linear "
+            "response is the candidate")
+
+
 def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
                   sf: evidence.SineFit | None) -> np.ndarray:
     """The real Allan variance less the fitted spectral line's (IEEE 952 C.7 for means of
@@ -355,6 +372,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + tf.temp_coeff,
                                                  "temp_coeff2": cm.temp_coeff2
                                                  + tf.temp_coeff2}, 2))
+                    cands[-1].refusal = _curvature_refusal(tf.block_temp_c, cm.temp_ref,
+                                                           cands[-1].params["temp_coeff"])
         elif eff == "outliers" and before.tail_z > Z_TAIL_CANDIDATE:
             of = evidence.fit_outliers(s.y, s.rate_hz, float(cur.impulses.mean()))
             if of is not None:

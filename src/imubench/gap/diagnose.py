@@ -427,12 +427,11 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
             worst = max((x for x in cands if id(x) in best), key=lambda x: x.score)
             del best[id(worst)]
     _shape_scores(cands)
-    ranked: list[Candidate] = []
-    seen: set[str] = set()
-    for c in sorted(cands, key=lambda x: x.score):
-        if c.effect not in seen:  # temperature: linear or quadratic, the better
-            seen.add(c.effect)
-            ranked.append(c)
+    # one per effect (temperature: linear or quadratic, the better one not refused)
+    per_effect: dict[str, Candidate] = {}
+    for c in sorted(cands, key=lambda x: (bool(x.refusal), x.score)):
+        per_effect.setdefault(c.effect, c)
+    ranked = sorted(per_effect.values(), key=lambda x: x.score)
     return ranked, best, ev
 
 
