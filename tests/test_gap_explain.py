@@ -199,7 +199,7 @@ def test_headline_closure_names_what_it_measures() -> None:
     hold = {"gap_before": 0.253, "gap_after": 0.137, "gap_excess_before": 0.22,
             "gap_excess_after": 0.10, "gap_null": 0.1}
     first = explain_channel(_entry("temperature", kept=[kept], holdout=hold), 10)[0]
-    assert "closes 55% of the systematic gap on the held-out part" in first
+    assert "closes 55% of the systematic Allan-curve gap on the held-out part" in first
     step = {"effect": "bias_step", "params": {"step_size": 0.1, "step_time_s": 900.0},
             "gap_after": 0.1, "holdout_gap_after": 0.2, "holdout_gap_excess_after": 0.15}
     hold = {"gap_before": 0.2, "gap_after": 0.2, "gap_excess_before": 0.15,

@@ -260,7 +260,7 @@ def test_headline_is_plain_words_with_the_held_out_closure() -> None:
     }
     first = explain_channel(c, 10)[0]
     assert first == ("The rate drifts with temperature, 0.0101; modelling it "
-                     "closes 86% of the systematic gap on the held-out part.")
+                     "closes 86% of the systematic Allan-curve gap on the held-out part.")
     units = {"temp_coeff": "dps/degC"}  # the JSON's units.params.<channel>
     assert explain_channel(c, 10, units)[0].startswith(
         "The rate drifts with temperature, 0.0101 dps/degC; modelling it")

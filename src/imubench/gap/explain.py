@@ -171,9 +171,9 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
     else:
         ea, ga = h.get("gap_excess_after"), h.get("gap_after")
     if eb is not None and eb > 0.05 and ea is not None:
-        frac, what = 1.0 - ea / eb, "the systematic gap"
+        frac, what = 1.0 - ea / eb, "the systematic Allan-curve gap"
     elif ga is not None and h["gap_before"]:
-        frac, what = 1.0 - ga / h["gap_before"], "the gap"
+        frac, what = 1.0 - ga / h["gap_before"], "the Allan-curve gap"
     else:
         return ""
     if frac >= 0.05:
