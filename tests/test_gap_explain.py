@@ -356,3 +356,19 @@ def test_the_whole_curve_test_is_listed_beside_the_regions() -> None:
     assert explain_channel(c, 10)[0].startswith(
         "No unmodelled effect: the recording departs from the model at 1-2.05e+03 s (the "
         "whole-curve test fired, so every tau is counted) by no more than the two halves")
+
+
+def test_a_negative_share_reads_as_none_removed() -> None:
+    """A reviewer read 'removes -1% of the significant excess'."""
+    from imubench.gap.diagnose import removes
+    assert removes(0.33) == "removes 33% of"
+    assert removes(-0.19) == "removes none (adds 19% to)"
+    assert removes(float("nan")) == removes(None) == "removes none of"
+    base = {"effect": "base_model", "params": {"bandwidth_hz": 0.0, "filter_order": 1,
+                                               "white": 0.002},
+            "gap_after": 0.2, "n_params": 3, "score": 10.0, "chi2_closed": 0.1,
+            "evidence_closed": -0.01}
+    c = _entry("base_model", effects=[base], kept=[base])
+    text = "\n".join(explain_channel(c, 10))
+    assert "it removes none (adds 1% to) the significant excess chi-squared" in text
+    assert "-1%" not in text

@@ -314,6 +314,14 @@ class _Step:
         return self.before.chi2 + _record_chi2(self.step_z, self.drift_t)
 
 
+def removes(share: float | None) -> str:
+    """'removes 33 % of', or for a share below zero (the candidate enlarges the
+    significant excess) 'removes none (adds 19 % to)'; 'removes none of' when undefined."""
+    if share is None or not math.isfinite(share):
+        return "removes none of"
+    return f"removes {share:.0%} of" if share >= 0 else f"removes none (adds {-share:.0%} to)"
+
+
 def _record_chi2(step_z: float, drift_t: float) -> float:
     return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
             + (drift_t**2 if math.isfinite(drift_t) else 0.0))
@@ -368,8 +376,7 @@ def _acceptable(c: Candidate, st: _Step) -> str:
         return "raises the total chi-squared"
     need_fit = float(chi2_dist.isf(FIT_ALPHA, c.n_params))
     if not (c.evidence_closed >= MIN_CLOSURE or drop > need_fit):
-        share = (f"{c.evidence_closed:.0%}" if math.isfinite(c.evidence_closed) else "none")
-        return (f"removes {share} of the significant excess (needs {MIN_CLOSURE:.0%}) "
+        return (f"{removes(c.evidence_closed)} the significant excess (needs {MIN_CLOSURE:.0%}) "
                 f"and lowers chi-squared by {drop:.1f} (needs {need_fit:.1f})")
     if c.holdout is not None and st.hold is not None and c.effect != "bias_step":
         need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))

@@ -20,7 +20,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from imubench.gap.curves import STAT_TESTS, stat_dof, stat_fired, t_threshold
-from imubench.gap.diagnose import MIN_CLOSURE
+from imubench.gap.diagnose import MIN_CLOSURE, removes
 
 
 def _f(v: float | None, digits: int = 3) -> str:
@@ -358,7 +358,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
             lines.append("Verdict unexplained: no candidate effect applies to this evidence.")
         else:
             why = best.get("rejected_because") or (
-                f"removes {_pct(best.get('evidence_closed'))} of the significant excess "
+                f"{removes(best.get('evidence_closed'))} the significant excess "
                 f"chi-squared (the verdict needs {MIN_CLOSURE:.0%}, without raising the "
                 "total)")
             lines.append(
@@ -372,7 +372,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
         w = (next((e for e in effects if e["effect"] == verdict), None) if step == 0
              else None) or (kept[step] if kept else {})
         ec = w.get("evidence_closed")
-        share = (f"it removes {_pct(ec)} of the significant excess chi-squared (the "
+        share = (f"it {removes(ec)} the significant excess chi-squared (the "
                  f"share criterion is {MIN_CLOSURE:.0%}")
         share += (f"; {_pct(w.get('chi2_closed'))} of the total)" if "chi2_closed" in w
                   else ")")
