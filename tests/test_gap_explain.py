@@ -372,3 +372,11 @@ def test_a_negative_share_reads_as_none_removed() -> None:
     text = "\n".join(explain_channel(c, 10))
     assert "it removes none (adds 1% to) the significant excess chi-squared" in text
     assert "-1%" not in text
+
+
+def test_report_params_of_a_base_model_without_filter() -> None:
+    from imubench.gap.report import _fmt
+    assert _fmt({"bandwidth_hz": 0.0, "filter_order": 1, "white": 0.0021}) == (
+        "no output filter, white=0.0021")
+    assert _fmt({"bandwidth_hz": 4.28, "filter_order": 2, "white": 0.0021}) == (
+        "bandwidth_hz=4.28, filter_order=2, white=0.0021")

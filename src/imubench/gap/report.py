@@ -181,6 +181,11 @@ def _num(v: Any) -> str:
 
 
 def _fmt(p: dict[str, float]) -> str:
+    """key=value pairs; a zero bandwidth reads 'no output filter' (its order means
+    nothing then)."""
+    if p.get("bandwidth_hz") == 0:
+        p = {k: v for k, v in p.items() if k not in ("bandwidth_hz", "filter_order")}
+        return ", ".join(["no output filter", *(f"{k}={v:.3g}" for k, v in p.items())])
     return ", ".join(f"{k}={v:.3g}" for k, v in p.items())
 
 
