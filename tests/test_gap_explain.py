@@ -46,7 +46,7 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     assert "Allan curve real above over 20-315 s (largest |z| 7.4" in text
     assert ("Verdict temperature (temp_coeff = 0.0081 dps/degC): it removes 97% of the "
             f"significant excess chi-squared (the share criterion is {MIN_CLOSURE:.0%}; 93% "
-            "of the total); score") in text
+            "of the total); score 40.2;") in text
     assert "other criterion" not in text
     assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
     assert "runner-up random_walk scores 71.0" in text

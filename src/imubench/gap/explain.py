@@ -389,7 +389,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
                       + ", ".join(rises) + ")")
         txt = f"Verdict {verdict} ({_params(w['params'], units)}){after}: {share}"
         if "score" in w:
-            txt += f"; score {_f(w.get('score'), 3)}"
+            txt += f"; score {w['score']:.1f}"
         r = next((e for e in effects if e["effect"] != verdict), None)
         if r is not None and "n_params" in w:
             txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
