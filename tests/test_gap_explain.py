@@ -350,11 +350,11 @@ def test_the_whole_curve_test_is_listed_beside_the_regions() -> None:
                regions=[{"tau_min_s": 512.0, "tau_max_s": 2048.0, "direction": "real_below",
                          "gap": 0.3, "z_max": 4.0}])
     text = "\n".join(explain_channel(c, 10))
-    assert "Allan curve real below over 512-2.05e+03 s" in text
+    assert "Allan curve real below over 512-2050 s" in text
     assert "the whole Allan curve's shape (chi-squared 19.9 against 16.5" in text
     c["background"] = {"source": "halves", "tau_min_s": 1.0, "tau_max_s": 2048.0}
     assert explain_channel(c, 10)[0].startswith(
-        "No unmodelled effect: the recording departs from the model at 1-2.05e+03 s (the "
+        "No unmodelled effect: the recording departs from the model at 1-2050 s (the "
         "whole-curve test fired, so every tau is counted) by no more than the two halves")
 
 

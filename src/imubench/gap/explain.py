@@ -24,7 +24,13 @@ from imubench.gap.diagnose import MIN_CLOSURE, removes
 
 
 def _f(v: float | None, digits: int = 3) -> str:
-    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}g}"
+    """``digits`` significant digits; 1e3 to 1e6 without an exponent (2048 s reads
+    '2050', not '2.05e+03')."""
+    if v is None or not math.isfinite(v):
+        return "-"
+    if 1e3 <= abs(v) < 1e6:
+        return f"{float(f'{v:.{digits}g}'):.0f}"
+    return f"{v:.{digits}g}"
 
 
 def _pct(v: float | None) -> str:
