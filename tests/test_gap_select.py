@@ -729,3 +729,27 @@ def test_a_curvature_far_from_temp_ref_is_not_offered() -> None:
     assert d.verdict == "temperature"
     assert d.kept[0].params["temp_coeff2"] == 0.0
     assert d.kept[0].params["temp_coeff"] == pytest.approx(0.02, rel=0.1)
+
+
+def test_evidence_plot_marks_a_sine_kept_after_the_verdict() -> None:
+    """A reviewer's ramp + sine: verdict ramp, sine kept second, and the spectrum panel
+    did not mark the line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from imubench.gap.report import _evidence
+
+    n = int(900 * RATE)
+    t = np.arange(n) / RATE
+    y = (1.15 * white(np.random.default_rng(51), n) + 2e-4 * t  # white 15 % above the
+         + 0.008 * np.sin(2 * math.pi * 3.3 * t + 0.4))              # model's: bands fire
+    d = diagnose_channel(MODEL, "gx", Series(y, None, RATE, "ramp+sine"),
+                         GapOptions(seed=2, realisations=5))
+    kept = [c.effect for c in d.kept]
+    assert "sine" in kept and d.verdict != "sine" and d.before.bands, (d.verdict, kept)
+    fig, ax = plt.subplots()
+    _evidence(ax, d)
+    assert any(ln.get_label() == "line 3.3 Hz" for ln in ax.get_lines())
+    plt.close(fig)

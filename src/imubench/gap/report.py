@@ -86,9 +86,10 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         ax.loglog(f[1:], real[1:], "k-", lw=0.7, label="real")
         ax.loglog(f[1:], sim[1:], "b-", lw=1.0, label="model (mean of realisations)")
         w = d.winner
-        if eff == "sine" and w is not None:
-            ax.axvline(w.params["sine_freq"], color="r", ls=":", lw=0.8, alpha=0.6,
-                       label=f"line {w.params['sine_freq']:.4g} Hz")  # the peak stays visible
+        sine = next((c for c in d.kept if c.effect == "sine"), None)  # also kept 2nd or 3rd
+        if sine is not None:
+            ax.axvline(sine.params["sine_freq"], color="r", ls=":", lw=0.8, alpha=0.6,
+                       label=f"line {sine.params['sine_freq']:.4g} Hz")  # the peak stays visible
         if eff == "resonance" and w is not None:
             p = w.params
             fc, width = p["resonance_freq_hz"], p["resonance_width_hz"]
