@@ -732,8 +732,8 @@ def test_a_curvature_far_from_temp_ref_is_not_offered() -> None:
 
 
 def test_evidence_plot_marks_a_sine_kept_after_the_verdict() -> None:
-    """A reviewer's ramp + sine: verdict ramp, sine kept second, and the spectrum panel
-    did not mark the line."""
+    """A reviewer's ramp + sine: verdict ramp, sine kept second; nothing showed the ramp
+    and the spectrum panel did not mark the line."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -748,8 +748,15 @@ def test_evidence_plot_marks_a_sine_kept_after_the_verdict() -> None:
     d = diagnose_channel(MODEL, "gx", Series(y, None, RATE, "ramp+sine"),
                          GapOptions(seed=2, realisations=5))
     kept = [c.effect for c in d.kept]
-    assert "sine" in kept and d.verdict != "sine" and d.before.bands, (d.verdict, kept)
+    assert "sine" in kept and d.verdict == "ramp" and d.before.bands, (d.verdict, kept)
     fig, ax = plt.subplots()
-    _evidence(ax, d)
+    assert _evidence(ax, d) == "block means over time (fit part)"  # the ramp's own evidence
+    fitted = next(ln for ln in ax.get_lines() if ln.get_label().startswith("ramp "))
+    tt, yy = fitted.get_data()
+    assert (yy[-1] - yy[0]) / (tt[-1] - tt[0]) == pytest.approx(2e-4, rel=0.1)
+    plt.close(fig)
+    d.verdict = "base_model"  # a verdict whose panel is the spectrum: the kept sine is marked
+    fig, ax = plt.subplots()
+    assert _evidence(ax, d) == "Welch spectrum (fit part)"
     assert any(ln.get_label() == "line 3.3 Hz" for ln in ax.get_lines())
     plt.close(fig)

@@ -228,6 +228,8 @@ rare (the blind and synthetic cases: 0.05-0.1 % of the samples); on the Samsung 
 whose noise is heavy-tailed (excess kurtosis 3-9), the truncated-normal fit put 22 % of
 the samples in the "impulses" at 1.7 sigma, and that heavy-tailed white noise then
 stood in for the base model's missing white term and came before every effect."""
+RAMP_PLOT_BLOCKS = 128
+"""Block means of the fit part kept as the ramp's evidence (the report plots them)."""
 QUANTIZATION_LAW_ALPHA = 1e-3
 """Level at which the short-tau excess is declared not to follow the quantization law
 (:func:`imubench.gap.avarfit.quantization_law`)."""
@@ -318,6 +320,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
         elif eff == "ramp":
             cands.append(Candidate(eff, {"ramp": cm.ramp + fit.real.trend_slope
                                          - float(np.nanmean(cur.trend_slope))}, 1))
+            m = max(1, len(s.y) // RAMP_PLOT_BLOCKS)
+            ev["ramp"] = ((np.arange(len(s.y) // m) + 0.5) * m / s.rate_hz,
+                          evidence.block_means_of(s.y, m))
         elif eff == "base_model":
             bw, order, white = avarfit.fit_base_model(
                 cm, fit.tau_s, s.rate_hz, _without_line(fit.tau_s, fit.real.avar, s.rate_hz,

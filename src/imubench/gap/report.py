@@ -72,6 +72,18 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         ax.set_ylabel(f"{d.channel} block mean ({unit})")
         ax.legend(fontsize=7)
         return "temperature scatter (fit part)"
+    if eff == "ramp" and "ramp" in ev and d.winner is not None:
+        t, means = ev["ramp"]
+        ok = np.isfinite(means)
+        ax.plot(t[ok], means[ok], ".", ms=3, color="k", label="real (block means)")
+        slope = d.winner.params["ramp"]
+        mid = float(np.mean(t[ok]))
+        ax.plot(t[ok], float(np.mean(means[ok])) + slope * (t[ok] - mid), "r-",
+                label=f"ramp {slope:.3g} {unit}/s")
+        ax.set_xlabel("time in the fit part (s)")
+        ax.set_ylabel(f"{d.channel} block mean ({unit})")
+        ax.legend(fontsize=7)
+        return "block means over time (fit part)"
     if eff == "outliers" and "outliers" in ev:
         of = ev["outliers"]
         ax.hist(of.detected / of.sigma, bins=40, color="tab:red")
