@@ -638,30 +638,31 @@ def test_a_noise_process_the_replicate_does_not_share_is_not_kept() -> None:
 
 
 # ------------------------------------------------------------------ backward step
-def _prune_setup(y: np.ndarray) -> tuple[Series, Any, Any, list[int]]:
+def _realiser(y: np.ndarray, model: NoiseModel = MODEL) -> Any:
+    from imubench.gap.diagnose import _Realiser
     from imubench.gap.parts import PartSetup, seeds_of
     s = Series(y, None, RATE, "prune")
     n_fit = len(y) // 2
-    cm = MODEL["gx"]
-    return (s, PartSetup(s.part(0, n_fit), cm), PartSetup(s.part(n_fit, len(y)), cm),
-            seeds_of(3, 5))
+    cm = model["gx"]
+    return _Realiser(model, "gx", s, seeds_of(3, 5), PartSetup(s.part(0, n_fit), cm),
+                     PartSetup(s.part(n_fit, len(y)), cm))
 
 
 def test_backward_step_drops_an_effect_a_later_one_made_redundant() -> None:
     """A weak flicker kept before a ramp (the look-alike taking part of the ramp's excess
     first) adds nothing once the ramp is in: the backward step drops it and says why."""
     from imubench.gap.candidates import Candidate
-    from imubench.gap.diagnose import PRUNE_REASON, _prune, _realised_step
+    from imubench.gap.diagnose import PRUNE_REASON, _prune
     n = int(900 * RATE)
     y = white(np.random.default_rng(31), n) + 1e-4 * np.arange(n) / RATE
-    s, fit, hold, seeds = _prune_setup(y)
+    r = _realiser(y)
     flicker = Candidate("flicker", {"flicker": 1e-4}, 1, accepted=True)
     ramp = Candidate("ramp", {"ramp": 1e-4}, 1, accepted=True)
-    kept, dropped = _prune(MODEL, "gx", s, seeds, fit, hold, [flicker, ramp])
+    kept, dropped = _prune(r, [flicker, ramp])
     assert kept == [ramp] and dropped == [flicker]
     assert flicker.note.startswith(PRUNE_REASON) and not flicker.accepted
     assert ramp.fit is not None and ramp.holdout is not None  # re-scored as the first
-    alone = _realised_step(MODEL, "gx", s, seeds, fit, hold, []).before
+    alone = r.step([]).before
     assert ramp.fit.gap_excess < 0.5 * alone.gap_excess
 
 
@@ -672,10 +673,9 @@ def test_backward_step_keeps_two_real_effects() -> None:
     t = np.arange(n) / RATE
     y = (white(np.random.default_rng(32), n) + 1e-4 * t
          + 0.01 * np.sin(2 * math.pi * 3.3 * t + 0.4))
-    s, fit, hold, seeds = _prune_setup(y)
     sine = Candidate("sine", {"sine_amplitude": 0.01, "sine_freq": 3.3}, 2, accepted=True)
     ramp = Candidate("ramp", {"ramp": 1e-4}, 1, accepted=True)
-    kept, dropped = _prune(MODEL, "gx", s, seeds, fit, hold, [sine, ramp])
+    kept, dropped = _prune(_realiser(y), [sine, ramp])
     assert kept == [sine, ramp] and dropped == []
 
 
@@ -683,18 +683,17 @@ def test_backward_step_refits_the_base_model_of_the_reduced_set() -> None:
     """The reduced model of the drop-one test is refitted: a base-model refit that was
     made beside another term (here a white level set too low) is fitted again."""
     from imubench.gap.candidates import Candidate
-    from imubench.gap.diagnose import _refit_base
     low = NoiseModel.single_term("gx", white=WHITE / 2)
     n = int(900 * RATE)
     y = white(np.random.default_rng(33), n) + 1e-4 * np.arange(n) / RATE
-    s, fit, hold, seeds = _prune_setup(y)
+    r = _realiser(y, low)
     ramp = Candidate("ramp", {"ramp": 1e-4}, 1, accepted=True)
     base = Candidate("base_model", {"bandwidth_hz": 0.0, "filter_order": 1,
                                     "white": WHITE / 4}, 3, accepted=True)
-    out = _refit_base(low, "gx", s, seeds, fit, hold, [base, ramp])
+    out = r.refit_base([base, ramp])
     assert out[1] is ramp and out[0] is not base and out[0].effect == "base_model"
     assert out[0].params["white"] == pytest.approx(WHITE, rel=0.1)
-    assert _refit_base(low, "gx", s, seeds, fit, hold, [ramp]) == [ramp]
+    assert r.refit_base([ramp]) == [ramp]
 
 
 def test_verdict_is_the_kept_effect_whose_removal_costs_most() -> None:

@@ -505,55 +505,74 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
 PRUNE_REASON = "made redundant by the effects kept after it"
 
 
-def _variant_of(model: NoiseModel, channel: str, series: Series, kept: list[Candidate]
-                ) -> tuple[Variant, np.ndarray | float]:
-    """The model with ``kept`` added in order, and the sum of their deterministic parts."""
-    variant = Variant(model)
-    det_sum: np.ndarray | float = 0.0
-    for c in kept:
-        det = deterministic(c.effect, c.params, variant.model[channel], series)
-        if det is not None:
-            det_sum = det_sum + det
-        variant = variant.add(channel, c)
-    return variant, det_sum
+class _Realiser:
+    """The model with a given list of kept effects, realised with the run's seeds and
+    compared with the record; each distinct list (by effects and parameters) is realised
+    once, since the backward step and its re-scoring ask for the same lists again."""
+
+    def __init__(self, model: NoiseModel, channel: str, series: Series, seeds: list[int],
+                 fit: PartSetup, hold: PartSetup | None) -> None:
+        self.model, self.channel, self.series, self.seeds = model, channel, series, seeds
+        self.fit, self.hold = fit, hold
+        self._steps: dict[tuple[tuple[str, tuple[tuple[str, float], ...]], ...], _Step] = {}
+
+    def variant(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray | float]:
+        """The model with ``kept`` added in order, and the sum of their deterministic
+        parts."""
+        variant = Variant(self.model)
+        det_sum: np.ndarray | float = 0.0
+        for c in kept:
+            det = deterministic(c.effect, c.params, variant.model[self.channel], self.series)
+            if det is not None:
+                det_sum = det_sum + det
+            variant = variant.add(self.channel, c)
+        return variant, det_sum
+
+    def step(self, kept: list[Candidate]) -> _Step:
+        """The step against the model with ``kept`` (realised afresh, same seeds)."""
+        key = tuple((c.effect, tuple(sorted(c.params.items()))) for c in kept)
+        if key not in self._steps:
+            variant, det_sum = self.variant(kept)
+            self._steps[key] = _Step(self.fit, self.hold,
+                                     variant.realise(self.channel, self.series, self.seeds),
+                                     self.series, det_sum)
+        return self._steps[key]
+
+    def refit_base(self, kept: list[Candidate]) -> list[Candidate]:
+        """``kept`` with the base model's refit (if kept) fitted again against the other
+        effects: the reduced model of a likelihood-ratio test is refitted, not just
+        shortened. The white level is what trades off most with the other terms (Samsung
+        S5 accelerometer: a flicker kept first took the short-tau excess of the first
+        segment's model, which has no white term, so the base model's refit that followed
+        set white at half of what it sets alone)."""
+        base = next((c for c in kept if c.effect == "base_model"), None)
+        if base is None:
+            return kept
+        rest = [c for c in kept if c is not base]
+        st = self.step(rest)
+        bw, order, white = avarfit.fit_base_model(
+            self.variant(rest)[0].model[self.channel], self.fit.tau_s, self.series.rate_hz,
+            self.fit.real.avar, st.feats.avar.mean(axis=0), st.before.sigma)
+        new = Candidate("base_model", {"bandwidth_hz": bw, "filter_order": order,
+                                       "white": white}, base.n_params, accepted=True)
+        return [new if c is base else c for c in kept]
+
+    def rescore(self, before: list[Candidate], c: Candidate) -> None:
+        """Recompute ``c``'s comparisons as the effect kept after ``before``."""
+        st, after = self.step(before), self.step([*before, c])
+        c.fit, c.step_z, c.drift_t = after.before, after.step_z, after.drift_t
+        c.evidence_closed = st.evidence_closed(c)
+        if st.hold is not None and after.hold is not None:
+            c.holdout = after.hold
+            pb, pa = st.hold.chi2_parts(), c.holdout.chi2_parts()
+            c.holdout_dparts = {k: pb[k] - pa[k] for k in pb}
+            c.holdout_dchi2 = float(sum(c.holdout_dparts.values()))
 
 
-def _realised_step(model: NoiseModel, channel: str, series: Series, seeds: list[int],
-                   fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]) -> _Step:
-    """The step against the model with ``kept`` (realised afresh, same seeds)."""
-    variant, det_sum = _variant_of(model, channel, series, kept)
-    return _Step(fit, hold, variant.realise(channel, series, seeds), series, det_sum)
-
-
-def _refit_base(model: NoiseModel, channel: str, series: Series, seeds: list[int],
-                fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]
-                ) -> list[Candidate]:
-    """``kept`` with the base model's refit (if kept) fitted again against the other
-    effects: the reduced model of a likelihood-ratio test is refitted, not just
-    shortened. The white level is what trades off most with the other terms (Samsung S5
-    accelerometer: a flicker kept first took the short-tau excess of the first segment's
-    model, which has no white term, so the base model's refit that followed set white
-    at half of what it sets alone)."""
-    base = next((c for c in kept if c.effect == "base_model"), None)
-    if base is None:
-        return kept
-    rest = [c for c in kept if c is not base]
-    variant, det_sum = _variant_of(model, channel, series, rest)
-    st = _Step(fit, hold, variant.realise(channel, series, seeds), series, det_sum)
-    bw, order, white = avarfit.fit_base_model(
-        variant.model[channel], fit.tau_s, series.rate_hz, fit.real.avar,
-        st.feats.avar.mean(axis=0), st.before.sigma)
-    new = Candidate("base_model", {"bandwidth_hz": bw, "filter_order": order,
-                                   "white": white}, base.n_params, accepted=True)
-    return [new if c is base else c for c in kept]
-
-
-def _prune(model: NoiseModel, channel: str, series: Series, seeds: list[int],
-           fit: PartSetup, hold: PartSetup | None, kept: list[Candidate]
-           ) -> tuple[list[Candidate], list[Candidate]]:
+def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[Candidate]]:
     """Backward elimination after the forward selection (Efroymson's stepwise method):
     an effect kept early is dropped when, with the effects kept after it, removing it
-    (and refitting the base model's refit, :func:`_refit_base`) raises neither the fit
+    (and refitting the base model's refit, :meth:`_Realiser.refit_base`) raises neither the fit
     part's total chi-squared beyond the likelihood-ratio level FIT_ALPHA nor the held-out
     chi-squared beyond HOLDOUT_ALPHA (its ``n_params`` dof each). A look-alike kept
     first can take part of a later effect's excess (Samsung S5 accelerometer: flicker
@@ -569,17 +588,14 @@ def _prune(model: NoiseModel, channel: str, series: Series, seeds: list[int],
     dropped) and the dropped ones, each with its ``note``."""
     dropped: list[Candidate] = []
     while len(kept) >= 2:
-        full = _realised_step(model, channel, series, seeds, fit, hold, kept)
+        full = r.step(kept)
         if any(c.effect == "base_model" for c in kept):  # the same refit for the full set
-            again = _realised_step(model, channel, series, seeds, fit, hold,
-                                   _refit_base(model, channel, series, seeds, fit, hold, kept))
-            full = min(full, again, key=lambda x: x.chi2())
+            full = min(full, r.step(r.refit_base(kept)), key=lambda x: x.chi2())
         worst: tuple[float, Candidate, str] | None = None
         reduced: dict[int, list[Candidate]] = {}
         for c in kept:
-            reduced[id(c)] = _refit_base(model, channel, series, seeds, fit, hold,
-                                         [x for x in kept if x is not c])
-            st = _realised_step(model, channel, series, seeds, fit, hold, reduced[id(c)])
+            reduced[id(c)] = r.refit_base([x for x in kept if x is not c])
+            st = r.step(reduced[id(c)])
             rise = c.unique_chi2 = st.chi2() - full.chi2()
             need = float(chi2_dist.isf(FIT_ALPHA, c.n_params))
             if rise > need:
@@ -603,7 +619,7 @@ def _prune(model: NoiseModel, channel: str, series: Series, seeds: list[int],
         kept = reduced[id(c)]
         at = min([at] + [i for i, x in enumerate(kept) if x.effect == "base_model"])
         for i in range(at, len(kept)):
-            _rescore(model, channel, series, seeds, fit, hold, kept[:i], kept[i])
+            r.rescore(kept[:i], kept[i])
     if len(kept) == 1:
         kept[0].unique_chi2 = math.nan
     return kept, dropped
@@ -623,21 +639,6 @@ def _main_effect(kept: list[Candidate]) -> Candidate | None:
         return main[0] if main else None
     return min(main, key=lambda c: (float(chi2_dist.logsf(c.unique_chi2, c.n_params)),
                                     main.index(c)))
-
-
-def _rescore(model: NoiseModel, channel: str, series: Series, seeds: list[int],
-             fit: PartSetup, hold: PartSetup | None, before: list[Candidate],
-             c: Candidate) -> None:
-    """Recompute ``c``'s comparisons as the effect kept after ``before``."""
-    st = _realised_step(model, channel, series, seeds, fit, hold, before)
-    after = _realised_step(model, channel, series, seeds, fit, hold, [*before, c])
-    c.fit, c.step_z, c.drift_t = after.before, after.step_z, after.drift_t
-    c.evidence_closed = st.evidence_closed(c)
-    if st.hold is not None and after.hold is not None:
-        c.holdout = after.hold
-        pb, pa = st.hold.chi2_parts(), c.holdout.chi2_parts()
-        c.holdout_dparts = {k: pb[k] - pa[k] for k in pb}
-        c.holdout_dchi2 = float(sum(c.holdout_dparts.values()))
 
 
 def diagnose_channel(model: NoiseModel, channel: str, series: Series,
@@ -719,11 +720,11 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     assert first is not None
     pruned: list[Candidate] = []
     if len(kept) >= 2:
-        kept, pruned = _prune(model, channel, series, seeds, fit, hold, kept)
+        realiser = _Realiser(model, channel, series, seeds, fit, hold)
+        kept, pruned = _prune(realiser, kept)
         if pruned:
-            residual = _realised_step(model, channel, series, seeds, fit, hold,
-                                      kept).significant
-            variant = _variant_of(model, channel, series, kept)[0]
+            residual = realiser.step(kept).significant
+            variant = realiser.variant(kept)[0]
             rep_now = [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
                        for rs, rep in rep_setups]
 
