@@ -375,8 +375,11 @@ def test_a_negative_share_reads_as_none_removed() -> None:
 
 
 def test_report_params_of_a_base_model_without_filter() -> None:
-    from imubench.gap.report import _fmt
-    assert _fmt({"bandwidth_hz": 0.0, "filter_order": 1, "white": 0.0021}) == (
-        "no output filter, white=0.0021")
-    assert _fmt({"bandwidth_hz": 4.28, "filter_order": 2, "white": 0.0021}) == (
-        "bandwidth_hz=4.28, filter_order=2, white=0.0021")
+    """The report's candidate table uses the explanation's parameter text."""
+    from imubench.gap.explain import params_text
+    units = gap_units(["gx"])["params"]["gx"]  # type: ignore[index]
+    assert params_text({"bandwidth_hz": 0.0, "filter_order": 1, "white": 0.0021},
+                       units) == "no output filter, white = 0.0021 dps/sqrt(Hz)"
+    assert params_text({"bandwidth_hz": 4.28, "filter_order": 2, "white": 0.0021},
+                       units) == ("bandwidth_hz = 4.28 Hz, filter_order = 2, "
+                                  "white = 0.0021 dps/sqrt(Hz)")

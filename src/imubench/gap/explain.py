@@ -50,7 +50,7 @@ def _valued(p: dict[str, Any], key: str, units: Mapping[str, str] | None,
     return _f(p.get(key), digits) + ("" if unit == "1" else f" {unit}")
 
 
-def _params(p: dict[str, Any], units: Mapping[str, str] | None) -> str:
+def params_text(p: dict[str, Any], units: Mapping[str, str] | None) -> str:
     """``key = value unit, ...`` of an effect's parameters (no filter: said so)."""
     out = []
     for k, v in p.items():
@@ -300,11 +300,11 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if not kept:
         return []
     h = c.get("holdout") or {}
-    dropped = [f"{d['effect']} ({_params(d['params'], units)}), {d['reason']}"
+    dropped = [f"{d['effect']} ({params_text(d['params'], units)}), {d['reason']}"
                for d in c.get("dropped", [])]
     parts = []
     for i, k in enumerate(kept, 1):
-        txt = (f"{i}. {k['effect']} ({_params(k['params'], units)}): fit-part gap "
+        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units)}): fit-part gap "
                f"{_f(k['gap_after'])}")
         if k.get("holdout_gap_after") is not None:
             txt += f", held-out gap {_f(k['holdout_gap_after'])}"
@@ -393,7 +393,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
             after += (f" (named as the verdict: taking it out of the kept effects raises the "
                       f"fit part's chi-squared by {w['chi2_rise_without']:.1f}, against "
                       + ", ".join(rises) + ")")
-        txt = f"Verdict {verdict} ({_params(w['params'], units)}){after}: {share}"
+        txt = f"Verdict {verdict} ({params_text(w['params'], units)}){after}: {share}"
         if "score" in w:
             txt += f"; score {w['score']:.1f}"
         r = next((e for e in effects if e["effect"] != verdict), None)

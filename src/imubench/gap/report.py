@@ -23,7 +23,7 @@ from imubench.batch import UNITS
 from imubench.gap.curves import Comparison
 from imubench.gap.diagnose import ChannelDiagnosis
 from imubench.gap.errors import GapError
-from imubench.gap.explain import explain_channel
+from imubench.gap.explain import explain_channel, params_text
 
 
 def _adev_panel(ax: Any, title: str, before: Comparison, after: Comparison | None,
@@ -158,9 +158,11 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
         plt.close(fig)
         c = result["channels"][ch]
         kept = [k["effect"] for k in c.get("kept", [])]
+        units = result["units"]["params"][ch]
         eff_rows = "".join(
-            f"<tr><td>{html.escape(e['effect'])}</td><td>{html.escape(_fmt(e['params']))}"
-            f"</td><td>{_num(e['gap_after'])}</td><td>{_num(e.get('holdout_gap_after'))}"
+            f"<tr><td>{html.escape(e['effect'])}</td>"
+            f"<td>{html.escape(params_text(e['params'], units))}</td>"
+            f"<td>{_num(e['gap_after'])}</td><td>{_num(e.get('holdout_gap_after'))}"
             f"</td><td>{_num(e['score'])}</td><td>{_kept_cell(e, kept)}</td></tr>"
             for e in c["effects"])
         hold = c.get("holdout") or {}
@@ -170,8 +172,7 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
             f"held out {_num(hold.get('gap_before'))} &rarr; {_num(hold.get('gap_after'))}; "
             f"regions: {html.escape(_regions(c['regions']))}</p>"
             "<ul>" + "".join(f"<li>{html.escape(s)}</li>"
-                             for s in explain_channel(c, result["realisations"],
-                                                      result["units"]["params"][ch]))
+                             for s in explain_channel(c, result["realisations"], units))
             + "</ul>"
             f"<img src='{ch}_adev.png'><img src='{ch}_evidence.png'>"
             "<table border=1><tr><th>effect</th><th>params</th><th>gap after</th>"
@@ -191,15 +192,6 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
 
 def _num(v: Any) -> str:
     return "-" if v is None else f"{v:.3g}"
-
-
-def _fmt(p: dict[str, float]) -> str:
-    """key=value pairs; a zero bandwidth reads 'no output filter' (its order means
-    nothing then)."""
-    if p.get("bandwidth_hz") == 0:
-        p = {k: v for k, v in p.items() if k not in ("bandwidth_hz", "filter_order")}
-        return ", ".join(["no output filter", *(f"{k}={v:.3g}" for k, v in p.items())])
-    return ", ".join(f"{k}={v:.3g}" for k, v in p.items())
 
 
 def _regions(regs: list[dict[str, Any]]) -> str:
