@@ -481,6 +481,13 @@ them too. Deterministic or recording-bound effects (a sine, a step, a ramp, temp
 outliers) and the base model's refit are not checked on replicates."""
 
 
+def _on_replicates(variant: Variant, channel: str, reps: list[tuple[PartSetup, Series]],
+                   seeds: list[int]) -> list[Comparison]:
+    """Each replicate recording against realisations of ``variant`` over it."""
+    return [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
+            for rs, rep in reps]
+
+
 def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
                        reps: list[tuple[PartSetup, Series]], now: list[Comparison],
                        seeds: list[int]) -> str:
@@ -491,9 +498,7 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
     kept in :attr:`Candidate.replicates` (reused when it is kept)."""
     if c.effect not in REPLICATE_EFFECTS:
         return ""
-    v = variant.add(channel, c)
-    c.replicates = [rs.compare(rs.sim_features(v.realise(channel, rep, seeds)))
-                    for rs, rep in reps]
+    c.replicates = _on_replicates(variant.add(channel, c), channel, reps, seeds)
     for (_, rep), b, a in zip(reps, now, c.replicates, strict=True):
         if a.gap_excess - b.gap_excess > b.gap_null:
             return (f"replicate {rep.name} does not share it: its systematic Allan gap "
@@ -666,8 +671,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     det_sum: np.ndarray | float = 0.0
     sims = simulate_channel(model, channel, series, seeds)
     rep_setups = [(PartSetup(r, cm0), r) for r in replicates or []]
-    rep_before = [rs.compare(rs.sim_features(simulate_channel(model, channel, r, seeds)))
-                  for rs, r in rep_setups]
+    rep_before = _on_replicates(variant, channel, rep_setups, seeds)
     rep_now = rep_before
 
     first: _Step | None = None
@@ -712,9 +716,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             det_sum = det_sum + det
         variant = variant.add(channel, chosen)
         sims = chosen_sims
-        rep_now = chosen.replicates or [
-            rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
-            for rs, rep in rep_setups]
+        rep_now = chosen.replicates or _on_replicates(variant, channel, rep_setups, seeds)
     else:
         residual = _Step(fit, hold, sims, series, det_sum).significant
     assert first is not None
@@ -724,9 +726,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         kept, pruned = _prune(realiser, kept)
         if pruned:
             residual = realiser.step(kept).significant
-            variant = realiser.variant(kept)[0]
-            rep_now = [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
-                       for rs, rep in rep_setups]
+            rep_now = _on_replicates(realiser.variant(kept)[0], channel, rep_setups, seeds)
 
     if not first.significant:
         verdict, reason = "none", "within the scatter of the realisations"
