@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from lsm6ds_sim.model import NoiseModel
 from lsm6ds_sim.physics import simulate
+from scipy.signal import lfilter
 
 from imubench.gap import GapOptions, Series, diagnose_channel
 from imubench.gap.background import Background, from_halves, from_replicates, within
@@ -22,12 +23,12 @@ from imubench.gap.evidence import (
     drift_statistic,
     fit_bias_step,
     fit_resonance,
-    smoothed_kurtosis,
     step_statistic,
 )
 from imubench.gap.explain import explain_channel
 from imubench.gap.extras import increment
 from imubench.gap.limits import detection_limits, inject, start_sizes
+from imubench.gap.two_level import detrend_span, two_level_llr
 
 RATE = 104.0
 WHITE = 0.004
@@ -81,9 +82,38 @@ def test_telegraph_is_two_level_and_gaussian_markov_is_not() -> None:
     w = 0.025 * math.sqrt(1 - phi * phi) * rng.standard_normal(n)
     for i in range(1, n):
         ar[i] = phi * ar[i - 1] + w[i]
-    win = int(2.5 * RATE)
-    assert smoothed_kurtosis(tel + white(rng, n), win) < -1.0
-    assert abs(smoothed_kurtosis(ar + white(rng, n), win)) < 0.5
+    # the same autocovariance, so only the level distribution can tell them apart
+    llr_tel = two_level_llr(tel + white(rng, n), RATE, 0.05, 10.0, 3600.0)
+    llr_ar = two_level_llr(ar + white(rng, n), RATE, 0.05, 10.0, 3600.0)
+    assert llr_tel > 1000.0 and llr_ar < -1000.0
+
+
+def test_two_level_ratio_refers_the_levels_to_a_local_mean_under_a_wandering_background(
+) -> None:
+    """Under a random walk the levels are referred to a moving mean a few dwells long
+    (the span :func:`detrend_span` picks from the background's Allan variance); over
+    white noise alone, to the record's mean. The ratio keeps telegraph and Markov far
+    apart both ways."""
+    tau = 2.0 ** np.arange(-6, 11)
+    avar_white = WHITE**2 / tau
+    avar_walk = avar_white + (2e-3) ** 2 * tau / 3.0  # IEEE 952 random walk K^2 tau / 3
+    assert detrend_span(0.05, 10.0, tau, avar_white, 3600.0) == 3600.0
+    span = detrend_span(0.05, 10.0, tau, avar_walk, 3600.0)
+    assert 20.0 <= span <= 200.0
+    rng = np.random.default_rng(5)
+    n = int(3600 * RATE)
+    walk = np.cumsum(2e-3 / math.sqrt(RATE) * rng.standard_normal(n))
+    tel = increment("telegraph", {"telegraph_step": 0.05, "telegraph_dwell_s": 10.0}, n,
+                    RATE, 12)
+    phi = math.exp(-1.0 / (RATE * 5.0))
+    ar = lfilter([math.sqrt(1 - phi * phi) * 0.025], [1.0, -phi], rng.standard_normal(n))
+    local = [two_level_llr(x + walk + white(rng, n), RATE, 0.05, 10.0, span)
+             for x in (tel, ar)]
+    whole = [two_level_llr(x + walk + white(rng, n), RATE, 0.05, 10.0, 3600.0)
+             for x in (tel, ar)]
+    assert local[0] - local[1] > 10000.0
+    assert local[0] - local[1] > whole[0] - whole[1]
+    assert math.isnan(two_level_llr(np.zeros(10), RATE, 0.05, 10.0, 100.0))
 
 
 def test_telegraph_is_named_only_when_the_amplitudes_favour_two_levels() -> None:

@@ -21,6 +21,7 @@ from scipy.stats import chi2 as chi2_dist
 from imubench.gap import avarfit, evidence, extras
 from imubench.gap.curves import Comparison, SimFeatures, line_segment, t_threshold
 from imubench.gap.parts import PartSetup, Series, simulate_channel
+from imubench.gap.two_level import detrend_span
 from imubench.noisefit.spectral_line import PEAK_MIN_BINS, SCAN_LOW_FRACTION
 
 EFFECTS: tuple[str, ...] = (
@@ -104,7 +105,9 @@ class Candidate:
     drift_t: float = float("nan")
     """Whole-record drift t after removing this effect's deterministic part."""
     shape_z: float = float("nan")
-    """Smoothed-kurtosis statistic (telegraph against Markov), NaN for other effects."""
+    """Two-level log-likelihood ratio of the real fit part against this candidate's
+    realisations (:func:`imubench.gap.two_level.two_level_llr`, telegraph against Markov),
+    as a z; NaN for other effects."""
     holdout_dchi2: float = float("nan")
     """Held-out chi-squared before minus after adding the effect
     (:meth:`imubench.gap.curves.Comparison.chi2_check`)."""
@@ -333,7 +336,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
             if tc * MARKOV_SPAN <= fit.tau_s[-1] and markov_dominates(
                     sg, tc, fit.tau_s, model_avar):
-                ev["shape_window"] = max(1, round(0.5 * tc * s.rate_hz))
+                ev["two_level"] = (2.0 * sg, 2.0 * tc, detrend_span(
+                    2.0 * sg, 2.0 * tc, fit.tau_s, model_avar, len(s.y) / s.rate_hz))
                 if eff == "markov":
                     cands.append(Candidate(eff, {"markov_sigma": sg, "markov_tau": tc}, 2))
                 else:

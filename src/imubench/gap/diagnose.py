@@ -62,6 +62,7 @@ from imubench.gap.candidates import (
 from imubench.gap.curves import Comparison, stat_fired, z_against
 from imubench.gap.errors import GapError
 from imubench.gap.parts import PartSetup, Series, seeds_of, simulate_channel
+from imubench.gap.two_level import two_level_llr as llr
 
 MIN_CLOSURE = 1.0 / 3.0
 """Share of the significant excess chi-squared (over the taus, bands and statistics that
@@ -81,8 +82,8 @@ HOLDOUT_ALPHA = 0.05
 """Level of the held-out check: the held-out chi-squared must fall by more than
 ``chi2.isf(HOLDOUT_ALPHA, n_params)``."""
 TWO_LEVEL_MARGIN = float(chi2_dist.isf(0.05, 1))
-"""How much better (in ``shape_z^2``, i.e. -2 ln of the likelihood ratio of the two
-amplitude distributions) the telegraph's shape must fit than the Markov's before a
+"""How much better (in ``shape_z^2`` of the two-level likelihood ratio against each
+candidate's realisations) the telegraph's shape must fit than the Markov's before a
 telegraph is named (:func:`_shape_scores`): the 5 % level of chi-squared with 1 dof."""
 NOISE_KEYS = ("white", "flicker", "random_walk", "quantization", "markov_sigma",
               "output_white", "resonance_height")
@@ -335,10 +336,11 @@ def _cand_chi2(c: Candidate) -> float:
 def _shape_scores(cands: list[Candidate]) -> None:
     """Add the amplitude-shape term to the Markov and telegraph scores.
 
-    The two have the same Allan curve (:mod:`imubench.gap.extras`); only the smoothed
-    kurtosis tells them apart. Each gets ``shape_z^2`` minus the smaller of the two, so
-    the one that matches the amplitude distribution keeps its score and the other one
-    pays the difference (the other candidates are not compared on this statistic).
+    The two have the same Allan curve (:mod:`imubench.gap.extras`); only the distribution
+    of the levels tells them apart (:mod:`imubench.gap.two_level`). Each gets
+    ``shape_z^2`` minus the smaller of the two, so the one that matches the level
+    distribution keeps its score and the other one pays the difference (the other
+    candidates are not compared on this statistic).
 
     Their realisations have the same AVAR and spectrum, so the rest of their scores
     differs only by the chance of the draws; the name between them is the amplitude
@@ -408,9 +410,9 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
     best: dict[int, np.ndarray] = {}
-    shape_w = ev.get("shape_window")
-    shape_real = (evidence.smoothed_kurtosis(fit.series.y, shape_w)
-                  if shape_w is not None else math.nan)
+    two_level = ev.get("two_level")
+    shape_real = (llr(fit.series.y, rate, *two_level) if two_level is not None
+                  else math.nan)
     for c in cands:
         cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
                             local_sum)
@@ -419,9 +421,9 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
         det = deterministic(c.effect, c.params, cm, series)
         c.drift_t = (evidence.drift_statistic(series.y - det_sum - det, rate)[0]
                      if det is not None else st.drift_t)
-        if c.effect in ("markov", "telegraph") and shape_w is not None:
+        if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
-                [evidence.smoothed_kurtosis(s[:n_fit], shape_w) for s in cs]))
+                [llr(s[:n_fit], rate, *two_level) for s in cs]))
         c.score = _cand_chi2(c) + penalty * c.n_params
         c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
         c.evidence_closed = st.evidence_closed(c)

@@ -241,21 +241,6 @@ def step_persistence(y: np.ndarray, rate_hz: float, step: StepFit) -> float:
     return float((np.median(after) - np.median(before)) / step.step_size)
 
 
-def smoothed_kurtosis(y: np.ndarray, window: int) -> float:
-    """Excess kurtosis of the means of consecutive windows of ``window`` samples.
-
-    Random telegraph noise (two levels) has excess kurtosis -2 when it dominates the
-    smoothed series; Gaussian (Markov, white) noise 0 (the fourth standardised moment
-    minus 3; e.g. Kendall & Stuart, vol. 1, sec. 3.31)."""
-    m = block_means_of(y, max(1, window))
-    m = m[np.isfinite(m)]
-    if m.size < 16:
-        return float("nan")
-    c = m - m.mean()
-    v = float(np.mean(c * c))
-    return float(np.mean(c**4) / (v * v) - 3.0) if v > 0 else float("nan")
-
-
 @dataclass(frozen=True)
 class ResonanceFit:
     resonance_freq_hz: float
