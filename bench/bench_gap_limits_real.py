@@ -62,6 +62,15 @@ generators. Since then several gap rules were made from S5 cases (docs/gap.md,
 first static segment (``../shared/reference/imu-real/cats-tag-temperature/``, 1 Hz,
 25.6 h, an MPU-9250-class part, gyro LSB 0.0305 dps), cut into three 8.5 h segments.
 ``--quick``: gx and the second segment only.
+
+``--pairs temperature+sine,ramp+sine,...`` (acceptance 3, "two simultaneous effects:
+both named, held-out gap closed >= 80 % after both"): on each test segment, each pair
+whose two effects have a stated limit is added at twice each limit (the same generators,
+independent draws) and diagnosed once. Right = both effects in ``kept`` AND the held-out
+half's systematic Allan-curve gap closed by at least 80 % (1 - excess after / before,
+when it exceeds 0.05 before; else the held-out excess chi-squared closed, as
+``bench_gap_acceptance.py`` scores its temperature + sine case). The single-effect
+cases are not run in this mode (``--effects`` still lists the limits searched).
 """
 
 from __future__ import annotations
@@ -104,6 +113,12 @@ SEGMENTS = 3
 FACTOR = 2.0
 """Injected size as a multiple of the stated detection limit (the issue's ">= 2x")."""
 NULL_OK = ("none", "base_model")
+PAIR_CLOSED = 0.8
+"""Held-out gap share the two effects of a pair must close together (acceptance 3)."""
+DEFAULT_PAIRS = ("temperature+sine", "ramp+sine", "bias_step+temperature",
+                 "random_walk+sine", "flicker+ramp")
+"""Pairs of ``--pairs`` by default: the issue's temperature + sine, and four pairs that
+mix a deterministic with a random or a local effect (chosen before any was run)."""
 KURT_Z = 5.0
 """Standard errors of excess kurtosis that count as heavy tails in the data."""
 SEED = 7
@@ -190,11 +205,20 @@ class Case:
     in_data: bool = False
     check: str = ""
     no_limit: bool = False
+    closed: float = float("nan")
+    """Held-out gap closed by the kept effects (scored for pairs)."""
+
+    @property
+    def pair(self) -> tuple[str, ...]:
+        return tuple(self.effect.split("+")) if "+" in self.effect else ()
 
     @property
     def right(self) -> bool:
         if self.effect == "null":
             return self.verdict in NULL_OK or self.in_data
+        if self.pair:
+            return (not self.no_limit and all(e in self.kept for e in self.pair)
+                    and self.closed >= PAIR_CLOSED)
         return not self.no_limit and self.verdict == self.effect
 
     @property
@@ -236,13 +260,51 @@ def diagnose(model, ch: str, series: Series, seed: int) -> tuple[object, float]:
 def line(c: Case) -> str:
     size = "" if c.size is None else f"{c.size:.3g}"
     ok = "OK " if c.right else "BAD"
+    closed = f" closed={c.closed:5.2f}" if c.pair else ""
     return (f"  {c.channel} seg{c.segment} {c.effect:11s} size={size:9s} "
-            f"verdict={c.verdict:11s} kept={c.kept} perr={c.param_error:5.2f} {ok} "
+            f"verdict={c.verdict:11s} kept={c.kept}{closed} perr={c.param_error:5.2f} {ok} "
             f"({c.seconds:.0f} s) reason={c.reason!r}{' ' + c.check if c.check else ''}")
 
 
+def held_out_closed(d) -> float:
+    """Held-out gap closed by the kept effects (as ``bench_gap_acceptance.run``)."""
+    h = d.to_dict()["holdout"] or {}
+    if (h.get("gap_excess_before") or 0.0) > 0.05:
+        return 1.0 - (h["gap_excess_after"] or 0.0) / h["gap_excess_before"]
+    if h.get("chi2_closed") is not None and d.kept:
+        return float(h["chi2_closed"])
+    return float("nan")
+
+
+def run_pairs(ch: str, ci: int, seg: int, model, bg: Series, lim: dict,
+              pairs: tuple[str, ...]) -> list[Case]:
+    """Each pair at twice each effect's stated limit, added to the test segment."""
+    n, fs, temp = len(bg.y), bg.rate_hz, bg.temp_c
+    assert temp is not None
+    out: list[Case] = []
+    for j, pair in enumerate(pairs):
+        sizes = [lim["effects"].get(e, {}).get("smallest_identified") for e in pair.split("+")]
+        if any(v is None for v in sizes):
+            c = Case(ch, seg, pair, None, "-", no_limit=True, reason="a limit not found")
+            print(line(c), flush=True)
+            out.append(c)
+            continue
+        add = np.zeros(n)
+        for k, (eff, lv) in enumerate(zip(pair.split("+"), sizes, strict=True)):
+            rng = np.random.default_rng([INJECT_SEED, ci, seg, 100 + j, k])
+            add += injection(rng, n, fs, eff, FACTOR * lv, temp)[0]
+        d, sec = diagnose(model, ch, Series(bg.y + add, temp, fs, bg.name),
+                          INJECT_SEED % 1000 + 10 * seg + 50 + j)
+        c = Case(ch, seg, pair, None, d.verdict, [k.effect for k in d.kept], d.reason,
+                 seconds=sec, closed=held_out_closed(d))
+        print(line(c), flush=True)
+        out.append(c)
+    return out
+
+
 def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
-                effects: tuple[str, ...]) -> tuple[list[Case], dict]:
+                effects: tuple[str, ...], pairs: tuple[str, ...] = ()
+                ) -> tuple[list[Case], dict]:
     n = len(y)
     temp = temperature_history(n, fs)
     bg = Series(y, temp, fs, f"s5:{ch}:seg{seg}")
@@ -274,6 +336,8 @@ def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
             print(f"  {ch} seg{seg} {e}: no limit measured (not in the limit search's "
                   "output)", flush=True)
 
+    if pairs:
+        return out + run_pairs(ch, ci, seg, model, bg, lim, pairs), {"seconds": lim_s, **lim}
     for j, eff in enumerate(effects):
         lv = lim["effects"].get(eff, {}).get("smallest_identified")
         if lv is None:
@@ -299,9 +363,30 @@ def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
     return out, {"seconds": lim_s, **lim}
 
 
+def summarise_pairs(cases: list[Case]) -> None:
+    print(f"\n## two effects at once, each at {FACTOR:g}x its limit (right: both kept and the "
+          f"held-out gap closed >= {PAIR_CLOSED:.0%})")
+    print("  | pair | right | both kept | closed >= 80 % | no limit | median closed |")
+    for pair in dict.fromkeys(c.effect for c in cases):
+        rs = [c for c in cases if c.effect == pair]
+        both = [c for c in rs if all(e in c.kept for e in c.pair)]
+        cl = [c.closed for c in rs if math.isfinite(c.closed)]
+        print(f"  | {pair} | {sum(c.right for c in rs)}/{len(rs)} | {len(both)}/{len(rs)} | "
+              f"{sum(c.closed >= PAIR_CLOSED for c in rs)}/{len(rs)} | "
+              f"{sum(c.no_limit for c in rs)} | {np.median(cl) if cl else math.nan:.0%} |")
+    right = sum(c.right for c in cases)
+    print(f"  right {right}/{len(cases)} ({right / max(1, len(cases)):.0%}); misses:")
+    for c in cases:
+        if not c.right:
+            print("  " + line(c))
+
+
 def summarise(cases: list[Case], limits: dict, effects: tuple[str, ...], wall: float
               ) -> None:
-    eff = [c for c in cases if c.effect != "null"]
+    pairs = [c for c in cases if c.pair]
+    if pairs:
+        summarise_pairs(pairs)
+    eff = [c for c in cases if c.effect != "null" and not c.pair]
     nul = [c for c in cases if c.effect == "null"]
     print("\n## limits (smallest size identified 3/3; units of the channel: dps or g, per "
           "s, per sqrt(s), per degC)")
@@ -363,9 +448,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="gx and the second segment only")
     ap.add_argument("--axes", default="gx,gy,gz", help="comma list of gx,gy,gz,ax,ay,az")
-    ap.add_argument("--effects", default=",".join(LIMIT_EFFECTS),
-                    help="comma list among " + ",".join(LIMIT_EFFECTS))
+    ap.add_argument("--effects", default=None,
+                    help="comma list among " + ",".join(LIMIT_EFFECTS) + " (default all; "
+                         "with --pairs, those of the pairs)")
     ap.add_argument("--json", default=None, help="write the cases and limits here")
+    ap.add_argument("--pairs", nargs="?", const=",".join(DEFAULT_PAIRS), default="",
+                    help="two effects at once (acceptance 3): comma list of a+b; without "
+                         "a value " + ",".join(DEFAULT_PAIRS))
     ap.add_argument("--exclude", default="",
                     help="comma list of candidate effects left out of every diagnosis and "
                          "limit search (as `imubench gap --effects`); NOT the issue's setting")
@@ -379,8 +468,15 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     axes = ("gx",) if args.quick else tuple(a for a in args.axes.split(",") if a)
     bad = [a for a in axes if a not in CHANNELS]
-    effects = tuple(e for e in args.effects.split(",") if e)
+    effects = tuple(e for e in (args.effects or "").split(",") if e)
     bad += [e for e in effects if e not in LIMIT_EFFECTS]
+    pairs = tuple(p for p in args.pairs.split(",") if p)
+    bad += [p for p in pairs if len(p.split("+")) != 2
+            or any(e not in LIMIT_EFFECTS for e in p.split("+"))]
+    if pairs:  # the limits of every effect of a pair are searched
+        effects = tuple(dict.fromkeys(effects + tuple(e for p in pairs for e in p.split("+"))))
+    elif not effects:
+        effects = LIMIT_EFFECTS
     global CANDIDATES
     drop = [e for e in args.exclude.split(",") if e]
     bad += [e for e in drop if e not in EFFECTS]
@@ -392,7 +488,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{platform.node()} {platform.machine()} cpus={os.cpu_count()} "
           f"python {sys.version.split()[0]} load {os.getloadavg()[0]:.1f} axes={axes} "
           f"segments={segs} effects={effects} excluded={drop or 'none'} "
-          f"recording={args.recording}", flush=True)
+          f"recording={args.recording} pairs={pairs or 'none'}", flush=True)
     t_all = time.perf_counter()
     cases: list[Case] = []
     limits: dict = {}
@@ -409,7 +505,7 @@ def main(argv: list[str] | None = None) -> int:
             if getattr(cm, k)), flush=True)
         for seg in segs:
             cs, lim = run_segment(ch, CHANNELS.index(ch), seg, model,
-                                  y[seg * n:(seg + 1) * n], fs, effects)
+                                  y[seg * n:(seg + 1) * n], fs, effects, pairs)
             cases += cs
             limits[(ch, seg)] = lim
     if args.json:

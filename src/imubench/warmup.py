@@ -4,7 +4,8 @@
 user with the service's ``NUMBA_CACHE_DIR``; docs/service.md) runs the streaming engine's
 warm-up (:func:`imubench.stats.streaming.warm_up`: both input kinds, both memory modes,
 every streaming statistic) and every batch statistic on tiny phase and frequency data,
-with and without gaps (what ``fit``, ``allan``, ``report`` and ``gap`` run). numba writes
+with and without gaps (what ``fit``, ``allan``, ``report`` and ``gap`` run), and the
+gap's two-level likelihood ratio. numba writes
 the compiled code to its cache: ``NUMBA_CACHE_DIR`` when set, else ``__pycache__`` beside
 the modules; later processes load it instead of compiling.
 """
@@ -20,6 +21,7 @@ import numpy as np
 
 def warm_numba_cache() -> float:
     """Run every kernel once on tiny inputs; returns the seconds it took."""
+    from imubench.gap.two_level import two_level_llr
     from imubench.stats import STATISTICS, compute
     from imubench.stats.streaming import warm_up
 
@@ -33,6 +35,7 @@ def warm_numba_cache() -> float:
         for series in (y, y_gaps):
             compute(stat, series, 10.0, "freq", "octave")
         compute(stat, np.cumsum(y), 10.0, "phase", "octave")
+    two_level_llr(y_gaps, 10.0, 1.0, 5.0, 20.0)  # gap: telegraph against Markov
     return time.perf_counter() - t0
 
 

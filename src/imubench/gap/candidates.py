@@ -105,7 +105,7 @@ class Candidate:
     drift_t: float = float("nan")
     """Whole-record drift t after removing this effect's deterministic part."""
     shape_z: float = float("nan")
-    """Two-level log-likelihood ratio of the real fit part against this candidate's
+    """Two-level log-likelihood ratio of the whole real record against this candidate's
     realisations (:func:`imubench.gap.two_level.two_level_llr`, telegraph against Markov),
     as a z; NaN for other effects."""
     holdout_dchi2: float = float("nan")

@@ -410,9 +410,10 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
     best: dict[int, np.ndarray] = {}
+    # telegraph against Markov on the whole record: the held-out part's Allan and
+    # spectral check cannot tell the two apart, so this takes nothing from that check
     two_level = ev.get("two_level")
-    shape_real = (llr(fit.series.y, rate, *two_level) if two_level is not None
-                  else math.nan)
+    shape_real = llr(series.y, rate, *two_level) if two_level is not None else math.nan
     for c in cands:
         cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
                             local_sum)
@@ -423,7 +424,7 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
                      if det is not None else st.drift_t)
         if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
-                [llr(s[:n_fit], rate, *two_level) for s in cs]))
+                [llr(s, rate, *two_level) for s in cs]))
         c.score = _cand_chi2(c) + penalty * c.n_params
         c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
         c.evidence_closed = st.evidence_closed(c)
