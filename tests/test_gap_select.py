@@ -789,3 +789,20 @@ def test_evidence_plot_marks_a_sine_kept_after_the_verdict() -> None:
     assert _evidence(ax, d) == "Welch spectrum (fit part)"
     assert any(ln.get_label() == "line 3.3 Hz" for ln in ax.get_lines())
     plt.close(fig)
+
+
+def test_temperature_candidate_adds_only_what_the_model_lacks() -> None:
+    """A model that already has 0.01 dps/degC, a record with 0.02: the candidate is the
+    total 0.02, not 0.01 + 0.02 (the regression runs on the record less the model's own
+    response; before, the model's coefficient was counted twice and the verdict was
+    random_walk)."""
+    rng = np.random.default_rng(21)
+    n = int(3600 * RATE)
+    t = np.arange(n) / RATE
+    temp = 25.0 + 3.0 * np.sin(2 * np.pi * t / 1600) + np.sin(2 * np.pi * t / 470) + t / 3600
+    y = white(rng, n) + 0.02 * (temp - 25.0)
+    model = NoiseModel.single_term("gx", white=WHITE, temp_coeff=0.01)
+    d = diagnose_channel(model, "gx", Series(y, temp, RATE, "t"),
+                         GapOptions(seed=1, realisations=10))
+    assert d.verdict == "temperature"
+    assert d.kept[0].params["temp_coeff"] == pytest.approx(0.02, rel=0.05)

@@ -372,7 +372,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             if s.has_temperature and (abs(before.temp_z) > gate
                                       or abs(before.temp_level_z) > gate):
                 assert s.temp_c is not None
-                tf = evidence.fit_temperature(s.y, s.temp_c, s.rate_hz, cm.temp_ref)
+                # the coefficients the model lacks: the regression of the record less
+                # the model's own temperature response (its realisations carry it)
+                dt = np.nan_to_num(s.temp_c - cm.temp_ref, nan=0.0)
+                tf = evidence.fit_temperature(
+                    s.y - cm.temp_coeff * dt - cm.temp_coeff2 * dt * dt, s.temp_c,
+                    s.rate_hz, cm.temp_ref)
                 if tf is not None:
                     ev["temperature"] = tf
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff
