@@ -303,7 +303,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                    ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
-    ``whole``: the whole record (the bias step is located on it); ``cur``: features of the
+    ``whole``: the whole record less the kept effects' deterministic parts (the bias
+    step is located on it); ``cur``: features of the
     current realisations on the fit part; ``step_fired``: the whole-record step test fired.
     """
     s = fit.series

@@ -40,6 +40,7 @@ step :func:`_prune`); ``base_model`` when only the base model's refit is kept;
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Callable
@@ -258,8 +259,10 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
     return d
 
 
-def step_stats(sims: np.ndarray, rate_hz: float) -> np.ndarray:
-    return np.array([evidence.step_statistic(s, rate_hz)[0] for s in sims])
+def step_stats(sims: np.ndarray, rate_hz: float, det_sum: np.ndarray | float = 0.0
+               ) -> np.ndarray:
+    """The step statistic of each realisation less ``det_sum``."""
+    return np.array([evidence.step_statistic(s - det_sum, rate_hz)[0] for s in sims])
 
 
 class _Step:
@@ -280,8 +283,11 @@ class _Step:
         self.before = fit.compare(self.feats)
         self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
                      if hold is not None else None)
-        self.step_real, _ = evidence.step_statistic(series.y, rate)
-        sim_steps = step_stats(sims, rate)
+        # both on the record and realisations less the kept effects' deterministic parts:
+        # a kept temperature response widens the block means' increments and hid a
+        # second effect's step (CATS gy, bias step + temperature at 2x their limits)
+        self.step_real, _ = evidence.step_statistic(series.y - det_sum, rate)
+        sim_steps = step_stats(sims, rate, det_sum)
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
@@ -405,7 +411,9 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
     n, rate = len(series.y), series.rate_hz
     n_fit = len(fit.series.y)
     cm = variant.model[channel]
-    cands, ev = fit_candidates(cm, fit, series, st.before, st.feats, effects, st.step_fired)
+    whole = series if np.isscalar(det_sum) else dataclasses.replace(
+        series, y=series.y - det_sum)
+    cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects, st.step_fired)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
@@ -418,7 +426,7 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
         cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
                             local_sum)
         c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
-        c.step_z = z_against(st.step_real, step_stats(cs, rate))
+        c.step_z = z_against(st.step_real, step_stats(cs, rate, det_sum))
         det = deterministic(c.effect, c.params, cm, series)
         c.drift_t = (evidence.drift_statistic(series.y - det_sum - det, rate)[0]
                      if det is not None else st.drift_t)
