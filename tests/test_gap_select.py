@@ -806,3 +806,15 @@ def test_temperature_candidate_adds_only_what_the_model_lacks() -> None:
                          GapOptions(seed=1, realisations=10))
     assert d.verdict == "temperature"
     assert d.kept[0].params["temp_coeff"] == pytest.approx(0.02, rel=0.05)
+
+
+def test_two_level_ratio_stays_finite_far_from_both_levels() -> None:
+    """A sample many noise sigmas from both levels (an impulse) gives a finite ratio,
+    not -inf from an underflowed emission."""
+    rng = np.random.default_rng(6)
+    n = int(600 * RATE)
+    tel = increment("telegraph", {"telegraph_step": 1.0, "telegraph_dwell_s": 10.0}, n,
+                    RATE, 13)
+    y = tel + 1e-4 * rng.standard_normal(n)
+    y[n // 2] = 50.0  # exp(-(50 - 1)^2 / (2 noise_var)) underflows
+    assert math.isfinite(two_level_llr(y, RATE, 1.0, 10.0, 600.0))

@@ -55,21 +55,22 @@ def _telegraph_loglik(z: np.ndarray, half_step: float, p_switch: float,
     a0 = 0.5
     a1 = 0.5
     ll = 0.0
-    norm = 1.0 / math.sqrt(2.0 * math.pi * noise_var)
+    log_norm = -0.5 * math.log(2.0 * math.pi * noise_var)
     q = 1.0 - p_switch
     for t in range(z.size):
         x = z[t]
         p0 = a0 * q + a1 * p_switch
         p1 = a0 * p_switch + a1 * q
         if math.isfinite(x):
-            d0 = x + half_step
-            d1 = x - half_step
-            p0 *= norm * math.exp(-0.5 * d0 * d0 / noise_var)
-            p1 *= norm * math.exp(-0.5 * d1 * d1 / noise_var)
+            # emission exponents referred to the larger one: a sample far from both
+            # levels (a switch inside an output filter's memory) must not underflow
+            e0 = -0.5 * (x + half_step) ** 2 / noise_var
+            e1 = -0.5 * (x - half_step) ** 2 / noise_var
+            top = max(e0, e1)
+            p0 *= math.exp(e0 - top)
+            p1 *= math.exp(e1 - top)
             tot = p0 + p1
-            if tot <= 0.0:
-                return -math.inf
-            ll += math.log(tot)
+            ll += math.log(tot) + top + log_norm
             p0 /= tot
             p1 /= tot
         a0 = p0
