@@ -304,7 +304,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
     ``whole``: the whole record less the kept effects' deterministic parts (the bias
-    step is located on it); ``cur``: features of the
+    step is located on it, the temperature response regressed on its fit part, which
+    comes first); ``cur``: features of the
     current realisations on the fit part; ``step_fired``: the whole-record step test fired.
     """
     s = fit.series
@@ -373,12 +374,13 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             if s.has_temperature and (abs(before.temp_z) > gate
                                       or abs(before.temp_level_z) > gate):
                 assert s.temp_c is not None
-                # the coefficients the model lacks: the regression of the record less
-                # the model's own temperature response (its realisations carry it)
+                # the coefficients the model lacks: the regression of the fit part less
+                # the kept effects' deterministic parts (a kept bias step biased it) and
+                # less the model's own temperature response (its realisations carry it)
                 dt = np.nan_to_num(s.temp_c - cm.temp_ref, nan=0.0)
                 tf = evidence.fit_temperature(
-                    s.y - cm.temp_coeff * dt - cm.temp_coeff2 * dt * dt, s.temp_c,
-                    s.rate_hz, cm.temp_ref)
+                    whole.y[:len(s.y)] - cm.temp_coeff * dt - cm.temp_coeff2 * dt * dt,
+                    s.temp_c, s.rate_hz, cm.temp_ref)
                 if tf is not None:
                     ev["temperature"] = tf
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff
