@@ -352,11 +352,12 @@ def _shape_scores(cands: list[Candidate]) -> None:
     differs only by the chance of the draws; the name between them is the amplitude
     distribution's alone: the telegraph is named only when its shape fits better than
     the Markov's by :data:`TWO_LEVEL_MARGIN` in ``shape_z^2``; otherwise the Gaussian
-    process is. Measured (issue 15 blind set): at near-limit sizes both shape z were
-    within 0.8 of zero and the name followed the draws (Markov sigma 0.0018 dps, tau_c
-    5 s, called telegraph); clear blind telegraphs gave -1.5 against -4.1 and 0.5
-    against -3.1; a reviewer's random walk (3e-3 dps/sqrt(s) on an ADIS16405 hour) was
-    named telegraph with 0.6 against -0.8."""
+    process is. Measured with the two-level ratio (issue 15 blind set, near-limit
+    sizes): telegraphs 0.004 dps / 10 s gave Markov z 3.0-3.2 against telegraph z
+    1.3-1.4 (named telegraph) and 1.6 against 0.6 (named markov); Markov processes
+    0.0018 dps / 5 s gave -0.1 to -0.3 against -1.3 to -1.8. With the smoothed kurtosis
+    it replaced, both z were within 0.8 of zero at these sizes and a reviewer's random
+    walk on an ADIS16405 hour was named telegraph (0.6 against -0.8)."""
     pair = [c for c in cands if c.effect in ("markov", "telegraph")
             and math.isfinite(c.shape_z)]
     if len(pair) < 2:
