@@ -130,9 +130,7 @@ class Result:
     verdict: str
     kept: list[str] = field(default_factory=list)
     closed: float = float("nan")
-    """Held-out gap closed by the kept effects: the systematic part (1 - excess after /
-    before) when it exceeds 0.05 before, else the held-out excess chi-squared closed
-    (line, tails, temperature and step effects barely move the Allan curve)."""
+    """Held-out gap closed by the kept effects (:func:`held_out_closed`)."""
     param_error: float = float("nan")
     seconds: float = 0.0
     detail: str = ""
@@ -162,18 +160,38 @@ def fitted_model(y: np.ndarray, fs: float, channel: str) -> NoiseModel:
     return NoiseModel.single_term(channel, **{k: v for k, v in fit.params.items() if v})
 
 
+def held_out_closed(d, null: dict | None = None) -> float:
+    """Held-out gap closed by the kept effects of diagnosis ``d``: the systematic part
+    (1 - excess after / before) when it exceeds 0.05 before, else the held-out excess
+    chi-squared closed (line, tails, temperature and step effects barely move the Allan
+    curve); NaN when neither applies.
+
+    With ``null`` (the same segment's null diagnosis's ``holdout``), the share of the gap
+    the injection ADDED that the kept effects close: the background's own departure
+    from the model (a null that is ``unexplained`` or ``base_model``) is subtracted from
+    before and after, so that what no injected effect could close does not count."""
+    h = d.to_dict()["holdout"] or {}
+    g0 = c0 = 0.0
+    if null:
+        g0 = null.get("gap_excess_before") or 0.0
+        c0 = null.get("chi2_check_before") or 0.0
+    if (h.get("gap_excess_before") or 0.0) - g0 > 0.05:
+        return 1.0 - max(0.0, (h["gap_excess_after"] or 0.0) - g0) / (
+            h["gap_excess_before"] - g0)
+    if null and d.kept and (h.get("chi2_check_before") or 0.0) > c0:
+        return 1.0 - max(0.0, h["chi2_check_after"] - c0) / (h["chi2_check_before"] - c0)
+    if not null and h.get("chi2_closed") is not None and d.kept:
+        return float(h["chi2_closed"])
+    return float("nan")
+
+
 def run(group: str, case: str, bg: str, model: NoiseModel, ch: str, series: Series,
         reps: list[Series] | None = None, truth: dict[str, float] | None = None) -> Result:
     t0 = time.perf_counter()
     d = diagnose_channel(model, ch, series, GapOptions(seed=7, realisations=10), reps)
     out = d.to_dict()
     r = Result(group, case, bg, d.verdict, [k["effect"] for k in out["kept"]],
-               seconds=time.perf_counter() - t0)
-    h = out["holdout"] or {}
-    if (h.get("gap_excess_before") or 0.0) > 0.05:
-        r.closed = 1.0 - (h["gap_excess_after"] or 0.0) / h["gap_excess_before"]
-    elif h.get("chi2_closed") is not None and r.kept:
-        r.closed = h["chi2_closed"]
+               seconds=time.perf_counter() - t0, closed=held_out_closed(d))
     w = d.winner
     check = ""
     if case.startswith("null") and w is not None and w.effect == "resonance":

@@ -98,9 +98,10 @@ from imubench.gap import EFFECTS, MAIN_PARAM, GapOptions, Series, diagnose_chann
 from imubench.gap.limits import LIMIT_EFFECTS, detection_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_gap_acceptance import (  # the textbook generators and the model recipe
+from bench_gap_acceptance import (  # the textbook generators, the model recipe, scoring
     effect_signal,
     fitted_model,
+    held_out_closed,
     temperature_history,
 )
 
@@ -270,28 +271,6 @@ def line(c: Case) -> str:
     return (f"  {c.channel} seg{c.segment} {c.effect:11s} size={size:9s} "
             f"verdict={c.verdict:11s} kept={c.kept}{closed} perr={c.param_error:5.2f} {ok} "
             f"({c.seconds:.0f} s) reason={c.reason!r}{' ' + c.check if c.check else ''}")
-
-
-def held_out_closed(d, null: dict | None = None) -> float:
-    """Held-out gap closed by the kept effects (as ``bench_gap_acceptance.run``).
-
-    With ``null`` (the same segment's null diagnosis's ``holdout``), the share of the gap
-    the injection ADDED that the kept effects close: the background's own departure
-    from the model (a null that is ``unexplained`` or ``base_model``) is subtracted from
-    before and after, so that what no injected effect could close does not count."""
-    h = d.to_dict()["holdout"] or {}
-    g0 = c0 = 0.0
-    if null:
-        g0 = null.get("gap_excess_before") or 0.0
-        c0 = null.get("chi2_check_before") or 0.0
-    if (h.get("gap_excess_before") or 0.0) - g0 > 0.05:
-        return 1.0 - max(0.0, (h["gap_excess_after"] or 0.0) - g0) / (
-            h["gap_excess_before"] - g0)
-    if null and d.kept and (h.get("chi2_check_before") or 0.0) > c0:
-        return 1.0 - max(0.0, h["chi2_check_after"] - c0) / (h["chi2_check_before"] - c0)
-    if not null and h.get("chi2_closed") is not None and d.kept:
-        return float(h["chi2_closed"])
-    return float("nan")
 
 
 def run_pairs(ch: str, ci: int, seg: int, model, bg: Series, lim: dict,

@@ -314,6 +314,14 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     model_avar = cur.avar.mean(axis=0)
     sig = before.sigma
     dof = cur.k - 1
+    markov: tuple[float, float] | None = None  # (sigma, tau_c), shared by the telegraph
+    if {"markov", "telegraph"} & set(effects):
+        sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
+        if tc * MARKOV_SPAN <= fit.tau_s[-1] and markov_dominates(sg, tc, fit.tau_s,
+                                                                  model_avar):
+            markov = sg, tc
+            ev["two_level"] = (2.0 * sg, 2.0 * tc, detrend_span(
+                2.0 * sg, 2.0 * tc, fit.tau_s, model_avar, len(s.y) / s.rate_hz))
     for eff in effects:
         if eff in avarfit.BASES:
             p = avarfit.fit_single(eff, fit.tau_s, fit.real.avar, model_avar, sig)
@@ -334,17 +342,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                                                         ev.get("sine")), model_avar, sig)
             cands.append(Candidate(eff, {"bandwidth_hz": bw, "filter_order": order,
                                          "white": white}, 3))
-        elif eff in ("markov", "telegraph"):
-            sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
-            if tc * MARKOV_SPAN <= fit.tau_s[-1] and markov_dominates(
-                    sg, tc, fit.tau_s, model_avar):
-                ev["two_level"] = (2.0 * sg, 2.0 * tc, detrend_span(
-                    2.0 * sg, 2.0 * tc, fit.tau_s, model_avar, len(s.y) / s.rate_hz))
-                if eff == "markov":
-                    cands.append(Candidate(eff, {"markov_sigma": sg, "markov_tau": tc}, 2))
-                else:
-                    cands.append(Candidate(eff, {"telegraph_step": 2.0 * sg,
-                                                 "telegraph_dwell_s": 2.0 * tc}, 2))
+        elif eff == "markov" and markov is not None:
+            cands.append(Candidate(eff, {"markov_sigma": markov[0], "markov_tau": markov[1]},
+                                   2))
+        elif eff == "telegraph" and markov is not None:
+            cands.append(Candidate(eff, {"telegraph_step": 2.0 * markov[0],
+                                         "telegraph_dwell_s": 2.0 * markov[1]}, 2))
         elif eff == "sine":
             if before.line_z > Z_LINE_CANDIDATE:
                 bin_hz = s.rate_hz / line_segment(len(s.y))

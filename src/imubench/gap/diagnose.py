@@ -283,15 +283,18 @@ class _Step:
         self.before = fit.compare(self.feats)
         self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
                      if hold is not None else None)
-        # both on the record and realisations less the kept effects' deterministic parts:
-        # a kept temperature response widens the block means' increments and hid a
-        # second effect's step (CATS gy, bias step + temperature at 2x their limits)
-        self.step_real, _ = evidence.step_statistic(series.y - det_sum, rate)
+        self.det_sum = det_sum
+        self.residual = series.y - det_sum
+        """The record less the kept effects' deterministic parts."""
+        # the step on the record and realisations less those parts: a kept temperature
+        # response widens the block means' increments and hid a second effect's step
+        # (CATS gy, bias step + temperature at 2x their limits)
+        self.step_real, _ = evidence.step_statistic(self.residual, rate)
         sim_steps = step_stats(sims, rate, det_sum)
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
-        self.drift_t, self.drift_dof = evidence.drift_statistic(series.y - det_sum, rate)
+        self.drift_t, self.drift_dof = evidence.drift_statistic(self.residual, rate)
         self.drift_fired = stat_fired(self.drift_t, Z_DRIFT, False, self.drift_dof)
 
     @property
@@ -402,8 +405,7 @@ def _acceptable(c: Candidate, st: _Step) -> str:
 
 
 def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
-              fit: PartSetup, st: _Step, sims: np.ndarray, det_sum: np.ndarray | float,
-              effects: tuple[str, ...]
+              fit: PartSetup, st: _Step, sims: np.ndarray, effects: tuple[str, ...]
               ) -> tuple[list[Candidate], dict[int, np.ndarray], dict[str, Any]]:
     """Fit, realise and score every candidate of one step.
 
@@ -412,8 +414,7 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
     n, rate = len(series.y), series.rate_hz
     n_fit = len(fit.series.y)
     cm = variant.model[channel]
-    whole = series if np.isscalar(det_sum) else dataclasses.replace(
-        series, y=series.y - det_sum)
+    whole = dataclasses.replace(series, y=st.residual)
     cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects, st.step_fired)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
@@ -427,9 +428,9 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
         cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
                             local_sum)
         c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
-        c.step_z = z_against(st.step_real, step_stats(cs, rate, det_sum))
+        c.step_z = z_against(st.step_real, step_stats(cs, rate, st.det_sum))
         det = deterministic(c.effect, c.params, cm, series)
-        c.drift_t = (evidence.drift_statistic(series.y - det_sum - det, rate)[0]
+        c.drift_t = (evidence.drift_statistic(st.residual - det, rate)[0]
                      if det is not None else st.drift_t)
         if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
@@ -710,7 +711,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         cm = variant.model[channel]
         done = {c.effect for c in kept}
         ranked, best_sims, ev = _evaluate(
-            variant, channel, series, seeds, fit, st, sims, det_sum,
+            variant, channel, series, seeds, fit, st, sims,
             tuple(e for e in opt.effects if e not in done))
         if k == 0:
             ranked0, ev0 = ranked, ev

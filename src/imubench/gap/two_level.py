@@ -39,6 +39,8 @@ import math
 import numpy as np
 from numba import njit
 
+from imubench.gap.evidence import block_means_of
+
 SPAN_DWELLS = (2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
 """Spans of the moving mean tried by :func:`detrend_span`, in dwells (longer than the
 record: the record's mean)."""
@@ -101,12 +103,8 @@ def _markov_loglik(z: np.ndarray, sigma2: float, phi: float, noise_var: float) -
 
 def _detrended_blocks(y: np.ndarray, m: int, span: int) -> np.ndarray:
     """Means of ``m`` samples less their centred moving mean over ``span`` means."""
-    nb = len(y) // m
-    with np.errstate(invalid="ignore"):
-        v = y[: nb * m].reshape(nb, m)
-        ok = np.isfinite(v)
-        cnt = ok.sum(axis=1)
-        z = np.where(cnt > 0, np.where(ok, v, 0.0).sum(axis=1) / np.maximum(cnt, 1), np.nan)
+    z = block_means_of(y, m)
+    nb = len(z)
     fin = np.isfinite(z)
     span = max(1, min(span, nb))
     cs = np.concatenate(([0.0], np.cumsum(np.where(fin, z, 0.0))))
