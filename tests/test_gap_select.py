@@ -395,10 +395,15 @@ def test_tail_threshold_is_normal_not_student_t() -> None:
         setattr(c, name, 0.0)
 
 
-def test_whitened_level_test_sees_a_smooth_temperature_response_the_increments_miss() -> None:
-    """White block means plus a response to a smooth temperature (periods of 25 and 7
-    min): differencing keeps little of the response, the model-whitened level
-    correlation keeps it. Realisations of the model (white only) calibrate both."""
+def test_model_gls_level_test_sees_a_smooth_temperature_response_the_increments_miss(
+) -> None:
+    """White plus flicker noise with a response to a smooth temperature (periods of 25
+    and 7 min): the increments' correlation weighs the flicker-heavy slow increments
+    like the others and keeps little of the response; the GLS slope under the model's
+    exact covariance keeps it. On the null its z is N(0, 1): 40 null records stay within
+    the normal range, with a spread near 1."""
+    from lsm6ds_sim.model import ChannelModel
+
     from imubench.gap.curves import (
         FISHER_SD_FLOOR,
         features,
@@ -406,6 +411,7 @@ def test_whitened_level_test_sees_a_smooth_temperature_response_the_increments_m
         temp_level_against,
         z_against,
     )
+    from imubench.gap.parts import Series, temperature_covariance
 
     fs, n = 10.0, 18000
     t = np.arange(n) / fs
@@ -414,20 +420,32 @@ def test_whitened_level_test_sees_a_smooth_temperature_response_the_increments_m
     afs = np.array([1, 2, 4])
     edges = np.array([0.01, 0.1, 1.0, 5.0])
     rng = np.random.default_rng(8)
-    sd = 0.004 * math.sqrt(fs) * 8.0  # noisier than the LSM6DSL so the response is weak
+    white, flicker = 0.004 * 4.0, 0.0008 * 4.0  # noisier than the LSM6DSL: a weak response
+    cm = ChannelModel().replace(white=white, flicker=flicker)
+    freq = np.fft.rfftfreq(n, 1.0 / fs)
+    s_fl = np.zeros_like(freq)
+    s_fl[1:] = flicker**2 / (math.pi * freq[1:])  # one-sided S(f) = B^2 / (pi f)
+
+    def noise() -> np.ndarray:  # textbook generator (FFT shaping), not the simulator
+        sd = np.sqrt(s_fl * fs * n / 4.0)
+        x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
+        return white * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
 
     def feats(y: np.ndarray) -> Any:
         return features(y, fs, afs, edges, 256, temp)
 
-    sims = stack([feats(sd * rng.standard_normal(n)) for _ in range(10)])
-    real = feats(sd * rng.standard_normal(n) + 4e-3 * (temp - 25.0))
-    level = temp_level_against(real, sims)
+    sims = stack([feats(noise()) for _ in range(10)])
+    real = feats(noise() + 3e-3 * (temp - 25.0))
+    chol = temperature_covariance(cm, Series(np.zeros(n), temp, fs), real)
+    assert chol is not None
+    level = temp_level_against(real, sims, chol)
     incr = z_against(real.temp_corr, sims.temp_corr, FISHER_SD_FLOOR)
-    thr = t_threshold(3.5, 9)
-    assert level > thr
-    assert abs(incr) < level / 2
-    null = feats(sd * rng.standard_normal(n))
-    assert abs(temp_level_against(null, sims)) < thr
+    assert level > 3.5  # the normal threshold: the model's exact error
+    assert abs(incr) < t_threshold(3.5, 9)  # K = 10 realisations estimate its spread
+    nulls = np.array([temp_level_against(feats(noise()), sims, chol) for _ in range(40)])
+    assert np.all(np.abs(nulls) < 3.5)
+    assert 0.6 < nulls.std() < 1.4
+    assert temp_level_against(real, sims, None) != temp_level_against(real, sims, None)
 
 
 def test_resonance_candidate_needs_a_peak_over_the_model() -> None:

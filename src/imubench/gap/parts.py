@@ -14,12 +14,15 @@ import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel
 from lsm6ds_sim.physics import simulate
 from lsm6ds_sim.temperature import ReplayTemperature
+from scipy.linalg import cho_factor, toeplitz
 
 from imubench.gap.curves import (
     Comparison,
+    Features,
     SimFeatures,
     analysis_afs,
     band_edges,
+    block_length,
     compare,
     features,
     psd_segment,
@@ -28,6 +31,7 @@ from imubench.gap.curves import (
 )
 from imubench.gap.errors import GapError
 from imubench.noisefit.covariance import oavar_correlation
+from imubench.noisefit.model_avar import block_increment_acv
 from imubench.stats import oadev
 
 
@@ -99,6 +103,22 @@ def tau_correlation(cm: ChannelModel, afs: np.ndarray, n: int, rate_hz: float) -
                              resonance=(cm.resonance_freq_hz, cm.resonance_width_hz))
 
 
+def temperature_covariance(cm: ChannelModel, series: Series, real: Features
+                           ) -> tuple[np.ndarray, bool] | None:
+    """Cholesky factor of the model's covariance of the increments of the block means
+    (:func:`imubench.gap.curves.temperature_blocks`) for the temperature level test;
+    None without temperature or when blocks were dropped for missing samples (the
+    increments across a dropped block are not the model's lag-1 ones)."""
+    if real.temp_yb is None:
+        return None
+    n_block = block_length(len(series.y), series.rate_hz)
+    n_b = len(real.temp_yb)
+    if n_b != len(series.y) // n_block or n_b < 4:
+        return None
+    acv = block_increment_acv(cm, n_block, n_b - 1, series.rate_hz)
+    return cho_factor(toeplitz(acv))
+
+
 class PartSetup:
     """Taus, bands and the real features of one part (fit, holdout or a replicate)."""
 
@@ -121,12 +141,15 @@ class PartSetup:
         self.corr = (None if cm is None
                      else tau_correlation(cm, self.afs, n, series.rate_hz)[:len(self.tau_s),
                                                                            :len(self.tau_s)])
+        self.temp_chol = None if cm is None else temperature_covariance(cm, series,
+                                                                        self.real)
 
     def sim_features(self, sims: np.ndarray) -> SimFeatures:
         return stack([features(s, self.series.rate_hz, self.afs, self.edges, self.nperseg,
                                self.series.temp_c) for s in sims])
 
     def compare(self, sims: SimFeatures) -> Comparison:
-        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr)
+        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr,
+                       self.temp_chol)
 
 

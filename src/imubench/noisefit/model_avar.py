@@ -68,6 +68,63 @@ def model_avar_m(cm: ChannelModel, m: np.ndarray, rate_hz: float) -> np.ndarray:
     return out + avar_from_gacv(apply_filter(g, rho), m)
 
 
+BLOCK_TERMS = ("white", "flicker", "random_walk", "quantization", "outliers")
+"""Terms that enter :func:`block_increment_acv` through the generalized autocovariance
+(the Gauss-Markov term and the white noise after the filter enter too, on their own)."""
+
+
+def block_increment_acv(cm: ChannelModel, m: int, n_lags: int, rate_hz: float) -> np.ndarray:
+    """Autocovariance (unit^2) at lags 0..n_lags-1 (in blocks) of the first differences
+    ``D_j = ybar_{j+1} - ybar_j`` of the means of consecutive non-overlapping blocks of
+    ``m`` samples, for the channel's stochastic terms.
+
+    With ``V(h)`` the variance of a sum of h consecutive samples (the structure function
+    of the integrated series, ``V(h) = h G(0) + 2 sum_{l=1}^{h-1} (h - l) G(l)`` from the
+    generalized autocovariance G, as in :func:`kernels.avar_from_gacv`) and ``X_j`` the
+    partial sums at the block boundaries, ``D_j = (X_{j+2} - 2 X_{j+1} + X_j) / m``; for
+    a process with stationary increments ``E[(X_a - X_b)(X_c - X_d)] = (V(a - d) +
+    V(b - c) - V(a - c) - V(b - d)) / 2`` (Yaglom 1987, Correlation Theory of Stationary
+    and Related Random Functions, sec. 23), so with ``c = (1, -2, 1)``::
+
+        Cov(D_0, D_k) = -1 / (2 m^2) sum_{a,b=0..2} c_a c_b V(|k + b - a| m)
+
+    and the lag-0 value is ``2 AVAR(m)`` (:func:`model_avar_m`). Flicker and random walk
+    have no autocovariance but a generalized one; the constant it is defined up to cancels
+    because ``sum c = 0``. The output filter is applied as in :func:`model_avar_m`. Left
+    out: ramp and sine (deterministic) and the resonance (a band-pass at Hz frequencies:
+    block means of seconds keep only its power near 0 Hz, ~(width / 2 f0)^2 of its
+    height).
+    """
+    if m < 1 or n_lags < 1:
+        raise FitError(f"block increment covariance: m {m} and n_lags {n_lags} must be >= 1")
+    rho = filter_autocorrelation(float(cm.bandwidth_hz), int(cm.filter_order), float(rate_hz))
+    kmax = (n_lags + 2) * m + rho.size
+    tau0 = 1.0 / rate_hz
+    g = np.zeros(kmax + 1)
+    for term, amp2, extra in channel_terms(cm):
+        if term in BLOCK_TERMS:
+            g += amp2 * gacv_unit(term, kmax, tau0, **extra)
+    g = apply_filter(g, rho)
+    if cm.markov_sigma > 0 and cm.markov_tau > 0:
+        g += cm.markov_sigma**2 * apply_filter(
+            gacv_unit("markov", kmax, tau0, tau_c_s=float(cm.markov_tau)), rho,
+            multiplicative=True)
+    g[0] += cm.output_white**2 * rate_hz  # white after the filter
+    h = np.arange(n_lags + 2, dtype=np.int64) * m
+    k = np.arange(g.size, dtype=np.float64)
+    p0 = np.concatenate([[0.0], np.cumsum(g[1:])])  # p0[n] = sum_{l=1}^{n} G(l)
+    p1 = np.concatenate([[0.0], np.cumsum(k[1:] * g[1:])])
+    hf = h.astype(np.float64)
+    hm1 = np.maximum(h - 1, 0)
+    v = np.where(h > 0, hf * g[0] + 2.0 * (hf * p0[hm1] - p1[hm1]), 0.0)
+    c = np.array([1.0, -2.0, 1.0])
+    out = np.zeros(n_lags)
+    for a in range(3):
+        for b in range(3):
+            out -= c[a] * c[b] * v[np.abs(np.arange(n_lags) + b - a)]
+    return out / (2.0 * m * m)
+
+
 def model_avar(channel_model: ChannelModel, tau_s: Sequence[float] | np.ndarray,
                rate_hz: float) -> np.ndarray:
     """AVAR (unit^2: dps^2 or g^2) of a model channel at ``tau_s`` for data at ``rate_hz``.
@@ -86,4 +143,4 @@ def model_avar(channel_model: ChannelModel, tau_s: Sequence[float] | np.ndarray,
     return model_avar_m(channel_model, averaging_factors(tau, rate_hz), rate_hz)
 
 
-__all__ = ["channel_terms", "model_avar", "model_avar_m"]
+__all__ = ["block_increment_acv", "channel_terms", "model_avar", "model_avar_m"]
