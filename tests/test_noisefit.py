@@ -623,3 +623,28 @@ def test_model_correlation_is_a_positive_definite_correlation_matrix() -> None:
                           resonance=(0.1953, 0.009766))
     assert np.allclose(np.diag(c), 1.0) and np.allclose(c, c.T)
     assert np.linalg.eigvalsh(c).min() >= 0.5 * CORR_EIG_FLOOR
+
+
+def test_block_increment_covariance_matches_closed_forms() -> None:
+    """Increments of m-sample block means: white noise (variance s^2 per sample) has
+    variance 2 s^2 / m, lag-1 covariance -s^2 / m and nothing beyond; a random walk of
+    density K has K^2 m tau0 (2/3, 1/6, 0) (the continuous-time block averages); lag 0
+    is twice the model's AVAR at m for any model."""
+    from lsm6ds_sim.model import ChannelModel
+
+    from imubench.noisefit.model_avar import block_increment_acv, model_avar_m
+
+    fs, m = 104.0, 500
+    white = block_increment_acv(ChannelModel().replace(white=0.004), m, 4, fs)
+    s2 = 0.004**2 * fs
+    np.testing.assert_allclose(white, [2 * s2 / m, -s2 / m, 0.0, 0.0], atol=1e-15)
+    rw = block_increment_acv(ChannelModel().replace(random_walk=1e-4), m, 4, fs)
+    q = 1e-8 * m / fs
+    np.testing.assert_allclose(rw, [2 * q / 3, q / 6, 0.0, 0.0], rtol=1e-5, atol=1e-9 * q)
+    full = ChannelModel().replace(white=0.004, flicker=0.0008, random_walk=1e-4,
+                                  markov_sigma=0.002, markov_tau=5.0, output_white=2e-4,
+                                  bandwidth_hz=20.0, filter_order=2)
+    lag0 = block_increment_acv(full, m, 3, fs)[0]
+    np.testing.assert_allclose(lag0, 2 * model_avar_m(full, np.array([m]), fs)[0], rtol=1e-6)
+    with pytest.raises(FitError, match="n_lags 0"):
+        block_increment_acv(full, m, 0, fs)
