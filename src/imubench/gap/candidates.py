@@ -105,6 +105,9 @@ class Candidate:
     """Whole-record bias-step statistic of the real record against these realisations."""
     drift_t: float = float("nan")
     """Whole-record drift t after removing this effect's deterministic part."""
+    temp_record_z: float = float("nan")
+    """Whole-record temperature z against these realisations
+    (:class:`imubench.gap.parts.RecordTemperature`)."""
     shape_z: float = float("nan")
     """Two-level log-likelihood ratio of the whole real record against this candidate's
     realisations (:func:`imubench.gap.two_level.two_level_llr`, telegraph against Markov),
@@ -300,14 +303,17 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
-                   cur: SimFeatures, effects: tuple[str, ...], step_fired: bool
-                   ) -> tuple[list[Candidate], dict[str, Any]]:
+                   cur: SimFeatures, effects: tuple[str, ...], step_fired: bool,
+                   temp_record_z: float) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
     ``whole``: the whole record less the kept effects' deterministic parts (the bias
     step is located on it, the temperature response regressed on its fit part, which
     comes first); ``cur``: features of the
-    current realisations on the fit part; ``step_fired``: the whole-record step test fired.
+    current realisations on the fit part; ``step_fired``: the whole-record step test fired;
+    ``temp_record_z``: the whole-record temperature z
+    (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
+    the fit part's level test does.
     """
     s = fit.series
     cands: list[Candidate] = []
@@ -377,7 +383,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             gate = t_threshold(Z_TEMP_CANDIDATE, dof)
             gate_level = t_threshold(Z_TEMP_CANDIDATE, stat_dof("temp_level_z", dof))
             if s.has_temperature and (abs(before.temp_z) > gate
-                                      or abs(before.temp_level_z) > gate_level):
+                                      or abs(before.temp_level_z) > gate_level
+                                      or abs(temp_record_z) > gate_level):
                 assert s.temp_c is not None
                 # the coefficients the model lacks: the regression of the fit part less
                 # the kept effects' deterministic parts (a kept bias step biased it) and

@@ -782,11 +782,21 @@ def temp_level_against(real: Features, sims: SimFeatures,
     held-out check stand beside this one."""
     if chol is None or real.temp_yb is None or real.temp_tb is None or sims.temp_yb is None:
         return float("nan")
-    dt = np.diff(real.temp_tb)
-    if sims.temp_yb.shape[1] != len(real.temp_tb) or len(dt) != chol[0].shape[0]:
+    return gls_against(real.temp_yb, sims.temp_yb, real.temp_tb, chol)
+
+
+def gls_against(yb: np.ndarray, sims_yb: np.ndarray, tb: np.ndarray,
+                chol: tuple[np.ndarray, bool]) -> float:
+    """z of the GLS temperature slope of the block means ``yb`` against that of each
+    realisation's (rows of ``sims_yb``), as :func:`temp_level_against` describes; NaN when
+    the blocks do not match the covariance or a block mean is missing."""
+    dt = np.diff(tb)
+    if (sims_yb.ndim != 2 or sims_yb.shape[1] != len(tb) or len(yb) != len(tb)
+            or len(dt) != chol[0].shape[0] or not np.isfinite(yb).all()):
         return float("nan")
-    b_real, se = gls_slope(np.diff(real.temp_yb), dt, chol)
-    b_sims = np.array([gls_slope(np.diff(b), dt, chol)[0] for b in sims.temp_yb])
+    b_real, se = gls_slope(np.diff(yb), dt, chol)
+    b_sims = np.array([gls_slope(np.diff(b), dt, chol)[0] if np.isfinite(b).all()
+                       else math.nan for b in sims_yb])
     ok = np.isfinite(b_sims)
     if not (math.isfinite(b_real) and ok.sum() >= 3):
         return float("nan")

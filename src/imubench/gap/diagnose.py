@@ -60,9 +60,9 @@ from imubench.gap.candidates import (
     deterministic,
     fit_candidates,
 )
-from imubench.gap.curves import Comparison, stat_fired, z_against
+from imubench.gap.curves import POOLED_DOF, Z_SLOPE, Comparison, stat_fired, z_against
 from imubench.gap.errors import GapError
-from imubench.gap.parts import PartSetup, Series, seeds_of, simulate_channel
+from imubench.gap.parts import PartSetup, RecordTemperature, Series, seeds_of, simulate_channel
 from imubench.gap.two_level import two_level_llr as llr
 
 MIN_CLOSURE = 1.0 / 3.0
@@ -165,6 +165,10 @@ class ChannelDiagnosis:
     """The whole-record bias-step test fired at the first step."""
     drift_fired: bool = False
     """The whole-record drift test fired at the first step."""
+    temp_record_z: float = float("nan")
+    """Whole-record temperature z (:class:`imubench.gap.parts.RecordTemperature`)."""
+    temp_fired: bool = False
+    """The whole-record temperature test fired at the first step."""
     residual_significant: bool = False
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
@@ -193,8 +197,10 @@ class ChannelDiagnosis:
         ff = self.final_fit or self.before
         out: dict[str, Any] = {
             "gap_before": self.before.gap,
-            "significant": self.before.significant or self.step_fired or self.drift_fired,
-            "whole_record": {"step_fired": self.step_fired, "drift_fired": self.drift_fired},
+            "significant": (self.before.significant or self.step_fired or self.drift_fired
+                            or self.temp_fired),
+            "whole_record": {"step_fired": self.step_fired, "drift_fired": self.drift_fired,
+                             "temperature_fired": self.temp_fired},
             "regions": [r.to_dict() for r in self.before.regions],
             "effects": [c.to_dict(self.before) for c in self.candidates],
             "verdict": self.verdict,
@@ -216,6 +222,7 @@ class ChannelDiagnosis:
             "trend_z": self.before.trend_z,
             "bias_step_z": self.step_z,
             "drift_t": self.drift_t,
+            "temperature_record_z": self.temp_record_z,
             "global": self.before.global_dict(),
             "background": self.background,
         }
@@ -268,15 +275,18 @@ def step_stats(sims: np.ndarray, rate_hz: float, det_sum: np.ndarray | float = 0
 class _Step:
     """One step of the forward selection: the current realisations against the record.
 
-    Besides the fit part's comparison, two whole-record tests: the bias step (the largest
+    Besides the fit part's comparison, three whole-record tests: the bias step (the largest
     normalised jump of block means, :func:`imubench.gap.evidence.step_statistic`, fired
     when it exceeds STEP_SIGMAS and every realisation's; scored as its t against the
-    realisations) and the drift (:func:`imubench.gap.evidence.drift_statistic` of the
-    record minus the deterministic parts of the kept effects, self-normalised Student t).
+    realisations), the drift (:func:`imubench.gap.evidence.drift_statistic` of the
+    record minus the deterministic parts of the kept effects, self-normalised Student t)
+    and the temperature response (:class:`imubench.gap.parts.RecordTemperature`, z
+    against the realisations, fired beyond Z_SLOPE).
     """
 
     def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
-                 series: Series, det_sum: np.ndarray | float) -> None:
+                 series: Series, temp: RecordTemperature, det_sum: np.ndarray | float
+                 ) -> None:
         n_fit = len(fit.series.y)
         rate = series.rate_hz
         self.feats = fit.sim_features(sims[:, :n_fit])
@@ -296,17 +306,27 @@ class _Step:
                                and self.step_real > float(np.max(sim_steps)))
         self.drift_t, self.drift_dof = evidence.drift_statistic(self.residual, rate)
         self.drift_fired = stat_fired(self.drift_t, Z_DRIFT, False, self.drift_dof)
+        self.temp = temp
+        self.temp_z = temp.z(self.residual, sims, det_sum)
+        self.temp_fired = stat_fired(self.temp_z, Z_SLOPE, False, POOLED_DOF)
+
+    @property
+    def record_fired(self) -> bool:
+        """A whole-record test fired (bias step, drift or temperature)."""
+        return self.step_fired or self.drift_fired or self.temp_fired
 
     @property
     def significant(self) -> bool:
-        return self.before.significant or self.step_fired or self.drift_fired
+        return self.before.significant or self.record_fired
 
-    def _record_excess(self, step_z: float, drift_t: float) -> float:
+    def _record_excess(self, step_z: float, drift_t: float, temp_z: float) -> float:
         e = 0.0
         if self.step_fired and math.isfinite(step_z):
             e += max(max(step_z, 0.0) ** 2 - 1.0, 0.0)
         if self.drift_fired and math.isfinite(drift_t):
             e += max(drift_t**2 - 1.0, 0.0)
+        if self.temp_fired and math.isfinite(temp_z):
+            e += max(temp_z**2 - 1.0, 0.0)
         return e
 
     def evidence_closed(self, c: Candidate) -> float:
@@ -316,12 +336,12 @@ class _Step:
         za = c.fit._fired_z(self.before)
         e0 = float(np.sum(np.maximum(zb * zb - 1.0, 0.0)))
         e1 = float(np.sum(np.maximum(za * za - 1.0, 0.0)))
-        e0 += self._record_excess(self.step_z, self.drift_t)
-        e1 += self._record_excess(c.step_z, c.drift_t)
+        e0 += self._record_excess(self.step_z, self.drift_t, self.temp_z)
+        e1 += self._record_excess(c.step_z, c.drift_t, c.temp_record_z)
         return 1.0 - e1 / e0 if e0 > 0 else float("nan")
 
     def chi2(self) -> float:
-        return self.before.chi2 + _record_chi2(self.step_z, self.drift_t)
+        return self.before.chi2 + _record_chi2(self.step_z, self.drift_t, self.temp_z)
 
 
 def removes(share: float | None) -> str:
@@ -332,14 +352,15 @@ def removes(share: float | None) -> str:
     return f"removes {share:.0%} of" if share >= 0 else f"removes none (adds {-share:.0%} to)"
 
 
-def _record_chi2(step_z: float, drift_t: float) -> float:
+def _record_chi2(step_z: float, drift_t: float, temp_z: float) -> float:
     return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
-            + (drift_t**2 if math.isfinite(drift_t) else 0.0))
+            + (drift_t**2 if math.isfinite(drift_t) else 0.0)
+            + (temp_z**2 if math.isfinite(temp_z) else 0.0))
 
 
 def _cand_chi2(c: Candidate) -> float:
     assert c.fit is not None
-    return c.fit.chi2 + _record_chi2(c.step_z, c.drift_t)
+    return c.fit.chi2 + _record_chi2(c.step_z, c.drift_t, c.temp_record_z)
 
 
 def _shape_scores(cands: list[Candidate]) -> None:
@@ -415,7 +436,8 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
     n_fit = len(fit.series.y)
     cm = variant.model[channel]
     whole = dataclasses.replace(series, y=st.residual)
-    cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects, st.step_fired)
+    cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects, st.step_fired,
+                               st.temp_z)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
@@ -432,6 +454,7 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
         det = deterministic(c.effect, c.params, cm, series)
         c.drift_t = (evidence.drift_statistic(st.residual - det, rate)[0]
                      if det is not None else st.drift_t)
+        c.temp_record_z = st.temp.z(st.residual, cs, st.det_sum)
         if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
                 [llr(s, rate, *two_level) for s in cs]))
@@ -532,6 +555,7 @@ class _Realiser:
                  fit: PartSetup, hold: PartSetup | None) -> None:
         self.model, self.channel, self.series, self.seeds = model, channel, series, seeds
         self.fit, self.hold = fit, hold
+        self.temp = RecordTemperature(model[channel], series)
         self._steps: dict[tuple[tuple[str, tuple[tuple[str, float], ...]], ...], _Step] = {}
 
     def variant(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray | float]:
@@ -553,7 +577,7 @@ class _Realiser:
             variant, det_sum = self.variant(kept)
             self._steps[key] = _Step(self.fit, self.hold,
                                      variant.realise(self.channel, self.series, self.seeds),
-                                     self.series, det_sum)
+                                     self.series, self.temp, det_sum)
         return self._steps[key]
 
     def refit_base(self, kept: list[Candidate]) -> list[Candidate]:
@@ -579,6 +603,7 @@ class _Realiser:
         """Recompute ``c``'s comparisons as the effect kept after ``before``."""
         st, after = self.step(before), self.step([*before, c])
         c.fit, c.step_z, c.drift_t = after.before, after.step_z, after.drift_t
+        c.temp_record_z = after.temp_z
         c.evidence_closed = st.evidence_closed(c)
         if st.hold is not None and after.hold is not None:
             c.holdout = after.hold
@@ -684,6 +709,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     det_sum: np.ndarray | float = 0.0
     sims = simulate_channel(model, channel, series, seeds)
     rep_setups = [(PartSetup(r, cm0), r) for r in replicates or []]
+    rtemp = RecordTemperature(cm0, series)
     rep_before = _on_replicates(variant, channel, rep_setups, seeds)
     rep_now = rep_before
 
@@ -696,7 +722,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     bg_summary: dict[str, Any] | None = None
     bg_rep: background.Background | None = None
     for k in range(MAX_EFFECTS):
-        st = _Step(fit, hold, sims, series, det_sum)
+        st = _Step(fit, hold, sims, series, rtemp, det_sum)
         if first is None:
             first = st
             bg_rep = background.from_replicates(st.before, rep_before)
@@ -704,7 +730,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             break
         if k == 0 and bg_rep is not None:
             bg_summary = background.summary(st.before, bg_rep)
-            if bg_summary["within"] and not (st.step_fired or st.drift_fired):
+            if bg_summary["within"] and not st.record_fired:
                 reason = "replicate variation"
                 residual = True
                 break
@@ -731,7 +757,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         sims = chosen_sims
         rep_now = chosen.replicates or _on_replicates(variant, channel, rep_setups, seeds)
     else:
-        residual = _Step(fit, hold, sims, series, det_sum).significant
+        residual = _Step(fit, hold, sims, series, rtemp, det_sum).significant
     assert first is not None
     pruned: list[Candidate] = []
     if len(kept) >= 2:
@@ -754,12 +780,13 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         if first.hold is not None:
             bg = background.from_halves(first.before, first.hold).merge(bg_rep)
             bg_summary = background.summary(first.before, bg)
-            if bg_summary["within"] and not (first.step_fired or first.drift_fired):
+            if bg_summary["within"] and not first.record_fired:
                 verdict, reason = "none", "replicate variation"
     ev0["psd"] = (fit.f_hz, fit.real.psd, first.feats.psd.mean(axis=0))
     diag = ChannelDiagnosis(channel, first.before, first.hold, ranked0, verdict, ev0,
                             kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
                             step_fired=first.step_fired, drift_fired=first.drift_fired,
+                            temp_record_z=first.temp_z, temp_fired=first.temp_fired,
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned)
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):

@@ -19,7 +19,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from imubench.gap.curves import STAT_TESTS, stat_dof, stat_fired, t_threshold
+from imubench.gap.curves import STAT_TESTS, Z_SLOPE, stat_dof, stat_fired, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE, removes
 
 
@@ -75,7 +75,7 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
                    f"{_span(b['f_min_hz'], b['f_max_hz'], 'Hz')}")
     names = {"line_z": f"a spectral line at {_f(c['line']['f_hz'], 4)} Hz",
              "tail_z": "impulsive tails", "temp_z": "correlation with temperature",
-             "temp_level_z": "correlation of the whitened level with temperature",
+             "temp_level_z": "a temperature response of the level (model GLS)",
              "trend_z": "a time trend"}
     for key, z_norm, one_sided in STAT_TESTS:
         z = _stat(c, key)
@@ -91,7 +91,7 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
 
 
 def _whole_record(c: dict[str, Any]) -> list[str]:
-    """The whole-record tests (bias step, drift) that fired."""
+    """The whole-record tests (bias step, drift, temperature) that fired."""
     whole = c.get("whole_record") or {}
     out = []
     if whole.get("step_fired"):
@@ -99,6 +99,9 @@ def _whole_record(c: dict[str, Any]) -> list[str]:
                    "realisations)")
     if whole.get("drift_fired"):
         out.append(f"a drift (t {c['drift_t']:.1f})")
+    if whole.get("temperature_fired"):
+        out.append(f"a temperature response over the whole record (z "
+                   f"{c['temperature_record_z']:.1f} against {Z_SLOPE:.1f})")
     return out
 
 
