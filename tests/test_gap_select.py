@@ -836,3 +836,47 @@ def test_two_level_ratio_stays_finite_far_from_both_levels() -> None:
     y = tel + 1e-4 * rng.standard_normal(n)
     y[n // 2] = 50.0  # exp(-(50 - 1)^2 / (2 noise_var)) underflows
     assert math.isfinite(two_level_llr(y, RATE, 1.0, 10.0, 600.0))
+
+
+def test_record_temperature_test_uses_the_whole_record() -> None:
+    """The whole-record temperature z (parts.RecordTemperature) against realisations of
+    the model (textbook white + flicker generator): a response of 1.2e-3 dps/degC over
+    noise 4x the LSM6DSL's is beyond Z_SLOPE on the record; 30 nulls stay within it; a
+    response the realisations carry is not counted; the kept deterministic parts
+    (det_sum) come off the realisations as the caller takes them off the record; without
+    temperature the test is NaN."""
+    from lsm6ds_sim.model import ChannelModel
+
+    from imubench.gap.curves import Z_SLOPE
+    from imubench.gap.parts import RecordTemperature, Series
+
+    fs, n = 10.0, 36000
+    t = np.arange(n) / fs
+    temp = 26.0 + 3.0 * np.sin(2 * math.pi * t / 1500.0) + 1.2 * np.sin(
+        2 * math.pi * t / 420.0)
+    rng = np.random.default_rng(21)
+    white, flicker = 0.016, 0.0032
+    cm = ChannelModel().replace(white=white, flicker=flicker)
+    freq = np.fft.rfftfreq(n, 1.0 / fs)
+    s_fl = np.zeros_like(freq)
+    s_fl[1:] = flicker**2 / (math.pi * freq[1:])
+
+    def noise() -> np.ndarray:
+        sd = np.sqrt(s_fl * fs * n / 4.0)
+        x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
+        return white * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+
+    rec = RecordTemperature(cm, Series(np.zeros(n), temp, fs))
+    sims = np.array([noise() for _ in range(10)])
+    response = 1.2e-3 * (temp - 25.0)
+    assert rec.z(noise() + response, sims, 0.0) > Z_SLOPE
+    nulls = np.array([rec.z(noise(), sims, 0.0) for _ in range(30)])
+    assert np.all(np.abs(nulls) < Z_SLOPE)
+    y = noise() + response
+    kept = rec.z(y, sims + response, 0.0)
+    assert abs(kept) < Z_SLOPE  # the realisations carry the response: nothing left
+    # as a kept deterministic part: the record less it against the realisations less it
+    assert abs(rec.z(y - response, sims + response, response) - rec.z(y - response, sims,
+                                                                        0.0)) < 1e-9
+    assert math.isnan(RecordTemperature(cm, Series(np.zeros(n), None, fs)).z(
+        noise(), sims, 0.0))
