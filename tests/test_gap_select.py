@@ -840,11 +840,11 @@ def test_two_level_ratio_stays_finite_far_from_both_levels() -> None:
 
 def test_record_temperature_test_uses_the_whole_record() -> None:
     """The whole-record temperature z (parts.RecordTemperature) against realisations of
-    the model (textbook white + flicker generator): a response of 1.2e-3 dps/degC over
+    the model (textbook white + flicker generator): a response of 2.4e-3 dps/degC over
     noise 4x the LSM6DSL's is beyond Z_SLOPE on the record; 30 nulls stay within it; a
     response the realisations carry is not counted; the kept deterministic parts
     (det_sum) come off the realisations as the caller takes them off the record; without
-    temperature the test is NaN."""
+    temperature the test is NaN; a ramp beside a drifting temperature is no response."""
     from lsm6ds_sim.model import ChannelModel
 
     from imubench.gap.curves import Z_SLOPE
@@ -868,7 +868,7 @@ def test_record_temperature_test_uses_the_whole_record() -> None:
 
     rec = RecordTemperature(cm, Series(np.zeros(n), temp, fs))
     sims = np.array([noise() for _ in range(10)])
-    response = 1.2e-3 * (temp - 25.0)
+    response = 2.4e-3 * (temp - 25.0)
     assert rec.z(noise() + response, sims, 0.0) > Z_SLOPE
     nulls = np.array([rec.z(noise(), sims, 0.0) for _ in range(30)])
     assert np.all(np.abs(nulls) < Z_SLOPE)
@@ -880,3 +880,9 @@ def test_record_temperature_test_uses_the_whole_record() -> None:
                                                                         0.0)) < 1e-9
     assert math.isnan(RecordTemperature(cm, Series(np.zeros(n), None, fs)).z(
         noise(), sims, 0.0))
+    # a temperature that drifts (3 degC/h) and a level that trends (a ramp the model
+    # lacks): the trend is fitted beside the slope, so the drift is no evidence
+    warming = temp + 3.0 * t / 3600.0
+    rec_w = RecordTemperature(cm, Series(np.zeros(n), warming, fs))
+    assert abs(rec_w.z(noise() + 4e-6 * t, sims, 0.0)) < Z_SLOPE
+    assert rec_w.z(noise() + 2.4e-3 * (warming - 25.0), sims, 0.0) > Z_SLOPE
