@@ -187,8 +187,8 @@ def test_whole_record_and_whole_curve_detections_are_named() -> None:
     c = _entry("temperature", significant=True, temperature_record_z=4.9,
                whole_record={"step_fired": False, "drift_fired": False,
                              "temperature_fired": True}, effects=[TEMP_EFFECT])
-    assert explain_channel(c, 10)[1] == ("On the whole record: a temperature response over "
-                                         "the whole record (z 4.9 against 3.5).")
+    assert explain_channel(c, 10)[1] == ("On the whole record: a temperature response "
+                                         "(z 4.9 against 3.6).")
     g = {"fired": True, "chi2": 30.0, "threshold": 28.0, "dof": 16, "chi2_smooth": 21.2,
          "threshold_smooth": 16.5, "dof_smooth": 4}
     lines = explain_channel(_entry("unexplained", effects=[RW_EFFECT], **{"global": g}), 10)

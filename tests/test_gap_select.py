@@ -886,3 +886,9 @@ def test_record_temperature_test_uses_the_whole_record() -> None:
     rec_w = RecordTemperature(cm, Series(np.zeros(n), warming, fs))
     assert abs(rec_w.z(noise() + 4e-6 * t, sims, 0.0)) < Z_SLOPE
     assert rec_w.z(noise() + 2.4e-3 * (warming - 25.0), sims, 0.0) > Z_SLOPE
+    assert rec_w.note == ""
+    # a temperature that only drifts, rounded as a logger does: no test, and why
+    drift_only = np.round((26.0 + 2.0 * t / 3600.0) * 256.0) / 256.0
+    rec_d = RecordTemperature(cm, Series(np.zeros(n), drift_only, fs))
+    assert math.isnan(rec_d.z(noise() + 2.4e-3 * (drift_only - 25.0), sims, 0.0))
+    assert "cannot be told from a ramp" in rec_d.note

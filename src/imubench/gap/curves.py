@@ -735,6 +735,18 @@ def z_against(value: float, sims: np.ndarray, sd_floor: float = 0.0) -> float:
     return float((value - sims[ok].mean()) / sd)
 
 
+TREND_ONLY = 1e-3
+"""Increments ``dx`` whose standard deviation is at most this share of their mean are a
+trend alone (a temperature that only drifts; its rounding leaves ~1e-5): no slope is
+fitted beside the constant (:func:`gls_slope`)."""
+
+
+def only_trend(dx: np.ndarray) -> bool:
+    """The regressor's increments are a constant (its levels a straight line): its slope
+    cannot be told from the trend fitted beside it (:data:`TREND_ONLY`)."""
+    return bool(float(np.std(dx)) <= TREND_ONLY * abs(float(np.mean(dx))))
+
+
 def gls_slope(dy: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
               ) -> tuple[float, float]:
     """Generalized-least-squares slope of the increments ``dy`` on ``dx`` beside a
@@ -749,9 +761,12 @@ def gls_slope(dy: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
     trend, so the response is identified by the regressor's variation about its own
     trend. Without it, real static records (CATS tag, 8.5 h segments, the bench's
     temperature with its 1 degC/h drift) gave z up to 6.5 on nulls whose level wanders;
-    with it |z| < 1.4 there, and the blind set's temperature responses keep z 5.2-11."""
+    with it |z| < 1.4 there, and the blind set's temperature responses keep z 5.2-11.
+    NaN when ``dx`` is a trend alone (:func:`only_trend`)."""
     from scipy.linalg import cho_solve
 
+    if only_trend(dx):
+        return float("nan"), float("nan")
     x = np.column_stack([np.ones_like(dx), dx])
     cx = cho_solve(chol, x)
     info = x.T @ cx

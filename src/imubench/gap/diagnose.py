@@ -169,6 +169,8 @@ class ChannelDiagnosis:
     """Whole-record temperature z (:class:`imubench.gap.parts.RecordTemperature`)."""
     temp_fired: bool = False
     """The whole-record temperature test fired at the first step."""
+    temp_note: str = ""
+    """Why the temperature test could not be made (:attr:`RecordTemperature.note`)."""
     residual_significant: bool = False
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
@@ -223,6 +225,7 @@ class ChannelDiagnosis:
             "bias_step_z": self.step_z,
             "drift_t": self.drift_t,
             "temperature_record_z": self.temp_record_z,
+            "temperature_note": self.temp_note or None,
             "global": self.before.global_dict(),
             "background": self.background,
         }
@@ -787,6 +790,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
                             step_fired=first.step_fired, drift_fired=first.drift_fired,
                             temp_record_z=first.temp_z, temp_fired=first.temp_fired,
+                            temp_note=rtemp.note,
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned)
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):

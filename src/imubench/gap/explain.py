@@ -19,7 +19,15 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from imubench.gap.curves import STAT_TESTS, Z_SLOPE, stat_dof, stat_fired, t_threshold
+from imubench.gap.curves import (
+    POOLED_DOF,
+    POOLED_STATS,
+    STAT_TESTS,
+    Z_SLOPE,
+    stat_dof,
+    stat_fired,
+    t_threshold,
+)
 from imubench.gap.diagnose import MIN_CLOSURE, removes
 
 
@@ -75,12 +83,13 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
                    f"{_span(b['f_min_hz'], b['f_max_hz'], 'Hz')}")
     names = {"line_z": f"a spectral line at {_f(c['line']['f_hz'], 4)} Hz",
              "tail_z": "impulsive tails", "temp_z": "correlation with temperature",
-             "temp_level_z": "a temperature response of the level (model GLS)",
+             "temp_level_z": "a temperature response of the block means",
              "trend_z": "a time trend"}
     for key, z_norm, one_sided in STAT_TESTS:
         z = _stat(c, key)
         if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
-            out.append(f"{names[key]} (t {z:.1f} against the threshold "
+            kind = "z" if key in POOLED_STATS else "t"
+            out.append(f"{names[key]} ({kind} {z:.1f} against the threshold "
                        f"{t_threshold(z_norm, stat_dof(key, dof)):.1f})")
     g = c.get("global") or {}
     if g.get("fired"):
@@ -100,8 +109,8 @@ def _whole_record(c: dict[str, Any]) -> list[str]:
     if whole.get("drift_fired"):
         out.append(f"a drift (t {c['drift_t']:.1f})")
     if whole.get("temperature_fired"):
-        out.append(f"a temperature response over the whole record (z "
-                   f"{c['temperature_record_z']:.1f} against {Z_SLOPE:.1f})")
+        out.append(f"a temperature response (z {c['temperature_record_z']:.1f} against "
+                   f"{t_threshold(Z_SLOPE, POOLED_DOF):.1f})")
     return out
 
 
@@ -124,12 +133,12 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
         z = z if one_sided else abs(z)
         if math.isfinite(z):
             thr = t_threshold(z_norm, stat_dof(key, dof))
-            ratios.append((z / thr, names[key], z, thr))
+            ratios.append((z / thr, names[key], z, thr, "z" if key in POOLED_STATS else "t"))
     if not ratios:
         return ""
-    _, n, z, thr = max(ratios)
-    return (f"; of the single statistics (line, tails, temperature, trend) the closest to "
-            f"its threshold is {n} (t {z:.1f} against {thr:.1f})")
+    _, n, z, thr, kind = max(ratios)
+    return (f"; of the single statistics (line, tails, temperature, temperature level, "
+            f"trend) the closest to its threshold is {n} ({kind} {z:.1f} against {thr:.1f})")
 
 
 def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
@@ -339,9 +348,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
         lines[-1] = lines[-1][0].upper() + lines[-1][1:]
     else:
         lines.append("Nothing exceeds its threshold (family-wise Allan and band limits, "
-                     "whole-curve test, line, tails, temperature, trend, whole-record step "
-                     "and drift)"
+                     "whole-curve test, line, tails, temperature, temperature level, trend, "
+                     "whole-record step, drift and temperature)"
                      + _strongest(c, dof) + ".")
+    if c.get("temperature_note"):
+        lines.append(f"Temperature: {c['temperature_note']}.")
     effects = c["effects"]
     if verdict == "none":
         lines.append("Verdict none: " + (

@@ -27,6 +27,7 @@ from imubench.gap.curves import (
     compare,
     features,
     gls_against,
+    only_trend,
     psd_segment,
     stack,
     welch_psd,
@@ -143,10 +144,20 @@ class RecordTemperature:
         self.n_block = block_length(len(series.y), series.rate_hz)
         self.tb: np.ndarray | None = None
         self.chol: tuple[np.ndarray, bool] | None = None
+        self.note = ""
+        """Why the test cannot be made although the record has a temperature (empty
+        otherwise)."""
         if series.has_temperature:
             assert series.temp_c is not None
             tb = block_means(series.temp_c, self.n_block)
-            if len(tb) >= 5 and np.isfinite(tb).all() and np.ptp(tb) > 1e-6:
+            if not (len(tb) >= 5 and np.isfinite(tb).all()):
+                self.note = "the temperature has missing blocks: no whole-record test"
+            elif np.ptp(tb) <= 1e-6:
+                self.note = "the temperature is constant: no response can be seen"
+            elif only_trend(np.diff(tb)):
+                self.note = ("the temperature only drifts, at a constant rate: a response "
+                             "to it cannot be told from a ramp (a ramp candidate takes it)")
+            else:
                 self.tb = tb
                 self.chol = increment_cholesky(cm, self.n_block, len(tb), series.rate_hz)
 
