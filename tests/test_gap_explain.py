@@ -388,3 +388,17 @@ def test_report_params_of_a_base_model_without_filter() -> None:
     assert params_text({"bandwidth_hz": 4.28, "filter_order": 2, "white": 0.0021},
                        units) == ("bandwidth_hz = 4.28 Hz, filter_order = 2, "
                                   "white = 0.0021 dps/sqrt(Hz)")
+
+
+def test_unexplained_without_candidates_says_why_each_effect_was_not_fitted() -> None:
+    """When no candidate applies, the gates that stayed shut are named (JSON
+    ``not_fitted``): a drift-only temperature asked for with ``--effects temperature``
+    said only 'no candidate effect applies'."""
+    why = ("no correlation with temperature beyond chance: increments t 2.6 (needs 3.1), "
+           "level z not made and whole-record z not made (need 2.5)")
+    c = _entry("unexplained", effects=[], not_fitted={"temperature": why},
+               temperature_note="the temperature only drifts, at a constant rate")
+    lines = explain_channel(c, 10)
+    assert "Temperature: the temperature only drifts, at a constant rate." in lines
+    assert (f"Verdict unexplained: no candidate effect applies to this evidence; "
+            f"temperature: {why}.") in lines

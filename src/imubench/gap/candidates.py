@@ -429,5 +429,41 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     f"levels {moved} (needs {evidence.STEP_PERSISTENCE:.0%} in its "
                     "direction); a transient excursion or a wandering level, not a bias "
                     "step")
+    fitted = {c.effect for c in cands}
+    ev["not_fitted"] = {eff: _why_not_fitted(eff, s, before, dof, temp_record_z)
+                        for eff in effects if eff not in fitted}
     return cands, ev
+
+
+def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
+                    temp_record_z: float) -> str:
+    """Why ``effect`` gave no candidate at this step: the gate of :func:`fit_candidates`
+    that stayed shut (JSON ``not_fitted``)."""
+    if effect in ("markov", "telegraph"):
+        return (f"no Gauss-Markov turnover on the fit part: the fitted correlation time "
+                f"must be at most the longest tau / {MARKOV_SPAN:g} and the term must "
+                "dominate the model at 3 tau_c")
+    if effect == "sine":
+        return (f"no spectral line (line z {before.line_z:.1f}, needs "
+                f"{Z_LINE_CANDIDATE:g})")
+    if effect == "resonance":
+        return (f"no narrowband peak at least {RESONANCE_MIN_RATIO:g}x the model's spectrum "
+                f"(line z {before.line_z:.1f})")
+    if effect == "temperature":
+        if not s.has_temperature:
+            return "the record has no temperature column"
+        gate = t_threshold(Z_TEMP_CANDIDATE, dof)
+        gate_level = t_threshold(Z_TEMP_CANDIDATE, stat_dof("temp_level_z", dof))
+        def z(v: float) -> str:
+            return f"{v:.1f}" if math.isfinite(v) else "not made"
+
+        return (f"no correlation with temperature beyond chance: increments t "
+                f"{z(before.temp_z)} (needs {gate:.1f}), level z {z(before.temp_level_z)} "
+                f"and whole-record z {z(temp_record_z)} (need {gate_level:.1f})")
+    if effect == "outliers":
+        return (f"no excess of impulses (tail z {before.tail_z:.1f}, needs "
+                f"{Z_TAIL_CANDIDATE:g}) or fewer than 3 found")
+    if effect == "bias_step":
+        return "the whole-record bias-step test did not fire"
+    return "no fit"
 

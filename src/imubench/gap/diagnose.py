@@ -226,6 +226,7 @@ class ChannelDiagnosis:
             "drift_t": self.drift_t,
             "temperature_record_z": self.temp_record_z,
             "temperature_note": self.temp_note or None,
+            "not_fitted": dict(self.evidence.get("not_fitted", {})),
             "global": self.before.global_dict(),
             "background": self.background,
         }

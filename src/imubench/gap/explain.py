@@ -375,7 +375,9 @@ def explain_channel(c: dict[str, Any], realisations: int,
     elif verdict == "unexplained":
         best = effects[0] if effects else None
         if best is None:
-            lines.append("Verdict unexplained: no candidate effect applies to this evidence.")
+            lines.append("Verdict unexplained: no candidate effect applies to this evidence"
+                         + "".join(f"; {e}: {why}" for e, why in
+                                   (c.get("not_fitted") or {}).items()) + ".")
         else:
             why = best.get("rejected_because") or (
                 f"{removes(best.get('evidence_closed'))} the significant excess "
