@@ -801,11 +801,12 @@ def temp_level_against(real: Features, sims: SimFeatures,
     chance slopes), times sqrt(1 + 1/K) for their mean; as the error is the model's
     exact one, not a K-sample estimate, the threshold is the normal one
     (:data:`POOLED_STATS`). Measured on the blind set's near-limit response 5e-4
-    dps/degC: z 3.3-3.6, where the previous AR(2)-whitened correlation against K = 10
-    realisations gave t 2.5 against 3.1. A low-frequency level the model lacks (a
-    random walk) is weighted as if it were flicker and can correlate with a slow
-    temperature by chance; the increments test (:attr:`Comparison.temp_z`) and the
-    held-out check stand beside this one."""
+    dps/degC: z 3.1-5.2 on the fit parts of the three splits, where the previous
+    AR(2)-whitened correlation against K = 10 realisations gave t 2.5 against 3.1. A
+    low-frequency level the model lacks (a random walk) is weighted as if it were
+    flicker and can correlate with a slow temperature by chance; the trend fitted
+    beside the slope (:func:`gls_slope`), the increments test
+    (:attr:`Comparison.temp_z`) and the held-out check stand against that."""
     if chol is None or real.temp_yb is None or real.temp_tb is None or sims.temp_yb is None:
         return float("nan")
     return gls_against(real.temp_yb, sims.temp_yb, real.temp_tb, chol)
