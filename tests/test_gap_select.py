@@ -411,7 +411,7 @@ def test_model_gls_level_test_sees_a_smooth_temperature_response_the_increments_
         temp_level_against,
         z_against,
     )
-    from imubench.gap.parts import Series, temperature_covariance
+    from imubench.gap.parts import RecordTemperature, Series
 
     fs, n = 10.0, 18000
     t = np.arange(n) / fs
@@ -436,7 +436,7 @@ def test_model_gls_level_test_sees_a_smooth_temperature_response_the_increments_
 
     sims = stack([feats(noise()) for _ in range(10)])
     real = feats(noise() + 3e-3 * (temp - 25.0))
-    chol = temperature_covariance(cm, Series(np.zeros(n), temp, fs), real)
+    chol = RecordTemperature(cm, Series(np.zeros(n), temp, fs)).chol
     assert chol is not None
     level = temp_level_against(real, sims, chol)
     incr = z_against(real.temp_corr, sims.temp_corr, FISHER_SD_FLOOR)
@@ -688,12 +688,12 @@ def test_a_noise_process_the_replicate_does_not_share_is_not_kept() -> None:
 # ------------------------------------------------------------------ backward step
 def _realiser(y: np.ndarray, model: NoiseModel = MODEL) -> Any:
     from imubench.gap.diagnose import _Realiser
-    from imubench.gap.parts import PartSetup, seeds_of
+    from imubench.gap.parts import PartSetup, RecordTemperature, seeds_of
     s = Series(y, None, RATE, "prune")
     n_fit = len(y) // 2
     cm = model["gx"]
     return _Realiser(model, "gx", s, seeds_of(3, 5), PartSetup(s.part(0, n_fit), cm),
-                     PartSetup(s.part(n_fit, len(y)), cm))
+                     PartSetup(s.part(n_fit, len(y)), cm), RecordTemperature(cm, s))
 
 
 def test_backward_step_drops_an_effect_a_later_one_made_redundant() -> None:

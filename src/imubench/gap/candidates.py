@@ -380,8 +380,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                             f"({rf.resonance_width_hz:.3g} Hz against {PEAK_MIN_BINS} x "
                             f"{df:.3g} Hz): a spectral line (the sine's), not a resonance")
         elif eff == "temperature":
-            gate = t_threshold(Z_TEMP_CANDIDATE, dof)
-            gate_level = t_threshold(Z_TEMP_CANDIDATE, stat_dof("temp_level_z", dof))
+            gate, gate_level = _temperature_gates(dof)
             if s.has_temperature and (abs(before.temp_z) > gate
                                       or abs(before.temp_level_z) > gate_level
                                       or abs(temp_record_z) > gate_level):
@@ -435,6 +434,13 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     return cands, ev
 
 
+def _temperature_gates(dof: int) -> tuple[float, float]:
+    """The temperature candidate's gates: (the increments' t with K - 1 = ``dof`` dof,
+    the level tests' normal-equivalent), both at :data:`Z_TEMP_CANDIDATE`."""
+    return (t_threshold(Z_TEMP_CANDIDATE, dof),
+            t_threshold(Z_TEMP_CANDIDATE, stat_dof("temp_level_z", dof)))
+
+
 def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
                     temp_record_z: float) -> str:
     """Why ``effect`` gave no candidate at this step: the gate of :func:`fit_candidates`
@@ -452,8 +458,8 @@ def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
     if effect == "temperature":
         if not s.has_temperature:
             return "the record has no temperature column"
-        gate = t_threshold(Z_TEMP_CANDIDATE, dof)
-        gate_level = t_threshold(Z_TEMP_CANDIDATE, stat_dof("temp_level_z", dof))
+        gate, gate_level = _temperature_gates(dof)
+
         def z(v: float) -> str:
             return f"{v:.1f}" if math.isfinite(v) else "not made"
 

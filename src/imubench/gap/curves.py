@@ -738,7 +738,7 @@ def z_against(value: float, sims: np.ndarray, sd_floor: float = 0.0) -> float:
 TREND_ONLY = 1e-3
 """Increments ``dx`` whose standard deviation is at most this share of their mean are a
 trend alone (a temperature that only drifts; its rounding leaves ~1e-5): no slope is
-fitted beside the constant (:func:`gls_slope`)."""
+fitted beside the constant (:func:`gls_slopes`)."""
 
 
 def only_trend(dx: np.ndarray) -> bool:
@@ -747,14 +747,15 @@ def only_trend(dx: np.ndarray) -> bool:
     return bool(float(np.std(dx)) <= TREND_ONLY * abs(float(np.mean(dx))))
 
 
-def gls_slope(dy: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
-              ) -> tuple[float, float]:
-    """Generalized-least-squares slope of the increments ``dy`` on ``dx`` beside a
-    constant, with noise covariance ``chol`` (:func:`scipy.linalg.cho_factor` of the
-    model's), and its standard error; ``s^2 = e' C^-1 e / (n - 2)`` is the residuals'
-    variance factor, at least 1 (the covariance is the model's own scale: noisier data
-    widen the error, quieter data never narrow it below the model's). Aitken (1935),
-    Proc. R. Soc. Edinb. 55, 42-48.
+def gls_slopes(dys: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Generalized-least-squares slopes of each row of the increments ``dys`` (k, n) on
+    ``dx`` beside a constant, with noise covariance ``chol`` (:func:`scipy.linalg.
+    cho_factor` of the model's), and their standard errors; each row's ``s^2 = e' C^-1 e
+    / (n - 2)`` is its residuals' variance factor, at least 1 (the covariance is the
+    model's own scale: noisier data widen the error, quieter data never narrow it below
+    the model's). Aitken (1935), Proc. R. Soc. Edinb. 55, 42-48. The design's solve is
+    made once for all rows.
 
     The constant is a linear trend of the levels (a ramp, or the chance trend of a
     wandering level): fitted beside the slope, it takes the part of ``dx`` that is a
@@ -762,23 +763,26 @@ def gls_slope(dy: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
     trend. Without it, real static records (CATS tag, 8.5 h segments, the bench's
     temperature with its 1 degC/h drift) gave z up to 6.5 on nulls whose level wanders;
     with it |z| < 1.4 there, and the blind set's temperature responses keep z 5.2-11.
-    NaN when ``dx`` is a trend alone (:func:`only_trend`)."""
+    NaN when ``dx`` is a trend alone (:func:`only_trend`); NaN for a row with a
+    missing value."""
     from scipy.linalg import cho_solve
 
+    nan = np.full(len(dys), np.nan)
     if only_trend(dx):
-        return float("nan"), float("nan")
+        return nan, nan
     x = np.column_stack([np.ones_like(dx), dx])
     cx = cho_solve(chol, x)
     info = x.T @ cx
     if not (np.all(np.isfinite(info)) and np.linalg.det(info) > 0):
-        return float("nan"), float("nan")
-    coef = np.linalg.solve(info, cx.T @ dy)
-    e = dy - x @ coef
-    s2 = float(e @ cho_solve(chol, e)) / max(len(e) - 2, 1)
-    var = float(np.linalg.inv(info)[1, 1])
+        return nan, nan
+    inv = np.linalg.inv(info)
+    var = float(inv[1, 1])
     if not var > 0:
-        return float("nan"), float("nan")
-    return float(coef[1]), math.sqrt(max(s2, 1.0) * var)
+        return nan, nan
+    coef = inv @ (cx.T @ dys.T)  # (2, k)
+    e = dys - (x @ coef).T
+    s2 = np.einsum("kn,nk->k", e, cho_solve(chol, e.T)) / max(dys.shape[1] - 2, 1)
+    return coef[1], np.sqrt(np.maximum(s2, 1.0) * var)
 
 
 def temp_level_against(real: Features, sims: SimFeatures,
@@ -796,7 +800,7 @@ def temp_level_against(real: Features, sims: SimFeatures,
     (:func:`imubench.noisefit.model_avar.block_increment_acv`, ``chol``): efficient
     when the model is right (Aitken 1935). The model's own response (and any kept
     effect's) is in the realisations; their mean slope is subtracted. The spread is the
-    larger of the real slope's GLS standard error (:func:`gls_slope`) and the
+    larger of the real slope's GLS standard error (:func:`gls_slopes`) and the
     realisations' standard deviation (a noisier candidate, a random walk, widens the
     chance slopes), times sqrt(1 + 1/K) for their mean; as the error is the model's
     exact one, not a K-sample estimate, the threshold is the normal one
@@ -805,7 +809,7 @@ def temp_level_against(real: Features, sims: SimFeatures,
     AR(2)-whitened correlation against K = 10 realisations gave t 2.5 against 3.1. A
     low-frequency level the model lacks (a random walk) is weighted as if it were
     flicker and can correlate with a slow temperature by chance; the trend fitted
-    beside the slope (:func:`gls_slope`), the increments test
+    beside the slope (:func:`gls_slopes`), the increments test
     (:attr:`Comparison.temp_z`) and the held-out check stand against that."""
     if chol is None or real.temp_yb is None or real.temp_tb is None or sims.temp_yb is None:
         return float("nan")
@@ -821,14 +825,17 @@ def gls_against(yb: np.ndarray, sims_yb: np.ndarray, tb: np.ndarray,
     if (sims_yb.ndim != 2 or sims_yb.shape[1] != len(tb) or len(yb) != len(tb)
             or len(dt) != chol[0].shape[0] or not np.isfinite(yb).all()):
         return float("nan")
-    b_real, se = gls_slope(np.diff(yb), dt, chol)
-    b_sims = np.array([gls_slope(np.diff(b), dt, chol)[0] if np.isfinite(b).all()
-                       else math.nan for b in sims_yb])
-    ok = np.isfinite(b_sims)
-    if not (math.isfinite(b_real) and ok.sum() >= 3):
+    rows = np.diff(np.vstack([yb, sims_yb]), axis=1)
+    ok = np.isfinite(rows).all(axis=1)
+    slopes = np.full(len(rows), np.nan)
+    se = np.full(len(rows), np.nan)
+    slopes[ok], se[ok] = gls_slopes(rows[ok], dt, chol)
+    b_real, b_sims = slopes[0], slopes[1:]
+    fin = np.isfinite(b_sims)
+    if not (math.isfinite(b_real) and fin.sum() >= 3):
         return float("nan")
-    sd = max(se, float(b_sims[ok].std(ddof=1))) * math.sqrt(1.0 + 1.0 / ok.sum())
-    return float((b_real - b_sims[ok].mean()) / sd)
+    sd = max(float(se[0]), float(b_sims[fin].std(ddof=1))) * math.sqrt(1.0 + 1.0 / fin.sum())
+    return float((b_real - b_sims[fin].mean()) / sd)
 
 
 def _runs(z: np.ndarray, z_edge: float = Z_EDGE, z_region: float = Z_REGION

@@ -556,10 +556,9 @@ class _Realiser:
     once, since the backward step and its re-scoring ask for the same lists again."""
 
     def __init__(self, model: NoiseModel, channel: str, series: Series, seeds: list[int],
-                 fit: PartSetup, hold: PartSetup | None) -> None:
+                 fit: PartSetup, hold: PartSetup | None, temp: RecordTemperature) -> None:
         self.model, self.channel, self.series, self.seeds = model, channel, series, seeds
-        self.fit, self.hold = fit, hold
-        self.temp = RecordTemperature(model[channel], series)
+        self.fit, self.hold, self.temp = fit, hold, temp
         self._steps: dict[tuple[tuple[str, tuple[tuple[str, float], ...]], ...], _Step] = {}
 
     def variant(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray | float]:
@@ -765,7 +764,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     assert first is not None
     pruned: list[Candidate] = []
     if len(kept) >= 2:
-        realiser = _Realiser(model, channel, series, seeds, fit, hold)
+        realiser = _Realiser(model, channel, series, seeds, fit, hold, rtemp)
         kept, pruned = _prune(realiser, kept)
         if pruned:
             residual = realiser.step(kept).significant

@@ -18,7 +18,6 @@ from scipy.linalg import cho_factor, toeplitz
 
 from imubench.gap.curves import (
     Comparison,
-    Features,
     SimFeatures,
     analysis_afs,
     band_edges,
@@ -106,31 +105,10 @@ def tau_correlation(cm: ChannelModel, afs: np.ndarray, n: int, rate_hz: float) -
                              resonance=(cm.resonance_freq_hz, cm.resonance_width_hz))
 
 
-def increment_cholesky(cm: ChannelModel, n_block: int, n_blocks: int, rate_hz: float
-                       ) -> tuple[np.ndarray, bool]:
-    """Cholesky factor of the model's covariance of the ``n_blocks - 1`` increments of
-    ``n_blocks`` consecutive means of ``n_block`` samples
-    (:func:`imubench.noisefit.model_avar.block_increment_acv`, Toeplitz)."""
-    return cho_factor(toeplitz(block_increment_acv(cm, n_block, n_blocks - 1, rate_hz)))
-
-
-def temperature_covariance(cm: ChannelModel, series: Series, real: Features
-                           ) -> tuple[np.ndarray, bool] | None:
-    """:func:`increment_cholesky` for the part's temperature blocks
-    (:func:`imubench.gap.curves.temperature_blocks`); None without temperature or when
-    blocks were dropped for missing samples (the increments across a dropped block are
-    not the model's lag-1 ones)."""
-    if real.temp_yb is None:
-        return None
-    n_block = block_length(len(series.y), series.rate_hz)
-    n_b = len(real.temp_yb)
-    if n_b != len(series.y) // n_block or n_b < 4:
-        return None
-    return increment_cholesky(cm, n_block, n_b, series.rate_hz)
-
-
 class RecordTemperature:
-    """The temperature level test on the WHOLE record (twice the fit part's data).
+    """The temperature level test of a series' blocks: on the WHOLE record (twice the fit
+    part's data) here, and its covariance (:attr:`chol`) for each part's level test
+    (:class:`PartSetup`).
 
     The fit part's test (:func:`imubench.gap.curves.temp_level_against`) sees half the
     record: a response of 5e-4 dps/degC on the blind set's temperatures (+-3 and +-1.2
@@ -138,7 +116,9 @@ class RecordTemperature:
     z ~3.3 on 30 min, ~4.7 on the hour. As the bias-step and drift tests, it is a test
     of the record; the temperature coefficient is still fitted on the fit part alone and
     checked on the held-out part. Blocks of :func:`imubench.gap.curves.block_length`
-    over the record; the covariance is the base model's."""
+    over the series; the covariance (the Cholesky factor of the model's Toeplitz
+    covariance of the block-mean increments,
+    :func:`imubench.noisefit.model_avar.block_increment_acv`) is the base model's."""
 
     def __init__(self, cm: ChannelModel, series: Series) -> None:
         self.n_block = block_length(len(series.y), series.rate_hz)
@@ -159,7 +139,8 @@ class RecordTemperature:
                              "to it cannot be told from a ramp (a ramp candidate takes it)")
             else:
                 self.tb = tb
-                self.chol = increment_cholesky(cm, self.n_block, len(tb), series.rate_hz)
+                self.chol = cho_factor(toeplitz(block_increment_acv(
+                    cm, self.n_block, len(tb) - 1, series.rate_hz)))
 
     def z(self, y: np.ndarray, sims: np.ndarray, det_sum: np.ndarray | float) -> float:
         """z of the record ``y``'s temperature slope against the realisations less the
@@ -192,8 +173,9 @@ class PartSetup:
         self.corr = (None if cm is None
                      else tau_correlation(cm, self.afs, n, series.rate_hz)[:len(self.tau_s),
                                                                            :len(self.tau_s)])
-        self.temp_chol = None if cm is None else temperature_covariance(cm, series,
-                                                                        self.real)
+        # a block the real part lacks makes its increments' count differ from the
+        # covariance's, and the level test NaN (curves.gls_against)
+        self.temp_chol = None if cm is None else RecordTemperature(cm, series).chol
 
     def sim_features(self, sims: np.ndarray) -> SimFeatures:
         return stack([features(s, self.series.rate_hz, self.afs, self.edges, self.nperseg,

@@ -199,6 +199,29 @@ def _geometric_tail_sum(g: np.ndarray, rho: np.ndarray) -> float:
     return float(full_rho @ powers)
 
 
+def _prefix_sums(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(p0, p1): p0[n] = sum_{k=1}^{n} G(k), p1[n] = sum_{k=1}^{n} k G(k)."""
+    k = np.arange(g.size, dtype=np.float64)
+    return (np.concatenate([[0.0], np.cumsum(g[1:])]),
+            np.concatenate([[0.0], np.cumsum(k[1:] * g[1:])]))
+
+
+def _sum_variance(g0: float, p0: np.ndarray, p1: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """V(h) = h G(0) + 2 sum_{l=1}^{h-1} (h - l) G(l) for integer h >= 1."""
+    hf = h.astype(np.float64)
+    return hf * g0 + 2.0 * (hf * p0[h - 1] - p1[h - 1])
+
+
+def sum_variance(g: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Variance (unit^2) of a sum of ``h`` consecutive samples, from G(0..max h - 1):
+    the structure function of the integrated series (0 at h = 0)."""
+    h = np.asarray(h, dtype=np.int64)
+    if h.size and g.size < int(h.max()):
+        raise ValueError("G must extend to lag max(h) - 1")
+    p0, p1 = _prefix_sums(g)
+    return np.where(h > 0, _sum_variance(float(g[0]), p0, p1, np.maximum(h, 1)), 0.0)
+
+
 def avar_from_gacv(g: np.ndarray, m: np.ndarray) -> np.ndarray:
     """AVAR(m) from G(0..2 max(m)) by the module formula (prefix sums, O(1) per m)."""
     m = np.asarray(m, dtype=np.int64)
@@ -206,11 +229,9 @@ def avar_from_gacv(g: np.ndarray, m: np.ndarray) -> np.ndarray:
         return np.zeros(0)
     if g.size < 2 * int(m.max()):
         raise ValueError("G must extend to lag 2 max(m) - 1")
-    k = np.arange(g.size, dtype=np.float64)
-    p0 = np.concatenate([[0.0], np.cumsum(g[1:])])  # p0[n] = sum_{k=1}^{n} G(k)
-    p1 = np.concatenate([[0.0], np.cumsum(k[1:] * g[1:])])
+    p0, p1 = _prefix_sums(g)
     mf = m.astype(np.float64)
-    s1 = mf * g[0] + 2.0 * (mf * p0[m - 1] - p1[m - 1])
+    s1 = _sum_variance(g[0], p0, p1, m)
     s2 = p1[m] + 2.0 * mf * (p0[2 * m - 1] - p0[m]) - (p1[2 * m - 1] - p1[m])
     return (s1 - s2) / mf**2
 
@@ -455,6 +476,7 @@ __all__ = [
     "resonance_avar",
     "resonance_gain2",
     "resonance_psd",
+    "sum_variance",
     "term_avar",
     "term_spectrum",
 ]

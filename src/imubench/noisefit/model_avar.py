@@ -23,6 +23,7 @@ from imubench.noisefit.kernels import (
     averaging_factors,
     filter_autocorrelation,
     gacv_unit,
+    sum_variance,
     term_avar,
 )
 
@@ -80,7 +81,7 @@ def block_increment_acv(cm: ChannelModel, m: int, n_lags: int, rate_hz: float) -
 
     With ``V(h)`` the variance of a sum of h consecutive samples (the structure function
     of the integrated series, ``V(h) = h G(0) + 2 sum_{l=1}^{h-1} (h - l) G(l)`` from the
-    generalized autocovariance G, as in :func:`kernels.avar_from_gacv`) and ``X_j`` the
+    generalized autocovariance G, :func:`kernels.sum_variance`) and ``X_j`` the
     partial sums at the block boundaries, ``D_j = (X_{j+2} - 2 X_{j+1} + X_j) / m``; for
     a process with stationary increments ``E[(X_a - X_b)(X_c - X_d)] = (V(a - d) +
     V(b - c) - V(a - c) - V(b - d)) / 2`` (Yaglom 1987, Correlation Theory of Stationary
@@ -110,13 +111,7 @@ def block_increment_acv(cm: ChannelModel, m: int, n_lags: int, rate_hz: float) -
             gacv_unit("markov", kmax, tau0, tau_c_s=float(cm.markov_tau)), rho,
             multiplicative=True)
     g[0] += cm.output_white**2 * rate_hz  # white after the filter
-    h = np.arange(n_lags + 2, dtype=np.int64) * m
-    k = np.arange(g.size, dtype=np.float64)
-    p0 = np.concatenate([[0.0], np.cumsum(g[1:])])  # p0[n] = sum_{l=1}^{n} G(l)
-    p1 = np.concatenate([[0.0], np.cumsum(k[1:] * g[1:])])
-    hf = h.astype(np.float64)
-    hm1 = np.maximum(h - 1, 0)
-    v = np.where(h > 0, hf * g[0] + 2.0 * (hf * p0[hm1] - p1[hm1]), 0.0)
+    v = sum_variance(g, np.arange(n_lags + 2, dtype=np.int64) * m)
     c = np.array([1.0, -2.0, 1.0])
     out = np.zeros(n_lags)
     for a in range(3):
