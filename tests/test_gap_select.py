@@ -18,7 +18,7 @@ from scipy.signal import lfilter
 
 from imubench.gap import GapOptions, Series, diagnose_channel
 from imubench.gap.background import Background, from_halves, from_replicates, within
-from imubench.gap.curves import Comparison, Region, t_threshold
+from imubench.gap.curves import Comparison, Region, t_threshold, wilson_hilferty_z
 from imubench.gap.evidence import (
     drift_statistic,
     fit_bias_step,
@@ -377,6 +377,27 @@ def test_holdout_chi2_counts_correlated_taus_once() -> None:
     plain = _cmp(z)
     assert plain.chi2_parts()["allan"] == pytest.approx(28.8)
     assert plain.chi2_parts()["statistics"] == pytest.approx(plain.chi2 - 28.8)
+
+
+def test_holdout_chi2_on_the_band_of_the_model_without_the_candidate() -> None:
+    """A candidate that quadruples the realisations' spread and moves the curve away (d
+    0.1 -> 0.25 at every tau) has a SMALLER Allan chi-squared on its own band (z 1.1 ->
+    0.95); measured on the band of the model without it (``spread``), its Allan term
+    rises, as the curve moved away. The spectral bands and statistics keep their own
+    spread; without ``spread`` the comparison's own band applies throughout."""
+    before = _cmp([1.0, 1.0, 1.0, 1.0])  # d 0.1, sigma 0.1
+    wide = _cmp([1.0, 1.0, 1.0, 1.0])
+    wide.d, wide.sigma = np.full(4, 0.25), np.full(4, 0.4)
+    wide.z = wilson_hilferty_z(wide.d, wide.sigma)
+    wide.band_z = np.array([1.5, -0.5])
+    own, fixed, ref = wide.chi2_parts(), wide.chi2_parts(before), before.chi2_parts(before)
+    assert own["allan"] < ref["allan"] < fixed["allan"]
+    assert fixed["allan"] == pytest.approx(
+        float(np.sum(wilson_hilferty_z(wide.d, before.sigma) ** 2)))
+    assert ref["allan"] == pytest.approx(
+        float(np.sum(wilson_hilferty_z(before.d, before.sigma) ** 2)))
+    assert fixed["bands"] == own["bands"] == pytest.approx(2.5)
+    assert fixed["statistics"] == own["statistics"]
 
 
 def test_tail_threshold_is_normal_not_student_t() -> None:
