@@ -913,3 +913,52 @@ def test_record_temperature_test_uses_the_whole_record() -> None:
     rec_d = RecordTemperature(cm, Series(np.zeros(n), drift_only, fs))
     assert math.isnan(rec_d.z(noise() + 2.4e-3 * (drift_only - 25.0), sims, 0.0))
     assert "cannot be told from a ramp" in rec_d.note
+
+
+def test_step_test_sees_through_a_temperature_response() -> None:
+    """A temperature response of 0.06 dps/degC (+-3 degC at 25 min, +-1.2 at 7 min) widens
+XX
+    step test (statistic 2.8-4.0 against STEP_SIGMAS 5; 4.8-7.0 without the response).
+    The record less its own GLS temperature response (parts.RecordTemperature.
+    less_response) shows the step as without the response, and the slope it takes off
+    is the response's; a record without a step stays at the null's level."""
+    from lsm6ds_sim.model import ChannelModel
+
+    from imubench.gap.diagnose import STEP_SIGMAS
+    from imubench.gap.parts import RecordTemperature, Series
+
+    fs, n = 10.0, 36000
+    t = np.arange(n) / fs
+    temp = 26.0 + 3.0 * np.sin(2 * math.pi * t / 1500.0) + 1.2 * np.sin(
+        2 * math.pi * t / 420.0)
+    rng = np.random.default_rng(21)
+    white, flicker = 0.016, 0.0032
+    cm = ChannelModel().replace(white=white, flicker=flicker)
+    freq = np.fft.rfftfreq(n, 1.0 / fs)
+    s_fl = np.zeros_like(freq)
+    s_fl[1:] = flicker**2 / (math.pi * freq[1:])
+
+    def noise() -> np.ndarray:
+        sd = np.sqrt(s_fl * fs * n / 4.0)
+        x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
+        return white * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+
+    rec = RecordTemperature(cm, Series(np.zeros(n), temp, fs))
+    response = 0.06 * (temp - 25.0)
+    step = np.where(t >= 1234.0, 0.05, 0.0)
+    hidden = seen = 0
+    for _ in range(5):
+        y = noise() + response + step
+        raw = step_statistic(y, fs)[0]
+        less = step_statistic(rec.less_response(y[None, :])[0], fs)[0]
+        hidden += raw < STEP_SIGMAS
+        seen += less > STEP_SIGMAS
+        null = rec.less_response((noise() + response)[None, :])[0]
+        assert step_statistic(null, fs)[0] < 4.5
+    assert hidden == 5 and seen == 5
+    y = noise() + response
+    taken = y - rec.less_response(y[None, :])[0]
+    assert np.polyfit(temp, taken, 1)[0] == pytest.approx(0.06, rel=0.05)
+    # without a usable temperature the rows come back unchanged
+    flat = RecordTemperature(cm, Series(np.zeros(n), np.full(n, 25.0), fs))
+    assert np.array_equal(flat.less_response(y[None, :]), y[None, :])

@@ -303,14 +303,18 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
-                   cur: SimFeatures, effects: tuple[str, ...], step_fired: bool,
+                   cur: SimFeatures, effects: tuple[str, ...], step_y: np.ndarray | None,
                    temp_record_z: float) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
     ``whole``: the whole record less the kept effects' deterministic parts (the bias
     step is located on it, the temperature response regressed on its fit part, which
     comes first); ``cur``: features of the
-    current realisations on the fit part; ``step_fired``: the whole-record step test fired;
+    current realisations on the fit part; ``step_y``: the whole record as the
+    whole-record step test saw it (``whole`` less its own temperature response when the
+    temperature test fired, :meth:`imubench.gap.diagnose._Step._for_step`), on which the
+    bias step is located, sized and checked for persistence; None when that test did not
+    fire;
     ``temp_record_z``: the whole-record temperature z
     (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
     the fit part's level test does.
@@ -415,11 +419,11 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                         f"samples in it (at most {OUTLIER_MAX_SHARE:.0%}), amplitude "
                         f"{of.outlier_amplitude:.3g}: heavy-tailed noise, which no candidate "
                         "models")
-        elif eff == "bias_step" and step_fired:
-            st = evidence.fit_bias_step(whole.y, whole.rate_hz)
+        elif eff == "bias_step" and step_y is not None:
+            st = evidence.fit_bias_step(step_y, whole.rate_hz)
             cands.append(Candidate(eff, {"step_time_s": st.step_time_s,
                                          "step_size": st.step_size}, 2))
-            kept_share = evidence.step_persistence(whole.y, whole.rate_hz, st)
+            kept_share = evidence.step_persistence(step_y, whole.rate_hz, st)
             if kept_share < evidence.STEP_PERSISTENCE:
                 moved = (f"keep {kept_share:.0%} of its size" if kept_share >= 0 else
                          f"move the other way, by {-kept_share:.0%} of its size")

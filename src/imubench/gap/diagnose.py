@@ -270,19 +270,14 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
     return d
 
 
-def step_stats(sims: np.ndarray, rate_hz: float, det_sum: np.ndarray | float = 0.0
-               ) -> np.ndarray:
-    """The step statistic of each realisation less ``det_sum``."""
-    return np.array([evidence.step_statistic(s - det_sum, rate_hz)[0] for s in sims])
-
-
 class _Step:
     """One step of the forward selection: the current realisations against the record.
 
     Besides the fit part's comparison, three whole-record tests: the bias step (the largest
     normalised jump of block means, :func:`imubench.gap.evidence.step_statistic`, fired
     when it exceeds STEP_SIGMAS and every realisation's; scored as its t against the
-    realisations), the drift (:func:`imubench.gap.evidence.drift_statistic` of the
+    realisations; record and realisations each less their own temperature response when
+    the temperature test fired, :meth:`_for_step`), the drift (:func:`imubench.gap.evidence.drift_statistic` of the
     record minus the deterministic parts of the kept effects, self-normalised Student t)
     and the temperature response (:class:`imubench.gap.parts.RecordTemperature`, z
     against the realisations, fired beyond Z_SLOPE).
@@ -298,21 +293,36 @@ class _Step:
         self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
                      if hold is not None else None)
         self.det_sum = det_sum
+        self.rate_hz = rate
         self.residual = series.y - det_sum
         """The record less the kept effects' deterministic parts."""
-        # the step on the record and realisations less those parts: a kept temperature
-        # response widens the block means' increments and hid a second effect's step
-        # (CATS gy, bias step + temperature at 2x their limits)
-        self.step_real, _ = evidence.step_statistic(self.residual, rate)
-        sim_steps = step_stats(sims, rate, det_sum)
-        self.step_z = z_against(self.step_real, sim_steps)
-        self.step_fired = bool(self.step_real > STEP_SIGMAS
-                               and self.step_real > float(np.max(sim_steps)))
         self.drift_t, self.drift_dof = evidence.drift_statistic(self.residual, rate)
         self.drift_fired = stat_fired(self.drift_t, Z_DRIFT, False, self.drift_dof)
         self.temp = temp
         self.temp_z = temp.z(self.residual, sims, det_sum)
         self.temp_fired = stat_fired(self.temp_z, Z_SLOPE, False, POOLED_DOF)
+        self.step_y = self._for_step(self.residual[None, :])[0]
+        """The record as the whole-record step test sees it (:meth:`_for_step`)."""
+        self.step_real = evidence.step_statistic(self.step_y, rate)[0]
+        sim_steps = self.step_stats(sims)
+        self.step_z = z_against(self.step_real, sim_steps)
+        self.step_fired = bool(self.step_real > STEP_SIGMAS
+                               and self.step_real > float(np.max(sim_steps)))
+
+    def _for_step(self, ys: np.ndarray) -> np.ndarray:
+        """``ys`` as the step test sees them: less the kept effects' deterministic parts
+        (done by the caller for the record) and, when the temperature test fired, less
+        each one's own temperature response (:meth:`RecordTemperature.less_response`).
+        A temperature response widens the block means' increments and hid a step: a kept
+        one hid a second effect's step (CATS gy, bias step + temperature at 2x their
+        limits), an unmodelled one let a random walk take the step's excess first (CATS
+        ax, az)."""
+        return self.temp.less_response(ys) if self.temp_fired else ys
+
+    def step_stats(self, sims: np.ndarray) -> np.ndarray:
+        """The step statistic of each realisation, seen as the record is (:meth:`_for_step`)."""
+        ys = self._for_step(sims - self.det_sum)
+        return np.array([evidence.step_statistic(y, self.rate_hz)[0] for y in ys])
 
     @property
     def record_fired(self) -> bool:
@@ -435,8 +445,8 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
     n_fit = len(fit.series.y)
     cm = variant.model[channel]
     whole = dataclasses.replace(series, y=st.residual)
-    cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects, st.step_fired,
-                               st.temp_z)
+    cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects,
+                               st.step_y if st.step_fired else None, st.temp_z)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
@@ -449,7 +459,7 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
         cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
                             local_sum)
         c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
-        c.step_z = z_against(st.step_real, step_stats(cs, rate, st.det_sum))
+        c.step_z = z_against(st.step_real, st.step_stats(cs))
         det = deterministic(c.effect, c.params, cm, series)
         c.drift_t = (evidence.drift_statistic(st.residual - det, rate)[0]
                      if det is not None else st.drift_t)

@@ -26,6 +26,7 @@ from imubench.gap.curves import (
     compare,
     features,
     gls_against,
+    gls_slopes,
     only_trend,
     psd_segment,
     stack,
@@ -123,6 +124,7 @@ class RecordTemperature:
     def __init__(self, cm: ChannelModel, series: Series) -> None:
         self.n_block = block_length(len(series.y), series.rate_hz)
         self.tb: np.ndarray | None = None
+        self.temp_c: np.ndarray | None = None
         self.chol: tuple[np.ndarray, bool] | None = None
         self.note = ""
         """Why the test cannot be made although the record has a temperature (empty
@@ -138,7 +140,7 @@ class RecordTemperature:
                 self.note = ("the temperature only drifts, at a constant rate: a response "
                              "to it cannot be told from a ramp (a ramp candidate takes it)")
             else:
-                self.tb = tb
+                self.tb, self.temp_c = tb, series.temp_c
                 self.chol = cho_factor(toeplitz(block_increment_acv(
                     cm, self.n_block, len(tb) - 1, series.rate_hz)))
 
@@ -149,6 +151,18 @@ class RecordTemperature:
             return float("nan")
         sims_yb = np.array([block_means(s - det_sum, self.n_block) for s in sims])
         return gls_against(block_means(y, self.n_block), sims_yb, self.tb, self.chol)
+
+    def less_response(self, ys: np.ndarray) -> np.ndarray:
+        """Each row of ``ys`` (k, n) less its own temperature response: the GLS slope of
+        its block-mean increments on the temperature's (:func:`imubench.gap.curves.
+        gls_slopes`, beside a constant) times the temperature about its mean. ``ys``
+        unchanged without the test (:attr:`note`) or where a slope is NaN."""
+        if self.chol is None or self.tb is None or self.temp_c is None:
+            return ys
+        yb = np.array([block_means(y, self.n_block) for y in ys])
+        slopes, _ = gls_slopes(np.diff(yb, axis=1), np.diff(self.tb), self.chol)
+        slopes = np.where(np.isfinite(slopes), slopes, 0.0)
+        return ys - slopes[:, None] * (self.temp_c - np.nanmean(self.temp_c))[None, :]
 
 
 class PartSetup:
