@@ -296,7 +296,8 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
                     + ("did not fall" if after < before + 0.01 else "rose")
                     + ": it is the Allan curve's RMS of ln ratios with every tau weighted "
                     "equally (the scatter of the long taus dominates it), while the check "
-                    "weighs each term by its precision and adds the spectrum and the "
+                    "weighs each term by its precision (the Allan curve's on the scatter "
+                    "of the model without the effect) and adds the spectrum and the "
                     f"statistics; its largest drop is in the {PART_NAMES.get(main, main)}")
             if main == "allan" and after >= before + 0.01:
                 txt += (" (the whole-curve statistic compares with the realisations' mean "
