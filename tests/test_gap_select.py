@@ -8,6 +8,7 @@ diagnosis uses, except where a model's realisation is the point.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -859,17 +860,12 @@ def test_two_level_ratio_stays_finite_far_from_both_levels() -> None:
     assert math.isfinite(two_level_llr(y, RATE, 1.0, 10.0, 600.0))
 
 
-def test_record_temperature_test_uses_the_whole_record() -> None:
-    """The whole-record temperature z (parts.RecordTemperature) against realisations of
-    the model (textbook white + flicker generator): a response of 2.4e-3 dps/degC over
-    noise 4x the LSM6DSL's is beyond Z_SLOPE on the record; 30 nulls stay within it; a
-    response the realisations carry is not counted; the kept deterministic parts
-    (det_sum) come off the realisations as the caller takes them off the record; without
-    temperature the test is NaN; a ramp beside a drifting temperature is no response."""
+def _hour_at_10_hz() -> tuple[float, int, np.ndarray, np.ndarray, Any,
+                             Callable[[], np.ndarray]]:
+    """One hour at 10 Hz: (rate, samples, time s, temperature degC: +-3 degC at 25 min and
+    +-1.2 at 7 min, the model (white 0.016 + flicker 0.0032, 4x the LSM6DSL's), a
+    textbook generator of that noise, white plus FFT-shaped 1/f)."""
     from lsm6ds_sim.model import ChannelModel
-
-    from imubench.gap.curves import Z_SLOPE
-    from imubench.gap.parts import RecordTemperature, Series
 
     fs, n = 10.0, 36000
     t = np.arange(n) / fs
@@ -886,6 +882,21 @@ def test_record_temperature_test_uses_the_whole_record() -> None:
         sd = np.sqrt(s_fl * fs * n / 4.0)
         x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
         return white * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+
+    return fs, n, t, temp, cm, noise
+
+
+def test_record_temperature_test_uses_the_whole_record() -> None:
+    """The whole-record temperature z (parts.RecordTemperature) against realisations of
+    the model (textbook white + flicker generator): a response of 2.4e-3 dps/degC over
+    noise 4x the LSM6DSL's is beyond Z_SLOPE on the record; 30 nulls stay within it; a
+    response the realisations carry is not counted; the kept deterministic parts
+    (det_sum) come off the realisations as the caller takes them off the record; without
+    temperature the test is NaN; a ramp beside a drifting temperature is no response."""
+    from imubench.gap.curves import Z_SLOPE
+    from imubench.gap.parts import RecordTemperature, Series
+
+    fs, n, t, temp, cm, noise = _hour_at_10_hz()
 
     rec = RecordTemperature(cm, Series(np.zeros(n), temp, fs))
     sims = np.array([noise() for _ in range(10)])
@@ -922,26 +933,10 @@ XX
     The record less its own GLS temperature response (parts.RecordTemperature.
     less_response) shows the step as without the response, and the slope it takes off
     is the response's; a record without a step stays at the null's level."""
-    from lsm6ds_sim.model import ChannelModel
-
     from imubench.gap.diagnose import STEP_SIGMAS
     from imubench.gap.parts import RecordTemperature, Series
 
-    fs, n = 10.0, 36000
-    t = np.arange(n) / fs
-    temp = 26.0 + 3.0 * np.sin(2 * math.pi * t / 1500.0) + 1.2 * np.sin(
-        2 * math.pi * t / 420.0)
-    rng = np.random.default_rng(21)
-    white, flicker = 0.016, 0.0032
-    cm = ChannelModel().replace(white=white, flicker=flicker)
-    freq = np.fft.rfftfreq(n, 1.0 / fs)
-    s_fl = np.zeros_like(freq)
-    s_fl[1:] = flicker**2 / (math.pi * freq[1:])
-
-    def noise() -> np.ndarray:
-        sd = np.sqrt(s_fl * fs * n / 4.0)
-        x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
-        return white * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+    fs, n, t, temp, cm, noise = _hour_at_10_hz()
 
     rec = RecordTemperature(cm, Series(np.zeros(n), temp, fs))
     response = 0.06 * (temp - 25.0)
