@@ -277,10 +277,11 @@ class _Step:
     normalised jump of block means, :func:`imubench.gap.evidence.step_statistic`, fired
     when it exceeds STEP_SIGMAS and every realisation's; scored as its t against the
     realisations; record and realisations each less their own temperature response when
-    the temperature test fired, :meth:`_for_step`), the drift (:func:`imubench.gap.evidence.drift_statistic` of the
-    record minus the deterministic parts of the kept effects, self-normalised Student t)
-    and the temperature response (:class:`imubench.gap.parts.RecordTemperature`, z
-    against the realisations, fired beyond Z_SLOPE).
+    the temperature test fired, :meth:`_for_step`), the drift
+    (:func:`imubench.gap.evidence.drift_statistic` of the record minus the deterministic
+    parts of the kept effects, self-normalised Student t) and the temperature response
+    (:class:`imubench.gap.parts.RecordTemperature`, z against the realisations, fired
+    beyond Z_SLOPE).
     """
 
     def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
@@ -413,6 +414,14 @@ def _shape_scores(cands: list[Candidate]) -> None:
             f"must differ by more than {TWO_LEVEL_MARGIN:.2f})")
 
 
+NOISE_PROCESSES = frozenset({"flicker", "random_walk", "quantization", "markov",
+                               "telegraph"})
+"""Noise processes: a property of the sensor, so a replicate recording of it should show
+them too. Deterministic or recording-bound effects (a sine, a step, a ramp, temperature,
+outliers) and the base model's refit are not checked on replicates; the held-out part's
+systematic Allan gap checks these and the base model's refit (:func:`_acceptable`)."""
+
+
 def _acceptable(c: Candidate, st: _Step) -> str:
     """Empty when ``c`` is kept; else why not, in plain words."""
     assert c.fit is not None
@@ -431,6 +440,12 @@ def _acceptable(c: Candidate, st: _Step) -> str:
             parts = ", ".join(f"{k} {v:.1f}" for k, v in c.holdout_dparts.items())
             return (f"does not reduce the held-out chi-squared beyond its scatter (drop "
                     f"{c.holdout_dchi2:.1f}: {parts}; needs {need:.1f})")
+        before, after = st.hold.gap_excess, c.holdout.gap_excess
+        noise = c.effect in NOISE_PROCESSES or c.effect == "base_model"
+        if noise and after - before > st.hold.gap_null:
+            return (f"makes the held-out Allan curve depart more: its systematic gap rises "
+                    f"{before:.3f} -> {after:.3f}, by more than the scatter "
+                    f"{st.hold.gap_null:.3f}")
     return ""
 
 
@@ -519,13 +534,6 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
     return None, None
 
 
-REPLICATE_EFFECTS = frozenset({"flicker", "random_walk", "quantization", "markov",
-                               "telegraph"})
-"""Noise processes: a property of the sensor, so a replicate recording of it should show
-them too. Deterministic or recording-bound effects (a sine, a step, a ramp, temperature,
-outliers) and the base model's refit are not checked on replicates."""
-
-
 def _on_replicates(variant: Variant, channel: str, reps: list[tuple[PartSetup, Series]],
                    seeds: list[int]) -> list[Comparison]:
     """Each replicate recording against realisations of ``variant`` over it."""
@@ -537,23 +545,18 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
                        reps: list[tuple[PartSetup, Series]], now: list[Comparison],
                        seeds: list[int]) -> str:
     """Why a noise-process candidate is refused by the replicates (empty if it is not):
-    with it, a replicate's chi-squared (:meth:`~imubench.gap.curves.Comparison.chi2_parts`
-    on the bands of the model without it, as the held-out check) rises by more than
-    ``chi2.isf(HOLDOUT_ALPHA, n_params)``, i.e. the replicate does not share it (Samsung S5
-    gy: a random walk of one segment took the next segment's systematic Allan gap 0.20 ->
-    0.72). The replicates' comparisons with the candidate are kept in
-    :attr:`Candidate.replicates` (reused when it is kept)."""
-    if c.effect not in REPLICATE_EFFECTS:
+    with it, a replicate's systematic Allan gap rises by more than its scatter, i.e. the
+    replicate does not share it (Samsung S5 gy: a random walk of one segment took the
+    next segment's gap 0.20 -> 0.72). The replicates' comparisons with the candidate are
+    kept in :attr:`Candidate.replicates` (reused when it is kept)."""
+    if c.effect not in NOISE_PROCESSES:
         return ""
     c.replicates = _on_replicates(variant.add(channel, c), channel, reps, seeds)
-    need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))
     for (_, rep), b, a in zip(reps, now, c.replicates, strict=True):
-        rise = sum(a.chi2_parts(b).values()) - b.chi2_check
-        if rise > need:
-            return (f"replicate {rep.name} does not share it: its chi-squared rises by "
-                    f"{rise:.1f} (at most {need:.1f}; systematic Allan gap "
-                    f"{b.gap_excess:.3f} -> {a.gap_excess:.3f}; recording-to-recording "
-                    "variation)")
+        if a.gap_excess - b.gap_excess > b.gap_null:
+            return (f"replicate {rep.name} does not share it: its systematic Allan gap "
+                    f"rises {b.gap_excess:.3f} -> {a.gap_excess:.3f}, by more than the "
+                    f"scatter {b.gap_null:.3f} (recording-to-recording variation)")
     return ""
 
 
