@@ -185,6 +185,7 @@ class Comparison:
     corr: np.ndarray | None = field(default=None, repr=False)
     """The model correlation of the OAVAR estimates at :attr:`tau_s` (None: taus taken as
     independent)."""
+
     @property
     def gap(self) -> float:
         """RMS over analysed taus of ln(ADEV_real / ADEV_sim)."""

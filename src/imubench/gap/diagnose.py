@@ -15,11 +15,14 @@ Schwarz 1978, Ann. Statist. 6(2)), and keep the best candidate that
 2. reduces the held-out part's chi-squared by more than its scatter
    (``chi2.isf(HOLDOUT_ALPHA, n_params)``, the likelihood-ratio level of a candidate
    whose parameters were fitted elsewhere; the bias step is located on the whole record
-   and exempt), measured on the bands of the model without it
+   and exempt), its Allan term measured on the band of the model without it
    (:meth:`~imubench.gap.curves.Comparison.chi2_parts` with ``spread``): a noise term
    fitted too large widens its realisations' spread, which lowers its own chi-squared
    while the curves move apart (Samsung S5 accelerometer null: a random walk with
-   held-out systematic gap 0 -> 0.35 lowered it by 6.5). The held-out chi-squared
+   held-out systematic gap 0 -> 0.35 lowered its own Allan term by 3.1); a noise process
+   or the base model's refit must also not raise the held-out systematic Allan gap
+   (:attr:`~imubench.gap.curves.Comparison.gap_excess`) by more than its scatter
+   (``gap_null``, :data:`NOISE_PROCESSES`). The held-out chi-squared
    (:meth:`~imubench.gap.curves.Comparison.chi2_check`) counts the Allan curve as the
    whole-curve Mahalanobis statistic (each tau once, with the correlation of the Allan
    estimates) plus the spectral bands and the single statistics; its drop is reported
@@ -317,7 +320,7 @@ class _Step:
         A temperature response widens the block means' increments and hid a step: a kept
         one hid a second effect's step (CATS gy, bias step + temperature at 2x their
         limits), an unmodelled one let a random walk take the step's excess first (CATS
-        ax, az)."""
+        az seg 1; ax seg 2 still keeps the walk)."""
         return self.temp.less_response(ys) if self.temp_fired else ys
 
     def step_stats(self, sims: np.ndarray) -> np.ndarray:
