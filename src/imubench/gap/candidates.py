@@ -112,11 +112,10 @@ class Candidate:
     """Two-level log-likelihood ratio of the whole real record against this candidate's
     realisations (:func:`imubench.gap.two_level.two_level_llr`, telegraph against Markov),
     as a z; NaN for other effects."""
-    holdout_dchi2: float = float("nan")
-    """Held-out chi-squared before minus after adding the effect
-    (:meth:`imubench.gap.curves.Comparison.chi2_check`)."""
     holdout_dparts: dict[str, float] = field(default_factory=dict)
-    """:attr:`holdout_dchi2` by source (``allan``, ``bands``, ``statistics``)."""
+    """Held-out chi-squared before minus after adding the effect, by source (``allan``,
+    ``bands``, ``statistics``; :meth:`imubench.gap.curves.Comparison.chi2_drop`); empty
+    until the held-out check has examined it."""
     unique_chi2: float = float("nan")
     """Rise of the fit part's total chi-squared when this effect alone is taken out of
     the final set of kept effects (its unique contribution; NaN unless two or more were
@@ -151,6 +150,11 @@ class Candidate:
             d["shape_z"] = self.shape_z
         d.update(self.holdout_dict())
         return d
+
+    @property
+    def holdout_dchi2(self) -> float:
+        """The total of :attr:`holdout_dparts` (NaN before the held-out check)."""
+        return float(sum(self.holdout_dparts.values())) if self.holdout_dparts else math.nan
 
     def holdout_dict(self) -> dict[str, Any]:
         """The held-out part's figures after this effect (empty without a held-out part)."""

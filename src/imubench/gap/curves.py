@@ -328,6 +328,13 @@ class Comparison:
                      else float(np.sum(zt[np.isfinite(zt)] ** 2)))
         return {"allan": float(allan), "bands": bands, "statistics": float(stats)}
 
+    def chi2_drop(self, after: Comparison) -> dict[str, float]:
+        """This comparison's :meth:`chi2_parts` less ``after``'s measured on this one's
+        band (``after`` a comparison of the same part with more effects in the model):
+        how far the added effects brought the curves to the record, by source."""
+        pb, pa = self.chi2_parts(), after.chi2_parts(self)
+        return {k: pb[k] - pa[k] for k in pb}
+
     @property
     def chi2_check(self) -> float:
         """Sum of :meth:`chi2_parts` (the held-out check's statistic)."""

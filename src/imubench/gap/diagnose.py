@@ -526,9 +526,7 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
         if hold is not None and st.hold is not None:
             n_fit = cs.shape[1] - len(hold.series.y)
             c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]))
-            pb, pa = st.hold.chi2_parts(), c.holdout.chi2_parts(st.hold)
-            c.holdout_dparts = {k: pb[k] - pa[k] for k in pb}
-            c.holdout_dchi2 = float(sum(c.holdout_dparts.values()))
+            c.holdout_dparts = st.hold.chi2_drop(c.holdout)
         c.note = _acceptable(c, st)
         if not c.note and replicate_check is not None:
             c.note = replicate_check(c)
@@ -626,9 +624,7 @@ class _Realiser:
         c.evidence_closed = st.evidence_closed(c)
         if st.hold is not None and after.hold is not None:
             c.holdout = after.hold
-            pb, pa = st.hold.chi2_parts(), c.holdout.chi2_parts(st.hold)
-            c.holdout_dparts = {k: pb[k] - pa[k] for k in pb}
-            c.holdout_dchi2 = float(sum(c.holdout_dparts.values()))
+            c.holdout_dparts = st.hold.chi2_drop(c.holdout)
 
 
 def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[Candidate]]:
@@ -665,7 +661,7 @@ def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[C
             text = (f"{PRUNE_REASON}: without it the fit part's chi-squared rises by "
                     f"{rise:.1f} (needs {need:.1f})")
             if full.hold is not None and st.hold is not None:
-                hold_rise = st.hold.chi2_check - sum(full.hold.chi2_parts(st.hold).values())
+                hold_rise = sum(st.hold.chi2_drop(full.hold).values())
                 hold_need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))
                 if hold_rise > hold_need:
                     continue
