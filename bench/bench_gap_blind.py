@@ -1,7 +1,8 @@
 """Blind acceptance of ``imubench gap`` on plain-CSV logger files (issue 15, acceptance 1).
 
 Usage: ``PYTHONPATH=src:drivers:simulator .venv/bin/python bench/bench_gap_blind.py
-[--quick] [--set tune,heldout] [--jobs 2] [--cases sine,markov,...] [--keep DIR]``
+[--quick] [--set tune,heldout] [--jobs 2] [--cases sine,markov,...] [--keep DIR]
+[--pairs]``
 
 What it measures. An independent generator written here from textbook definitions
 (numpy / scipy only; NOT :mod:`lsm6ds_sim`) makes 1 h at 104 Hz of one gyro channel
@@ -55,6 +56,11 @@ diagnosis seed 12, the ``fresh`` split data seeds 3000+ and diagnosis seed 13 (s
 :data:`SPLITS`). Tune only on ``tune``; report each separately.
 
 ``--quick``: the clear magnitudes and 2 nulls per split.
+
+``--pairs`` (acceptance 3, "two simultaneous effects: both named, held-out gap closed >= 80 %
+after both"): each pair of :data:`PAIRS` instead, both effects at their clear magnitudes
+drawn in turn into one record (the same generator and model file). Right = both effects
+in ``kept`` and the held-out gap closed by at least 80 % (the closure defined above).
 """
 
 from __future__ import annotations
@@ -129,6 +135,14 @@ MAIN = {"temperature": "temp_coeff", "sine": "sine_amplitude", "random_walk": "r
         "filter": "bandwidth_hz", "bias_step": "step_size", "telegraph": "telegraph_step",
         "resonance": "resonance_freq_hz"}
 N_NULL = 4
+PAIRS = ("temperature+sine", "ramp+sine", "bias_step+temperature", "random_walk+sine",
+         "flicker+ramp", "markov+temperature", "outliers+random_walk", "telegraph+ramp",
+         "resonance+bias_step", "quantization+temperature", "filter+sine")
+"""Two withheld effects at once (``--pairs``), each at its clear magnitude; fixed before
+the first run: the issue's temperature + sine, and every other effect once beside a
+deterministic or a random one."""
+PAIR_CLOSURE = 0.8
+"""Acceptance 3: the held-out gap closed by at least this share after both effects."""
 SPLITS = {"tune": (1000, 11), "heldout": (2000, 12), "fresh": (3000, 13)}
 """Split: (first data seed, diagnosis seed). ``fresh`` was added on 2026-11-27 after two
 held-out misses had been studied case by case (temperature clear, Markov clear): it is
@@ -156,17 +170,31 @@ def temperature(rng: np.random.Generator, n: int, fs: float) -> np.ndarray:
     return np.round(temp / TEMP_LSB) * TEMP_LSB
 
 
-def generate(rng: np.random.Generator, effect: str, p: dict[str, float], n: int, fs: float,
-             temp: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
-    """(gx in dps quantised to LSB, truth values of the effect's parameters)."""
+def generate(rng: np.random.Generator, effects: list[tuple[str, dict[str, float]]], n: int,
+             fs: float, temp: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
+    """(gx in dps quantised to LSB, truth values of the effects' parameters): the base
+    (white + flicker) and each effect in turn, drawn from ``rng`` in that order."""
     tau0 = 1.0 / fs
-    t = np.arange(n) * tau0
     f = np.fft.rfftfreq(n, tau0)
     fl = np.zeros_like(f)
     fl[1:] = 1.0 / (math.pi * f[1:])
     y = WHITE / math.sqrt(tau0) * rng.standard_normal(n) + spectral(rng, n, fs,
                                                                    FLICKER**2 * fl)
-    truth = dict(p)
+    truth: dict[str, float] = {}
+    for effect, p in effects:
+        y = _add(rng, effect, p, y, fs, fl, temp, truth)
+    return np.round(y / LSB) * LSB, truth
+
+
+def _add(rng: np.random.Generator, effect: str, p: dict[str, float], y: np.ndarray,
+         fs: float, fl: np.ndarray, temp: np.ndarray, truth: dict[str, float]) -> np.ndarray:
+    """``y`` with one effect added (or applied: quantization, filter); its truth values
+    into ``truth``."""
+    n, tau0 = len(y), 1.0 / fs
+    t = np.arange(n) * tau0
+    f = np.fft.rfftfreq(n, tau0)
+    y = y.copy()
+    truth.update(p)
     if effect == "temperature":
         y += p["temp_coeff"] * (temp - TEMP_REF)
     elif effect == "sine":
@@ -220,7 +248,7 @@ def generate(rng: np.random.Generator, effect: str, p: dict[str, float], n: int,
         y += spectral(rng, n, fs, s)
     elif effect != "none":
         raise ValueError(effect)
-    return np.round(y / LSB) * LSB, truth
+    return y
 
 
 def model_toml() -> str:
@@ -258,19 +286,43 @@ class Case:
     error: str = ""
 
     @property
+    def names(self) -> list[str]:
+        """The withheld effects (two for a pair ``a+b``)."""
+        return self.effect.split("+")
+
+    @property
+    def effects(self) -> list[tuple[str, dict[str, float]]]:
+        """Each withheld effect with its own parameters (the keys of :data:`EFFECTS`)."""
+        if self.effect == "none":
+            return [("none", {})]
+        return [(e, {k: v for k, v in self.params.items() if k in EFFECTS[e][0]})
+                for e in self.names]
+
+    @property
     def expected(self) -> str:
-        return EXPECTED.get(self.effect, self.effect)
+        return "+".join(EXPECTED.get(e, e) for e in self.names)
+
+    @property
+    def named(self) -> bool:
+        """Single effect: the verdict names it; pair: both are kept."""
+        if len(self.names) == 1:
+            return self.verdict == self.expected
+        return all(EXPECTED.get(e, e) in self.kept for e in self.names)
 
     @property
     def right(self) -> bool:
-        return self.verdict == self.expected
+        """Single effect: named; pair (acceptance 3): both kept and the held-out gap
+        closed by at least 80 %."""
+        if len(self.names) == 1:
+            return self.named
+        return self.named and self.closed >= PAIR_CLOSURE
 
 
 def run_case(c: Case, work: Path) -> Case:
     n = int(DURATION_S * RATE)
     rng = np.random.default_rng(c.data_seed)
     temp = temperature(rng, n, RATE)
-    y, c.truth = generate(rng, c.effect, c.params, n, RATE, temp)
+    y, c.truth = generate(rng, c.effects, n, RATE, temp)
     stem = f"{c.split}_{c.effect}_{c.size}_{c.data_seed}"
     csv, out = work / f"{stem}.csv", work / f"{stem}.json"
     write_csv(csv, y, temp, RATE)
@@ -291,16 +343,20 @@ def run_case(c: Case, work: Path) -> Case:
     c.verdict = d["verdict"]
     c.kept = [k["effect"] for k in d["kept"]]
     h = d["holdout"] or {}
-    if c.right and c.effect != "none":
+    if c.named and c.effect != "none":
         if (h.get("gap_excess_before") or 0.0) > 0.05:
             c.closed = 1.0 - (h["gap_excess_after"] or 0.0) / h["gap_excess_before"]
         elif h.get("chi2_closed") is not None:
             c.closed = h["chi2_closed"]
-        key = MAIN[c.effect]
-        win = next((k for k in d["kept"] if k["effect"] == c.verdict), None)
-        if win is not None and key in win["params"] and c.truth.get(key):
-            c.param_error = abs(abs(win["params"][key]) - abs(c.truth[key])) / abs(
-                c.truth[key])
+        errors = []
+        for e in c.names:
+            key = MAIN[e]
+            win = next((k for k in d["kept"] if k["effect"] == EXPECTED.get(e, e)), None)
+            if win is not None and key in win["params"] and c.truth.get(key):
+                errors.append(abs(abs(win["params"][key]) - abs(c.truth[key]))
+                              / abs(c.truth[key]))
+        if errors:  # a pair: the worse of the two
+            c.param_error = max(errors)
     top = [(e["effect"], e.get("rejected_because", "")[:60]) for e in d["effects"][:3]]
     c.detail = (f"reason={d['reason']!r} gap {d['gap_before']:.3f}->{d['gap_after']:.3f} "
                 f"excess {d['gap_excess_before']:.3f}; held-out "
@@ -317,6 +373,20 @@ def show(c: Case) -> None:
     print(f"  {c.split:7s} {c.effect:12s} {c.size:5s} verdict={c.verdict:12s} kept={c.kept} "
           f"closed={c.closed:5.2f} perr={c.param_error:5.2f} {ok} ({c.seconds:.0f} s) "
           f"{c.error or c.detail} {c.params}", flush=True)
+
+
+def pair_cases(split: str, only: tuple[str, ...]) -> list[Case]:
+    """Acceptance 3: each pair of :data:`PAIRS` at both effects' clear magnitudes."""
+    base, diag_seed = SPLITS[split]
+    out = []
+    for i, pair in enumerate(PAIRS):
+        if only and pair not in only:
+            continue
+        params: dict[str, float] = {}
+        for e in pair.split("+"):
+            params.update(EFFECTS[e][0])
+        out.append(Case(split, pair, "clear", base + 700 + i, diag_seed, params))
+    return out
 
 
 def make_cases(split: str, quick: bool, only: tuple[str, ...]) -> list[Case]:
@@ -339,12 +409,18 @@ def summarise(name: str, cs: list[Case]) -> None:
     nul = [c for c in cs if c.effect == "none"]
     print(f"\n## {name}")
     if eff:
-        cols = sorted({c.verdict for c in eff} | {c.expected for c in eff})
+        single = [c for c in eff if len(c.names) == 1]
+        cols = sorted({c.verdict for c in single} | {c.expected for c in single})
         print(f"{'truth':13s}" + "".join(f"{x[:10]:>11s}" for x in cols))
         for e in EFFECTS:
-            row = Counter(c.verdict for c in eff if c.effect == e)
+            row = Counter(c.verdict for c in single if c.effect == e)
             if row:
                 print(f"{e:13s}" + "".join(f"{row.get(x, 0):11d}" for x in cols))
+        pairs = [c for c in eff if len(c.names) == 2]
+        if pairs:
+            print(f"  pairs: both kept {sum(c.named for c in pairs)}/{len(pairs)}; both kept "
+                  f"and held-out gap closed >= {PAIR_CLOSURE:.0%} (acceptance 3) "
+                  f"{sum(c.right for c in pairs)}/{len(pairs)}")
         for size in ("clear", "near"):
             sub = [c for c in eff if c.size == size]
             if sub:
@@ -356,7 +432,10 @@ def summarise(name: str, cs: list[Case]) -> None:
               f"{np.median(closed) if closed else math.nan:.0%} (n={len(closed)}); median "
               f"main-parameter error {np.median(perr) if perr else math.nan:.0%} "
               f"(n={len(perr)}); misses: "
-              + ", ".join(f"{c.effect}/{c.size}->{c.verdict}" for c in eff if not c.right))
+              + ", ".join(f"{c.effect}/{c.size}->{c.verdict}"
+                          + (f" kept {'+'.join(c.kept)} closed {c.closed:.2f}"
+                             if len(c.names) == 2 else "")
+                          for c in eff if not c.right))
     if nul:
         strict = sum(c.verdict != "none" for c in nul)
         named = sum(c.verdict not in ("none", "base_model", "unexplained") for c in nul)
@@ -375,6 +454,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", default="", help="comma list of effects (and/or none)")
     ap.add_argument("--jobs", type=int, default=1, help="CLI subprocesses at once")
     ap.add_argument("--keep", default=None, help="write the CSV/TOML/JSON here (kept)")
+    ap.add_argument("--pairs", action="store_true",
+                    help="acceptance 3: two withheld effects at once (PAIRS) instead")
     args = ap.parse_args(argv)
     print(f"# bench_gap_blind {datetime.datetime.now():%Y-%m-%d %H:%M} {platform.node()} "
           f"{platform.machine()} cpus={os.cpu_count()} python {sys.version.split()[0]} "
@@ -386,7 +467,8 @@ def main(argv: list[str] | None = None) -> int:
         (work / "model.toml").write_text(model_toml())
         results: dict[str, list[Case]] = {}
         for split in args.set.split(","):
-            cases = make_cases(split, args.quick, only)
+            cases = (pair_cases(split, only) if args.pairs
+                     else make_cases(split, args.quick, only))
             print(f"\n# split {split}: {len(cases)} cases")
             with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as ex:
                 done = []
