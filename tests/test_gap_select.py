@@ -17,7 +17,7 @@ from lsm6ds_sim.model import NoiseModel
 from lsm6ds_sim.physics import simulate
 from scipy.signal import lfilter
 
-from imubench.gap import GapOptions, Series, diagnose_channel
+from imubench.gap import GapOptions, Series, diagnose, diagnose_channel
 from imubench.gap.background import Background, from_halves, from_replicates, within
 from imubench.gap.curves import Comparison, Region, t_threshold, wilson_hilferty_z
 from imubench.gap.evidence import (
@@ -239,6 +239,31 @@ def test_two_effects_are_both_kept_and_close_the_held_out_gap() -> None:
     h = out["holdout"]
     assert h["gap_excess_after"] < 0.2 * h["gap_excess_before"]
     assert all("holdout_gap_after" in k for k in out["kept"])
+
+
+def test_an_effect_fitted_beside_an_unmodelled_one_is_replaced_once_that_is_kept(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A telegraph beside a ramp: the ramp's Allan rise stretches the fitted dwell, the
+    two-level test then refuses the telegraph and the forward selection keeps `markov`
+    and the ramp. The sequential replacement fits the first effect again beside the ramp
+    and the telegraph takes its place."""
+    n = int(1800 * RATE)
+    rng = np.random.default_rng(1)
+    y = (white(rng, n) + 3e-5 * np.arange(n) / RATE
+         + increment("telegraph", {"telegraph_step": 0.008, "telegraph_dwell_s": 10.0}, n,
+                     RATE, 101))
+    series = Series(y, None, RATE, "telegraph+ramp")
+    opt = GapOptions(seed=1, realisations=5)
+    monkeypatch.setattr(diagnose, "EXCHANGE_PASSES", 0)
+    forward = diagnose_channel(MODEL, "gx", series, opt)
+    assert [c.effect for c in forward.kept] == ["markov", "ramp"]
+    monkeypatch.undo()
+    d = diagnose_channel(MODEL, "gx", series, opt)
+    assert d.verdict == "telegraph" and {c.effect for c in d.kept} == {"telegraph", "ramp"}
+    assert d.kept[-1].params["telegraph_dwell_s"] == pytest.approx(10.0, rel=0.5)
+    gone = [c for c in d.pruned if c.effect == "markov"]
+    assert gone and gone[0].note.startswith("replaced by telegraph")
+    assert "markov" in [x["effect"] for x in d.to_dict()["dropped"]]
 
 
 def test_bias_step_at_the_split_point_is_named() -> None:

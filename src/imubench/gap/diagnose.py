@@ -31,7 +31,9 @@ Schwarz 1978, Ann. Statist. 6(2)), and keep the best candidate that
    statistic;
 
 then re-diagnose against the model with the kept effects and repeat while a significant
-excess remains (at most :data:`MAX_EFFECTS`).
+excess remains (at most :data:`MAX_EFFECTS`); then fit each kept effect again beside the
+others, a better acceptable candidate taking its place (:func:`_exchange`), and drop the
+effects the later ones made redundant (:func:`_prune`).
 
 Verdict: ``none`` when nothing is significant, or when the departure is within the
 recording's own variation (:mod:`imubench.gap.background`: replicates first, then the two
@@ -178,8 +180,9 @@ class ChannelDiagnosis:
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
     pruned: list[Candidate] = field(default_factory=list)
-    """Effects the forward selection kept and the backward step dropped
-    (:func:`_prune`), each with its ``note``."""
+    """Effects the forward selection kept and the sequential replacement
+    (:func:`_exchange`) or the backward step (:func:`_prune`) dropped, each with its
+    ``note``."""
     replicates: list[tuple[str, Comparison, Comparison | None]] = field(default_factory=list)
 
     @property
