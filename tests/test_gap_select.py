@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from scipy.signal import lfilter
 
 from imubench.gap import GapOptions, Series, diagnose, diagnose_channel
 from imubench.gap.background import Background, from_halves, from_replicates, within
+from imubench.gap.candidates import Candidate
 from imubench.gap.curves import Comparison, Region, t_threshold, wilson_hilferty_z
 from imubench.gap.evidence import (
     drift_statistic,
@@ -264,6 +266,23 @@ def test_an_effect_fitted_beside_an_unmodelled_one_is_replaced_once_that_is_kept
     gone = [c for c in d.pruned if c.effect == "markov"]
     assert gone and gone[0].note.startswith("replaced by telegraph")
     assert "markov" in [x["effect"] for x in d.to_dict()["dropped"]]
+
+
+def test_a_response_that_silences_its_own_record_test_passes_the_first_rule() -> None:
+    """Beside a base-model mismatch the share of the significant excess and the fit
+    part's likelihood ratio weigh a temperature response (or a ramp) against the mismatch;
+    silencing its own whole-record test that fired is the third way through rule 1."""
+    st = cast(Any, SimpleNamespace(temp_fired=True, drift_fired=True, drift_dof=40))
+    temp = Candidate("temperature", {"temp_coeff": 0.0087}, 1, temp_record_z=0.46)
+    assert diagnose._explains_own_test(temp, st)
+    temp.temp_record_z = 3.9  # fitted, but the record still correlates with temperature
+    assert not diagnose._explains_own_test(temp, st)
+    ramp = Candidate("ramp", {"ramp": 1e-5}, 1, drift_t=0.8)
+    assert diagnose._explains_own_test(ramp, st)
+    quiet = cast(Any, SimpleNamespace(temp_fired=False, drift_fired=False, drift_dof=40))
+    assert not diagnose._explains_own_test(ramp, quiet)  # no test fired: rule 1 as before
+    flick = Candidate("flicker", {"flicker": 0.002}, 1, temp_record_z=0.0, drift_t=0.0)
+    assert not diagnose._explains_own_test(flick, st)
 
 
 def test_bias_step_at_the_split_point_is_named() -> None:
