@@ -720,15 +720,17 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
               check: Callable[[Variant], Callable[[Candidate], str] | None]
               ) -> tuple[list[Candidate], list[Candidate]]:
     """Sequential replacement after the forward selection (Miller, Subset Selection in
-    Regression, 2nd ed. 2002, sec. 3.3): each kept unmodelled effect in turn is taken
-    out, every candidate is fitted again against the model with the OTHER kept effects
-    (:func:`_evaluate`) and the best acceptable one (:func:`_choose`, the held-out check
-    included) takes its place when it scores better than the effect it replaces, both
-    fitted in that same context, by :data:`EXCHANGE_MARGIN`. The forward selection fits
-    each effect against the effects kept before it only: a look-alike that covers two
-    departures at once wins the first step, and an effect fitted beside an unmodelled one
-    takes a biased shape
-    (issue 15 blind pairs: a telegraph beside a ramp, whose Allan rise stretched the
+    Regression, 2nd ed. 2002, sec. 3.3): each kept noise process (:data:`NOISE_PROCESSES`,
+    fitted to the Allan curve, which every unmodelled effect distorts; a deterministic
+    effect is fitted to its own signature by regression, and skipping it keeps the cost
+    of the common case down) in turn is taken out, every candidate is fitted again
+    against the model with the OTHER kept effects (:func:`_evaluate`) and the best
+    acceptable one (:func:`_choose`, the held-out check included) takes its place when it
+    scores better than the effect it replaces, both fitted in that same context, by
+    :data:`EXCHANGE_MARGIN`. The forward selection fits each effect against the effects
+    kept before it only: a look-alike that covers two departures at once wins the first
+    step, and an effect fitted beside an unmodelled one takes a biased shape (issue 15
+    blind pairs: a telegraph beside a ramp, whose Allan rise stretched the
     fitted dwell from ~20 s to 37 s, so that the two-level test refused the telegraph and
     `markov` was named; once the ramp is in the model the telegraph is fitted again).
     Repeated while a replacement is made, at most :data:`EXCHANGE_PASSES` times.
@@ -739,7 +741,7 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
     last: Candidate | None = None  # chosen against the other kept effects as they are
     for _ in range(EXCHANGE_PASSES):
         changed = False
-        for old in [c for c in kept if c.effect != "base_model" and c is not last]:
+        for old in [c for c in kept if c.effect in NOISE_PROCESSES and c is not last]:
             others = [c for c in kept if c is not old]
             variant, _ = r.variant(others)
             st = r.step(others)
