@@ -32,9 +32,9 @@ Schwarz 1978, Ann. Statist. 6(2)), and keep the best candidate that
    statistic;
 
 then re-diagnose against the model with the kept effects and repeat while a significant
-excess remains (at most :data:`MAX_EFFECTS`); then fit each kept effect again beside the
-others, a better acceptable candidate taking its place (:func:`_exchange`), and drop the
-effects the later ones made redundant (:func:`_prune`).
+excess remains (at most :data:`MAX_EFFECTS`); then fit each kept noise process again
+beside the other kept effects, a better acceptable candidate taking its place
+(:func:`_exchange`), and drop the effects the later ones made redundant (:func:`_prune`).
 
 Verdict: ``none`` when nothing is significant, or when the departure is within the
 recording's own variation (:mod:`imubench.gap.background`: replicates first, then the two
