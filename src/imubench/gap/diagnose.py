@@ -707,13 +707,6 @@ def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[C
 
 EXCHANGE_PASSES = 2
 """Most passes of the sequential replacement over the kept effects (:func:`_exchange`)."""
-EXCHANGE_MARGIN = float(chi2_dist.isf(FIT_ALPHA, 1))
-"""How much lower (in score) a replacement must score than the effect it replaces: the
-fit part's likelihood-ratio level of one parameter (10.8). Without it the replacement was
-a second draw of close calls: an injected Gauss-Markov on ADIS16405 rep 3 gz, kept as
-`markov` by the forward selection, was replaced by `telegraph` once the base model's
-refit was in (the two share their Allan curve; the two-level test passed its margin on
-the second look). The blind telegraph beside a ramp is replaced by 61-66."""
 
 
 def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
@@ -726,13 +719,16 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
     of the common case down) in turn is taken out, every candidate is fitted again
     against the model with the OTHER kept effects (:func:`_evaluate`) and the best
     acceptable one (:func:`_choose`, the held-out check included) takes its place when it
-    scores better than the effect it replaces, both fitted in that same context, by
-    :data:`EXCHANGE_MARGIN`. The forward selection fits each effect against the effects
-    kept before it only: a look-alike that covers two departures at once wins the first
-    step, and an effect fitted beside an unmodelled one takes a biased shape (issue 15
-    blind pairs: a telegraph beside a ramp, whose Allan rise stretched the
-    fitted dwell from ~20 s to 37 s, so that the two-level test refused the telegraph and
-    `markov` was named; once the ramp is in the model the telegraph is fitted again).
+    scores better than the effect it replaces, both fitted in that same context. (A
+    margin of 10.8, the likelihood-ratio level of one parameter, was tried: it kept the
+    replacement on ADIS16405 rep 3 gz, where an injected Gauss-Markov became `telegraph`
+    by 20.5, and undid one on a CATS pair.) The forward selection fits each effect
+    against the effects kept before it only: a look-alike that covers two departures at
+    once wins the first step, and an effect fitted beside an unmodelled one takes a
+    biased shape (issue 15 blind pairs: a telegraph beside a ramp, whose Allan rise
+    stretched the fitted dwell from ~20 s to 37 s, so that the two-level test refused
+    the telegraph and `markov` was named; once the ramp is in the model the telegraph is
+    fitted again).
     Repeated while a replacement is made, at most :data:`EXCHANGE_PASSES` times.
 
     Returns the kept effects (the replacement last, the sequence re-scored) and the
@@ -755,7 +751,7 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
             occupant = next((c for c in ranked if c.effect == old.effect), None)
             old_score = (occupant.score if occupant is not None else
                          r.step(kept).chi2() + math.log(st.before.n_terms) * old.n_params)
-            if new.score > old_score - EXCHANGE_MARGIN:
+            if new.score >= old_score:
                 continue
             new.accepted, old.accepted = True, False
             old.note = (f"replaced by {new.effect}: fitted again beside the other kept "
