@@ -367,7 +367,7 @@ def timing() -> None:
     model = load_model("datasheet:lsm6dsl")
     n = int(DURATION_S * RATE)
     one = model.with_channel("gy", sine_amplitude=0.003, sine_freq=2.0)
-    two = model  # every channel with two effects: the exchange step runs on each
+    two = model  # two effects kept on every channel
     for ch in CHANNELS:
         scale = 0.003 if ch.startswith("g") else 3e-4  # dps or g
         two = two.with_channel(ch, sine_amplitude=scale, sine_freq=2.0 + CHANNELS.index(ch),
