@@ -611,13 +611,25 @@ class _Realiser:
 
     def step(self, kept: list[Candidate]) -> _Step:
         """The step against the model with ``kept`` (realised afresh, same seeds)."""
-        key = tuple((c.effect, tuple(sorted(c.params.items()))) for c in kept)
+        key = self._key(kept)
         if key not in self._steps:
-            variant, det_sum = self.variant(kept)
-            self._steps[key] = _Step(self.fit, self.hold,
-                                     variant.realise(self.channel, self.series, self.seeds),
-                                     self.series, self.temp, det_sum)
+            self.realise(kept)
         return self._steps[key]
+
+    def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, _Step]:
+        """The model with ``kept``, its realisations (the run's seeds) and its step; the
+        step is built from these realisations when it is not cached yet."""
+        variant, det_sum = self.variant(kept)
+        sims = variant.realise(self.channel, self.series, self.seeds)
+        key = self._key(kept)
+        if key not in self._steps:
+            self._steps[key] = _Step(self.fit, self.hold, sims, self.series, self.temp,
+                                     det_sum)
+        return variant, sims, self._steps[key]
+
+    @staticmethod
+    def _key(kept: list[Candidate]) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ...]:
+        return tuple((c.effect, tuple(sorted(c.params.items()))) for c in kept)
 
     def refit_base(self, kept: list[Candidate]) -> list[Candidate]:
         """``kept`` with the base model's refit (if kept) fitted again against the other
@@ -739,9 +751,7 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
         changed = False
         for old in [c for c in kept if c.effect in NOISE_PROCESSES and c is not last]:
             others = [c for c in kept if c is not old]
-            variant, _ = r.variant(others)
-            st = r.step(others)
-            sims = variant.realise(r.channel, r.series, r.seeds)
+            variant, sims, st = r.realise(others)
             done = {c.effect for c in others}
             ranked, best, _ = _evaluate(variant, r.channel, r.series, r.seeds, r.fit, st,
                                         sims, tuple(e for e in effects if e not in done))
