@@ -61,6 +61,12 @@ generators. Since then several gap rules were made from S5 cases (docs/gap.md,
 ``--recording cats`` runs the same protocol on a sensor nobody tuned on: the CATS tag's
 first static segment (``../shared/reference/imu-real/cats-tag-temperature/``, 1 Hz,
 25.6 h, an MPU-9250-class part, gyro LSB 0.0305 dps), cut into three 8.5 h segments.
+``--recording mtig`` (added in the eleventh sitting, never used by the gap code before):
+the Xsens MTi-G gyro x (``../shared/reference/imu-real/mtig-contaminated/``, 100 Hz,
+1.39 h, rad/s converted to dps), cut into three 0.46 h segments; 5.4 % of its samples
+are impulsive outliers, so its nulls are expected to be named ``outliers`` (checked by
+the kurtosis test above) and the column "first after the null's confirmed effect" is
+the one that says whether an added effect is found behind them. gx only.
 ``--quick``: gx and the second segment only.
 
 ``--pairs temperature+sine,ramp+sine,...`` (acceptance 3, "two simultaneous effects:
@@ -108,8 +114,12 @@ from bench_gap_acceptance import (  # the textbook generators, the model recipe,
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "imu-real"
 S5 = REAL / "samsung-s5-static"
 CATS = REAL / "cats-tag-temperature"
+MTIG = REAL / "mtig-contaminated"
 RECORDINGS = {"s5": S5 / "samsung_galaxy_s5_static.npz",
-              "cats": CATS / "cats_temperature_calib.npz"}
+              "cats": CATS / "cats_temperature_calib.npz",
+              "mtig": MTIG / "mtig_gyro_x_contaminated.npz"}
+AXES = {"mtig": ("gx",)}
+"""Axes a recording has (default all six)."""
 CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")
 G = 9.80665
 SEGMENTS = 3
@@ -132,9 +142,15 @@ INJECT_SEED = 20261127
 
 
 def load(ch: str, recording: str = "s5") -> tuple[np.ndarray, float]:
-    """One axis in dps or g: the S5 record, or the CATS tag's first static segment (rows
-    from its events.csv; gyro mrad/s, accel m/s2)."""
+    """One axis in dps or g: the S5 record, the CATS tag's first static segment (rows
+    from its events.csv; gyro mrad/s, accel m/s2), or the MTi-G gyro x (rad/s, bias
+    removed by its source)."""
     i = "xyz".index(ch[1])
+    if recording == "mtig":
+        if ch != "gx":
+            raise ValueError(f"the MTi-G recording has gx only, not {ch}")
+        z = np.load(RECORDINGS["mtig"])
+        return np.degrees(z["gyro_x"]), float(z["fs_hz"])
     if recording == "cats":
         z = np.load(RECORDINGS["cats"])
         rows = (CATS / "events.csv").read_text().splitlines()
@@ -466,13 +482,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--recording", choices=sorted(RECORDINGS), default="s5",
                     help="s5: Samsung Galaxy S5 (default); cats: the CATS tag's first "
                          "static segment (1 Hz, 25.6 h; its own temperature column is not "
-                         "used, the bench's synthetic one is, as for the S5)")
+                         "used, the bench's synthetic one is, as for the S5); mtig: the "
+                         "Xsens MTi-G gyro x with impulsive outliers (100 Hz, 1.39 h, gx)")
     args = ap.parse_args(argv)
     if not RECORDINGS[args.recording].is_file():
         print(f"skipped: no reference data at {RECORDINGS[args.recording]}", file=sys.stderr)
         return 0
     axes = ("gx",) if args.quick else tuple(a for a in args.axes.split(",") if a)
-    bad = [a for a in axes if a not in CHANNELS]
+    bad = [a for a in axes if a not in AXES.get(args.recording, CHANNELS)]
     effects = tuple(e for e in (args.effects or "").split(",") if e)
     bad += [e for e in effects if e not in LIMIT_EFFECTS]
     pairs = tuple(p for p in args.pairs.split(",") if p)

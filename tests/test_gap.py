@@ -280,6 +280,38 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
     assert "  Verdict temperature (temp_coeff = " in r.stdout  # and on the terminal
 
 
+def test_channels_in_parallel_give_the_same_result(csv_rec: tuple[Path, Path]) -> None:
+    """``jobs`` > 1 diagnoses the channels in spawned processes; every channel's
+    realisations are seeded from the options alone, so the JSON is the same, and
+    ``progress`` hears of every channel once."""
+    from lsm6ds_sim.model import load_model
+
+    from imubench.gap import diagnose_recording
+    from imubench.recording import load_recording
+
+    rec, model_path = csv_rec
+    recording, model = load_recording(rec), load_model(model_path)
+    opt = GapOptions(seed=3, realisations=4, effects=("temperature", "random_walk"))
+    runs = []
+    for jobs in (1, 2):
+        heard: list[str] = []
+        out, diags = diagnose_recording(recording, model, ["gx", "gy"], opt,
+                                        progress=heard.append, jobs=jobs)
+        assert sorted(heard) == ["gx", "gy"]
+        assert list(out["channels"]) == ["gx", "gy"] == list(diags)
+        runs.append(json.dumps(out, sort_keys=True))
+    assert runs[0] == runs[1]
+    assert json.loads(runs[1])["channels"]["gy"]["verdict"] == "temperature"
+
+
+def test_cli_jobs_must_be_positive(csv_rec: tuple[Path, Path], tmp_path: Path,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    rec, model = csv_rec
+    rc, err = run_inproc(capsys, str(rec), "--model", str(model), "--jobs", "0",
+                         "--json", str(tmp_path / "g.json"))
+    assert rc == 2 and "--jobs 0: use 1 or more" in err
+
+
 def test_cli_replicate_holdout(csv_rec: tuple[Path, Path], tmp_path: Path,
                                capsys: pytest.CaptureFixture[str]) -> None:
     rec, model = csv_rec

@@ -3,7 +3,7 @@ effect causes it, and how far the gap closes once it is modelled, checked on hel
 
     imubench gap REAL --model MODEL.toml [--channels gx,...] [--holdout-fraction 0.5]
         [--holdout REC2 ...] [--effects flicker,...] [--realisations 10] [--seed N]
-        [--report DIR] [--limits] --json OUT
+        [--report DIR] [--limits] [--jobs N] --json OUT
 
 REAL is a recording (.imbr or .csv, with a ``temp`` column when the sensor has one).
 See docs/gap.md. Exit status 0 on success, 2 on an imubench error.
@@ -12,6 +12,7 @@ See docs/gap.md. Exit status 0 on success, 2 on an imubench error.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -35,6 +36,16 @@ def _fraction(text: str) -> float:
     if not 0.0 <= v < 1.0:
         raise argparse.ArgumentTypeError(f"{text!r} must be in [0, 1)")
     return v
+
+
+def _jobs(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--jobs {text!r}: not a whole number") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"--jobs {n}: use 1 or more")
+    return n
 
 
 def _list(text: str) -> list[str]:
@@ -71,6 +82,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="write PNG/SVG plots and index.html here")
     p.add_argument("--json", default=None, metavar="OUT|-",
                    help="write the JSON here (required for one recording)")
+    p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
+                   help="channels of one recording diagnosed at once, one process each "
+                        "(default: the CPUs this process may use, at most the channels; "
+                        "the result is the same for any N)")
     add_input_arguments(p)
     add_batch_options(p)
     p.set_defaults(func=run)
@@ -117,11 +132,12 @@ def run(args: argparse.Namespace) -> int:
     reps = [load_recording(p, reading) for p in args.holdout]
 
     n_channels = len(args.channels) if args.channels else len(rec.channels)
+    jobs = args.jobs if args.jobs is not None else len(os.sched_getaffinity(0))
     with progress(n_channels, "gap", unit="channel") as bar:
         out, diags = diagnose_recording(rec, model, args.channels, options, reps,
                                         effects_requested=args.effects is not None,
                                         progress=lambda ch: bar.update(1),
-                                        limits=args.limits)
+                                        limits=args.limits, jobs=jobs)
     out["units"] = gap_units(list(out["channels"]))
     if args.report is not None:
         from imubench.gap.report import write_report  # matplotlib only when asked

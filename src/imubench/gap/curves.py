@@ -26,12 +26,14 @@ compared with their distribution over the realisations.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import welch
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.signal.windows import hann
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 from scipy.stats import t as student_t
@@ -580,11 +582,31 @@ def oavar_at(y: np.ndarray, rate_hz: float, afs: np.ndarray) -> np.ndarray:
 
 
 def welch_psd(y: np.ndarray, rate_hz: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
-    """One-sided Welch PSD (unit^2/Hz), Hann, 50 % overlap, mean removed; NaN filled by 0."""
+    """One-sided Welch PSD (unit^2/Hz), Hann, 50 % overlap, mean removed; NaN filled by 0.
+
+    Welch (1967): the mean of the segments' periodograms, each segment less its own mean
+    and Hann-windowed, scaled by 1 / (rate_hz sum(w^2)) and doubled except at 0 and
+    Nyquist: the numbers of ``scipy.signal.welch(..., window="hann", detrend="constant")``
+    (checked in tests/test_gap_curves.py), computed directly because that function spends
+    most of its time outside the FFT (a Python-level sum over the window, ~8 ms per call
+    for a whole-record segment), and this is the gap's innermost loop.
+    """
     v = np.where(np.isfinite(y), y - np.nanmean(y), 0.0)
-    f, p = welch(v, fs=rate_hz, window="hann", nperseg=nperseg, noverlap=nperseg // 2,
-                 detrend="constant", axis=-1)
-    return f, p
+    step = nperseg - nperseg // 2
+    segs = sliding_window_view(v, nperseg)[::step]
+    w = _hann(nperseg)
+    spec = np.fft.rfft((segs - segs.mean(axis=1, keepdims=True)) * w, axis=1)
+    p = (spec.real ** 2 + spec.imag ** 2).mean(axis=0) / (rate_hz * float(np.dot(w, w)))
+    p[1:len(p) - (1 if nperseg % 2 == 0 else 0)] *= 2.0
+    return np.fft.rfftfreq(nperseg, 1.0 / rate_hz), p
+
+
+@functools.lru_cache(maxsize=8)
+def _hann(n: int) -> np.ndarray:
+    """The periodic Hann window of n points (read-only: it is shared)."""
+    w = hann(n, sym=False)
+    w.flags.writeable = False
+    return w
 
 
 def line_segment(n: int) -> int:
@@ -635,7 +657,8 @@ def highpass_residual(y: np.ndarray) -> np.ndarray:
     amplitude in the residual and is never averaged into its own reference; smooth
     (low-frequency) noise cancels. NaN samples are replaced by the series' median.
     """
-    v = np.where(np.isfinite(y), y, np.nanmedian(y))
+    finite = np.isfinite(y)
+    v = y if finite.all() else np.where(finite, y, np.nanmedian(y))
     p = np.pad(v, 2, mode="edge")
     a, b, c, d = p[:-4], p[1:-3], p[3:-1], p[4:]
     hi = np.maximum(np.maximum(a, b), np.maximum(c, d))

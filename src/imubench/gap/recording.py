@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -52,11 +54,17 @@ def diagnose_recording(
     effects_requested: bool = False,
     progress: Callable[[str], None] | None = None,
     limits: bool = False,
+    jobs: int = 1,
 ) -> tuple[dict[str, Any], dict[str, ChannelDiagnosis]]:
     """(JSON structure, per-channel diagnoses) for the channels of ``rec``.
 
     ``limits``: also measure the detection limits on this recording
     (:func:`imubench.gap.limits.detection_limits`, ``limits`` in each channel's entry).
+
+    ``jobs``: channels diagnosed at once, each in its own process (spawned, so no state
+    of this one is shared). The channels are independent and every channel's
+    realisations are seeded from ``options.seed`` alone, so the result is the same for
+    any ``jobs``. ``progress`` is called with each channel as it finishes.
 
     ``effects_requested``: the caller named the effects explicitly, so ``temperature``
     without a temperature column is an error instead of a skipped candidate.
@@ -80,20 +88,42 @@ def diagnose_recording(
                            "realisations": opt.realisations, "seed": opt.seed,
                            "effects_tested": [e for e in EFFECTS if e in opt.effects],
                            "channels": {}}
+    work = {ch: (model, ch, series_of(rec, ch), opt, [series_of(r, ch) for r in replicates],
+                 limits) for ch in chans}
+    done: dict[str, tuple[ChannelDiagnosis, dict[str, Any] | None]] = {}
+    if jobs > 1 and len(chans) > 1:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(chans)),
+                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(_channel, *args): ch for ch, args in work.items()}
+            for fut in as_completed(futures):
+                done[futures[fut]] = fut.result()
+                if progress is not None:
+                    progress(futures[fut])
+    else:
+        for ch, args in work.items():
+            done[ch] = _channel(*args)
+            if progress is not None:
+                progress(ch)
     diags: dict[str, ChannelDiagnosis] = {}
     for ch in chans:
-        if progress is not None:
-            progress(ch)
-        reps = [series_of(r, ch) for r in replicates]
-        series = series_of(rec, ch)
-        d = diagnose_channel(model, ch, series, opt, reps)
+        d, lim = done[ch]
         diags[ch] = d
         out["channels"][ch] = d.to_dict()
-        if limits:
-            from imubench.gap.limits import detection_limits
-
-            out["channels"][ch]["limits"] = detection_limits(model, ch, series, opt)
+        if lim is not None:
+            out["channels"][ch]["limits"] = lim
     return _clean(out), diags
+
+
+def _channel(model: NoiseModel, channel: str, series: Series, opt: GapOptions,
+             reps: list[Series], limits: bool
+             ) -> tuple[ChannelDiagnosis, dict[str, Any] | None]:
+    """One channel's diagnosis and, when asked, its detection limits."""
+    d = diagnose_channel(model, channel, series, opt, reps)
+    if not limits:
+        return d, None
+    from imubench.gap.limits import detection_limits
+
+    return d, detection_limits(model, channel, series, opt)
 
 
 def _clean(obj: Any) -> Any:
