@@ -32,6 +32,7 @@ from imubench.gap.curves import (
     SimFeatures,
     compare,
     family_z,
+    welch_psd,
     wilson_hilferty_z,
 )
 from imubench.gap.evidence import fit_outliers, fit_sine, fit_temperature
@@ -171,6 +172,24 @@ def test_gap_excess_is_the_systematic_part() -> None:
     # gap^2 = 0.3^2 + 0.1^2 in expectation: the excess recovers the offset
     assert c.gap == pytest.approx(np.hypot(0.3, 0.1), rel=0.05)
     assert c.gap_excess == pytest.approx(0.3, rel=0.06)
+
+
+@pytest.mark.parametrize(("n", "nperseg"), [(187_200, 4096), (187_200, 187_200),
+                                             (1001, 64), (999, 999), (5000, 333)])
+def test_welch_psd_is_scipys_welch(n: int, nperseg: int) -> None:
+    """The gap's own Welch estimate gives scipy.signal.welch's numbers (Hann, half
+    overlap, each segment less its mean), odd and even segment lengths, NaN as 0."""
+    from scipy.signal import welch
+
+    rng = np.random.default_rng(n + nperseg)
+    y = rng.standard_normal(n) + 1e-3 * rng.standard_normal(n).cumsum() + 5.0
+    y[n // 3] = np.nan
+    f, p = welch_psd(y, 104.0, nperseg)
+    v = np.where(np.isfinite(y), y - np.nanmean(y), 0.0)
+    f0, p0 = welch(v, fs=104.0, window="hann", nperseg=nperseg, noverlap=nperseg // 2,
+                   detrend="constant")
+    np.testing.assert_array_equal(f, f0)
+    np.testing.assert_allclose(p, p0, rtol=1e-10, atol=0)
 
 
 def test_temperature_regression_recovers_coefficients() -> None:

@@ -587,7 +587,7 @@ def welch_psd(y: np.ndarray, rate_hz: float, nperseg: int) -> tuple[np.ndarray, 
     Welch (1967): the mean of the segments' periodograms, each segment less its own mean
     and Hann-windowed, scaled by 1 / (rate_hz sum(w^2)) and doubled except at 0 and
     Nyquist: the numbers of ``scipy.signal.welch(..., window="hann", detrend="constant")``
-    (checked in tests/test_gap_curves.py), computed directly because that function spends
+    (checked in tests/test_gap.py), computed directly because that function spends
     most of its time outside the FFT (a Python-level sum over the window, ~8 ms per call
     for a whole-record segment), and this is the gap's innermost loop.
     """
