@@ -594,19 +594,19 @@ def welch_psd(y: np.ndarray, rate_hz: float, nperseg: int) -> tuple[np.ndarray, 
     v = np.where(np.isfinite(y), y - np.nanmean(y), 0.0)
     step = nperseg - nperseg // 2
     segs = sliding_window_view(v, nperseg)[::step]
-    w = _hann(nperseg)
+    w, w2 = _hann(nperseg)
     spec = np.fft.rfft((segs - segs.mean(axis=1, keepdims=True)) * w, axis=1)
-    p = (spec.real ** 2 + spec.imag ** 2).mean(axis=0) / (rate_hz * float(np.dot(w, w)))
+    p = (spec.real ** 2 + spec.imag ** 2).mean(axis=0) / (rate_hz * w2)
     p[1:len(p) - (1 if nperseg % 2 == 0 else 0)] *= 2.0
     return np.fft.rfftfreq(nperseg, 1.0 / rate_hz), p
 
 
 @functools.lru_cache(maxsize=8)
-def _hann(n: int) -> np.ndarray:
-    """The periodic Hann window of n points (read-only: it is shared)."""
+def _hann(n: int) -> tuple[np.ndarray, float]:
+    """The periodic Hann window of n points (read-only: it is shared) and sum(w^2)."""
     w = hann(n, sym=False)
     w.flags.writeable = False
-    return w
+    return w, float(np.sum(w * w))
 
 
 def line_segment(n: int) -> int:
