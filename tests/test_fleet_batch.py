@@ -148,6 +148,8 @@ def test_a_damaged_recording_is_reported_and_the_others_kept(
     (["fit", "recs"], "needs --out-dir DIR"),
     (["fit", "recs/a.imbr"], "-o MODEL.toml is required for one recording"),
     (["gap", "recs/a.imbr", "--model", "m.toml"], "--json OUT is required"),
+    (["gap", "recs", "--model", "m.toml", "--out-dir", "x", "--jobs", "2"],
+     "--jobs runs one recording's channels"),
     (["fit", "empty", "--out-dir", "x"], "no recordings"),
     (["fit", "recs", "--out-dir", "x", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
      "not both"),
