@@ -317,11 +317,11 @@ def run_pairs(ch: str, ci: int, seg: int, model, bg: Series, lim: dict,
 
 
 def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
-                effects: tuple[str, ...], pairs: tuple[str, ...] = ()
+                effects: tuple[str, ...], pairs: tuple[str, ...] = (), recording: str = "s5"
                 ) -> tuple[list[Case], dict]:
     n = len(y)
     temp = temperature_history(n, fs)
-    bg = Series(y, temp, fs, f"s5:{ch}:seg{seg}")
+    bg = Series(y, temp, fs, f"{recording}:{ch}:seg{seg}")
     out: list[Case] = []
 
     d, sec = diagnose(model, ch, bg, SEED)
@@ -527,7 +527,7 @@ def main(argv: list[str] | None = None) -> int:
             if getattr(cm, k)), flush=True)
         for seg in segs:
             cs, lim = run_segment(ch, CHANNELS.index(ch), seg, model,
-                                  y[seg * n:(seg + 1) * n], fs, effects, pairs)
+                                  y[seg * n:(seg + 1) * n], fs, effects, pairs, args.recording)
             cases += cs
             limits[(ch, seg)] = lim
     if args.json:
