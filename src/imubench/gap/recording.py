@@ -95,10 +95,15 @@ def diagnose_recording(
         with ProcessPoolExecutor(max_workers=min(jobs, len(chans)),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(_channel, *args): ch for ch, args in work.items()}
-            for fut in as_completed(futures):
-                done[futures[fut]] = fut.result()
-                if progress is not None:
-                    progress(futures[fut])
+            try:
+                for fut in as_completed(futures):
+                    done[futures[fut]] = fut.result()
+                    if progress is not None:
+                        progress(futures[fut])
+            except BaseException:  # an error or Ctrl-C: start no further channel
+                for fut in futures:
+                    fut.cancel()
+                raise
     else:
         for ch, args in work.items():
             done[ch] = _channel(*args)
