@@ -323,6 +323,36 @@ def test_channels_in_parallel_give_the_same_result(csv_rec: tuple[Path, Path]) -
     assert json.loads(runs[1])["channels"]["gy"]["verdict"] == "temperature"
 
 
+def test_an_error_in_a_parallel_channel_is_raised_as_itself(csv_rec: tuple[Path, Path]
+                                                            ) -> None:
+    """A channel's GapError (here: the model has no noise on gy) reaches the caller from
+    the worker process unchanged."""
+    from imubench.gap import diagnose_recording
+    from imubench.recording import load_recording
+
+    model = NoiseModel.quiet().with_channel("gx", white=0.004)
+    with pytest.raises(GapError, match=r"\[channels.gy\] has no noise term"):
+        diagnose_recording(load_recording(csv_rec[0]), model, ["gx", "gy"],
+                           GapOptions(realisations=3), jobs=2)
+
+
+def test_a_constant_channel_is_refused_by_name(tmp_path: Path) -> None:
+    """A stuck axis (every sample the same) is a clear error naming the channel, not a
+    division by zero deep in a statistic."""
+    model = NoiseModel.quiet().with_all(white=0.004)
+    series = Series(np.zeros(20000), None, RATE, "stuck.csv")
+    with pytest.raises(GapError, match=r"stuck.csv: gz is constant \(0 in every sample\)"):
+        diagnose_channel(model, "gz", series, GapOptions(realisations=3))
+
+
+def test_a_channel_named_twice_is_refused(csv_rec: tuple[Path, Path], tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    rec, model = csv_rec
+    rc, err = run_inproc(capsys, str(rec), "--model", str(model), "--channels", "gx,gy,gx",
+                         "--json", str(tmp_path / "g.json"))
+    assert rc == 2 and "--channels: gx given more than once" in err
+
+
 def test_cli_jobs_must_be_positive(csv_rec: tuple[Path, Path], tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str]) -> None:
     rec, model = csv_rec

@@ -12,7 +12,6 @@ See docs/gap.md. Exit status 0 on success, 2 on an imubench error.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from imubench.commands import write_json
 from imubench.gap import EFFECTS, GapOptions, diagnose_recording
 from imubench.gap.errors import GapError
 from imubench.gap.explain import explain_channel
+from imubench.gap.recording import default_jobs, pick_channels
 from imubench.progress import progress
 from imubench.recording import load_recording
 from imubench.recording.options import add_input_arguments, input_options
@@ -131,8 +131,8 @@ def run(args: argparse.Namespace) -> int:
     rec = load_recording(args.real, reading)
     reps = [load_recording(p, reading) for p in args.holdout]
 
-    n_channels = len(args.channels) if args.channels else len(rec.channels)
-    jobs = args.jobs if args.jobs is not None else len(os.sched_getaffinity(0))
+    n_channels = len(pick_channels(rec, args.channels))
+    jobs = args.jobs if args.jobs is not None else default_jobs(rec)
     with progress(n_channels, "gap", unit="channel") as bar:
         out, diags = diagnose_recording(rec, model, args.channels, options, reps,
                                         effects_requested=args.effects is not None,

@@ -812,6 +812,12 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             f"{series.name}: {n} samples are too few to split with --holdout-fraction "
             f"{opt.holdout_fraction} (each part needs >= 256 samples)"
         )
+    finite = series.y[np.isfinite(series.y)]
+    if finite.size and np.ptp(finite) == 0:
+        raise GapError(
+            f"{series.name}: {channel} is constant ({finite[0]:g} in every sample): a stuck "
+            "or unconnected axis has no noise to compare with the model; leave it out "
+            "with --channels")
     seeds = seeds_of(opt.seed, opt.realisations)
     fit = PartSetup(series.part(0, n_fit), cm0)
     hold = PartSetup(series.part(n_fit, n), cm0) if n_fit < n else None

@@ -156,7 +156,7 @@ def two_level_llr(y: np.ndarray, rate_hz: float, step: float, dwell_s: float,
 
     Positive when two levels ``step`` apart explain the record better than the Gaussian
     process with the same autocovariance; NaN when the record holds fewer than 16 values
-    or the parameters are not positive."""
+    or the parameters are not positive, or the record (detrended) is constant."""
     if not (step > 0 and dwell_s > 0 and rate_hz > 0):
         return float("nan")
     m = max(1, -(-len(y) // MAX_BLOCKS))
@@ -168,6 +168,8 @@ def two_level_llr(y: np.ndarray, rate_hz: float, step: float, dwell_s: float,
         return float("nan")
     sigma2 = 0.25 * step * step
     total = float(np.mean(fin * fin))
+    if not total > 0:  # a constant record: no level to tell
+        return float("nan")
     noise_var = max(total - sigma2, MIN_NOISE_SHARE * total)
     p_switch = 0.5 * (1.0 - math.exp(-2.0 * dt / dwell_s))
     phi = math.exp(-2.0 * dt / dwell_s)
