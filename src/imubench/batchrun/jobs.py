@@ -283,8 +283,9 @@ def run_gap_batch(args: argparse.Namespace) -> int:
 
     out_dir = _check_options(args, (("json", "--json"), ("holdout", "--holdout")))
     if args.jobs is not None:
-        raise BatchError("--jobs runs one recording's channels in local processes; a batch "
-                         "runs its channels as tasks, in this process or with --workers N")
+        raise BatchError("--jobs runs one recording's channels in local processes; drop it "
+                         "for a batch, which runs its channels as tasks, in this process or "
+                         "with --workers N")
     outcomes = _run("gap", args, args.real,
                     functools.partial(gap_plan, args.channels, input_options(args)),
                     functools.partial(gap_work, args))
