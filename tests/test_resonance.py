@@ -200,7 +200,8 @@ def test_explicit_terms_fit_a_resonance_only_at_a_peak() -> None:
         fit_channel(y, FS, channel="gz", terms="white,resonance", method="whittle")
 
 
-@pytest.mark.parametrize("rep", [1, 2, 3])
+@pytest.mark.parametrize("rep", [1, pytest.param(2, marks=pytest.mark.slow),
+                                 pytest.param(3, marks=pytest.mark.slow)])
 def test_adis16405_gz_resonance_closes_the_short_tau_misfit(reference_dir: Path,
                                                              rep: int) -> None:
     """ADIS16405 gz: without a resonance term the model was off by ln(ADEV/model) = +0.28
