@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from imubench.commands.gap import gap_units
+from imubench.gap.candidates import DENSE_TAIL
 from imubench.gap.curves import Z_SLOPE, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
 from imubench.gap.explain import explain_channel
@@ -63,6 +64,21 @@ def test_unexplained_gives_the_shortfall() -> None:
     assert "spectrum real above over 0.01-0.04 Hz" in text
     assert ("best candidate, random_walk, removes 21% of the significant excess chi-squared "
             f"(the verdict needs {MIN_CLOSURE:.0%}, without raising the total)") in text
+
+
+def test_unexplained_points_to_dense_heavy_tails() -> None:
+    """The MTi-G gyro (5 % impulsive samples): the outliers candidate is refused as
+    heavy-tailed noise; the explanation of the verdict says so."""
+    refusal = (f"{DENSE_TAIL}: the fit puts 14.4% of the samples in it (at most 1%), "
+               "amplitude 0.558: heavy-tailed noise, which no candidate models")
+    tails = {"effect": "outliers", "params": {"outlier_rate": 14.4,
+                                              "outlier_amplitude": 0.558},
+             "gap_after": 0.24, "n_params": 2, "accepted": False,
+             "rejected_because": refusal}
+    text = "\n".join(explain_channel(_entry("unexplained", effects=[RW_EFFECT, tails]), 10))
+    assert f"The recording's tails are heavy ({refusal})." in text
+    plain = "\n".join(explain_channel(_entry("unexplained", effects=[RW_EFFECT]), 10))
+    assert "tails are heavy" not in plain
 
 
 def test_none_names_the_closest_statistic() -> None:

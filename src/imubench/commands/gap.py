@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
     reps = [load_recording(p, reading) for p in args.holdout]
 
     n_channels = len(pick_channels(rec, args.channels))
-    jobs = args.jobs if args.jobs is not None else default_jobs(rec)
+    jobs = args.jobs if args.jobs is not None else default_jobs(rec, args.limits)
     with progress(n_channels, "gap", unit="channel") as bar:
         out, diags = diagnose_recording(rec, model, args.channels, options, reps,
                                         effects_requested=args.effects is not None,

@@ -39,6 +39,10 @@ MAIN_PARAM: dict[str, str] = {
     "outliers": "outlier_rate", "bias_step": "step_size", "base_model": "bandwidth_hz",
 }
 """The key that measures each effect's size (used for parameter errors)."""
+DENSE_TAIL = "the tail is not sparse impulses"
+"""How the outliers candidate's refusal starts when its fit puts more than
+OUTLIER_MAX_SHARE of the samples in the tail (heavy-tailed noise, which no candidate
+models; the explanation of an ``unexplained`` verdict points to it)."""
 MARKOV_SPAN = 8.0
 """A Markov (or telegraph) candidate needs its tau_c at most the longest analysed tau /
 MARKOV_SPAN.
@@ -419,7 +423,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                 share = of.outlier_rate / s.rate_hz
                 if share > OUTLIER_MAX_SHARE:
                     cands[-1].refusal = (
-                        f"the tail is not sparse impulses: the fit puts {share:.1%} of the "
+                        f"{DENSE_TAIL}: the fit puts {share:.1%} of the "
                         f"samples in it (at most {OUTLIER_MAX_SHARE:.0%}), amplitude "
                         f"{of.outlier_amplitude:.3g}: heavy-tailed noise, which no candidate "
                         "models")

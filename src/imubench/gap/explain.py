@@ -19,6 +19,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from imubench.gap.candidates import DENSE_TAIL
 from imubench.gap.curves import (
     POOLED_DOF,
     POOLED_STATS,
@@ -389,6 +390,13 @@ def explain_channel(c: dict[str, Any], realisations: int,
                 "departure comes from an effect outside the candidate list, or from a part "
                 "of the base model its refit (white level, output filter) cannot change "
                 "(e.g. a Markov or flicker term of the wrong size).")
+        tails = next((e["rejected_because"] for e in effects if e["effect"] == "outliers"
+                      and (e.get("rejected_because") or "").startswith(DENSE_TAIL)), None)
+        if tails is not None:
+            lines.append(
+                f"The recording's tails are heavy ({tails}). Such tails also raise the white "
+                "level of a Gaussian noise fit of the recording (imubench fit warns of "
+                "them), which a model fitted on it carries.")
     else:
         kept = c.get("kept") or []
         step = next((i for i, k in enumerate(kept) if k["effect"] == verdict), 0)

@@ -54,13 +54,14 @@ PARALLEL_MIN_SAMPLES = 2**18
 default (:func:`default_jobs`): ~42 min at 104 Hz."""
 
 
-def default_jobs(rec: Recording) -> int:
+def default_jobs(rec: Recording, limits: bool = False) -> int:
     """``imubench gap``'s default ``--jobs``: one process per CPU this process may use for
-    a recording of at least PARALLEL_MIN_SAMPLES samples per channel, else 1. A spawned
-    worker spends ~2 s importing; measured on 2 cores, 6 channels: 15 min at 104 Hz 5.4 s
-    in this process and 6.7 s with two workers; 1 h 20.0 s and 15.5-17 s; 1 h with two
-    effects kept on every channel 118.5 s and 75.4 s."""
-    if len(rec.index) < PARALLEL_MIN_SAMPLES:
+    a recording of at least PARALLEL_MIN_SAMPLES samples per channel or with ``limits``
+    (minutes per channel), else 1. A spawned worker spends ~2 s importing; measured on
+    2 cores, 6 channels: 15 min at 104 Hz 5.4 s in this process and 6.7 s with two
+    workers; 1 h 20.0 s and 15.5-17 s; 1 h with two effects kept on every channel
+    118.5 s and 75.4 s."""
+    if len(rec.index) < PARALLEL_MIN_SAMPLES and not limits:
         return 1
     return len(os.sched_getaffinity(0))
 
