@@ -345,20 +345,18 @@ def test_a_constant_channel_is_refused_by_name(tmp_path: Path) -> None:
         diagnose_channel(model, "gz", series, GapOptions(realisations=3))
 
 
-def test_a_channel_named_twice_is_refused(csv_rec: tuple[Path, Path], tmp_path: Path,
-                                          capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(("args", "message"), [
+    (["--channels", "gx,gy,gx"], "--channels: gx given more than once"),
+    (["--jobs", "0"], "--jobs 0: use 1 or more"),
+    (["--jobs", "two"], "--jobs 'two': not a whole number"),
+])
+def test_cli_refuses_bad_channels_and_jobs(csv_rec: tuple[Path, Path], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str],
+                                           args: list[str], message: str) -> None:
     rec, model = csv_rec
-    rc, err = run_inproc(capsys, str(rec), "--model", str(model), "--channels", "gx,gy,gx",
+    rc, err = run_inproc(capsys, str(rec), "--model", str(model), *args,
                          "--json", str(tmp_path / "g.json"))
-    assert rc == 2 and "--channels: gx given more than once" in err
-
-
-def test_cli_jobs_must_be_positive(csv_rec: tuple[Path, Path], tmp_path: Path,
-                                   capsys: pytest.CaptureFixture[str]) -> None:
-    rec, model = csv_rec
-    rc, err = run_inproc(capsys, str(rec), "--model", str(model), "--jobs", "0",
-                         "--json", str(tmp_path / "g.json"))
-    assert rc == 2 and "--jobs 0: use 1 or more" in err
+    assert rc == 2 and message in err
 
 
 def test_cli_replicate_holdout(csv_rec: tuple[Path, Path], tmp_path: Path,
