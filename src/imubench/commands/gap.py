@@ -84,8 +84,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="write the JSON here (required for one recording)")
     p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
                    help="channels of one recording diagnosed at once, one process each "
-                        "(default: the CPUs this process may use, at most the channels; "
-                        "the result is the same for any N)")
+                        "(default: the CPUs this process may use for 2^18 samples per "
+                        "channel or more, or with --limits; else 1); the result is the "
+                        "same for any N")
     add_input_arguments(p)
     add_batch_options(p)
     p.set_defaults(func=run)
