@@ -469,8 +469,8 @@ def simulate(
     dt = 1.0 / rate_hz
     s = phys.generate(n, dt)
     t = np.arange(n) * dt  # the times generate() used (t_base = 0)
-    both = np.hstack([s.gyro_dps, s.accel_g])
-    out = {ch: both[:, CHANNELS.index(ch)].copy() for ch in wanted}
+    out = {ch: (s.gyro_dps if ch[0] == "g" else s.accel_g)[:, "xyz".index(ch[1])].copy()
+           for ch in wanted}
     out["t_s"] = t
     out["temp_c"] = s.temp_c
     return out
