@@ -469,8 +469,8 @@ def simulate(
     dt = 1.0 / rate_hz
     s = phys.generate(n, dt)
     t = np.arange(n) * dt  # the times generate() used (t_base = 0)
-    out = {ch: (s.gyro_dps if ch[0] == "g" else s.accel_g)[:, "xyz".index(ch[1])].copy()
-           for ch in wanted}
+    out = {ch: (s.gyro_dps if i < 3 else s.accel_g)[:, i % 3].copy()
+           for ch, i in ((c, CHANNELS.index(c)) for c in wanted)}
     out["t_s"] = t
     out["temp_c"] = s.temp_c
     return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import signal
@@ -112,18 +113,14 @@ def diagnose_recording(
     work: list[Job] = [(model, ch, series_of(rec, ch), opt,
                         [series_of(r, ch) for r in replicates], limits) for ch in chans]
     done: dict[str, tuple[ChannelDiagnosis, dict[str, Any] | None]] = {}
-    if jobs > 1 and len(chans) > 1:
-        # a Pool, not a ProcessPoolExecutor: leaving the block (an error in a channel,
-        # Ctrl-C) terminates the workers at once instead of finishing the queued channels
-        with multiprocessing.get_context("spawn").Pool(
-                min(jobs, len(chans)), initializer=_leave_ctrl_c_to_the_parent) as pool:
-            for ch, result in pool.imap_unordered(_channel_job, work):
-                done[ch] = result
-                if progress is not None:
-                    progress(ch)
-    else:
-        for job in work:
-            ch, result = _channel_job(job)
+    # a Pool, not a ProcessPoolExecutor: leaving the block (an error in a channel, Ctrl-C)
+    # terminates the workers at once instead of finishing the queued channels
+    parallel = jobs > 1 and len(chans) > 1
+    with (multiprocessing.get_context("spawn").Pool(
+            min(jobs, len(chans)), initializer=_leave_ctrl_c_to_the_parent) if parallel
+          else contextlib.nullcontext()) as pool:
+        results = pool.imap_unordered(_channel_job, work) if pool else map(_channel_job, work)
+        for ch, result in results:
             done[ch] = result
             if progress is not None:
                 progress(ch)
