@@ -6,14 +6,21 @@ One rule for every reader (the CSV/text reader, ROS 2 bags, MCAP):
 2. else the file's own rate (``# odr_hz`` metadata, a native header);
 3. else, with a sample-index column and times, the least-squares slope of t against the
    index; with a sample-index column alone, ``--rate`` is required;
-4. else from the times alone: a first step from the median spacing gives provisional
-   indices ``round((t - t0) / step)`` of the first 1000 rows, the least-squares slope of
-   t against them a better step, which indexes 10x as many rows, and so on to the whole
-   record: the rate is the least-squares slope over all of it. (Indexing everything with
-   the median step at once would slip a period every 1 / (relative error) samples.)
-   A median step is biased by the rounding of printed times (104 Hz printed to 6
-   decimals: median step 0.009615 s -> 104.004 Hz); the slope over N samples is not
-   (104.0000 Hz).
+4. else from the times alone: a first line (step and the time of index 0) gives
+   provisional indices ``round((t - t0) / step)`` of the first 1000 rows, the
+   least-squares line of t against them a better one, which indexes 2x as many rows, and
+   so on to the whole record: the rate is the least-squares slope over all of it.
+   (Indexing everything with a first estimate at once would slip a period every
+   1 / (relative error) samples.) When every stamp lies within half a step of the
+   least-squares line of the stamps against their row numbers, no sample is missing and
+   the rows are the samples. Otherwise the first line is the least-squares line of the
+   first 1000 stamps against their row numbers when no stamp departs from it by half a
+   step (no sample missing there); else the median spacing and the first stamps. A median
+   step is biased by the rounding of printed times (104 Hz printed to 6 decimals: median
+   step 0.009615 s -> 104.004 Hz) and, with jittered stamps (a logger stamping when it
+   reads, +-0.45 periods), off by ~1 % (a dozen periods after 1000 rows); the row-number line is
+   not, and the fitted time of index 0 keeps every stamp within half a step of its
+   sample as long as the jitter stays below half a period.
 
 Time stamps that go backwards or land on an earlier sample than the row before (a
 damaged row, a logger's glitch) are not trusted: the longest run of rows whose indices
@@ -169,11 +176,51 @@ def _slope(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.dot(xc, y - y.mean()) / np.dot(xc, xc))
 
 
+def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least-squares (slope, value at x = 0) of y against x."""
+    b = _slope(x, y)
+    return b, float(y.mean() - b * x.mean())
+
+
+def _on_line(t_s: np.ndarray, step: float, t0: float) -> bool:
+    """Whether every finite stamp lies within half a step of ``t0 + step * row``."""
+    ok = np.isfinite(t_s)
+    k = np.nonzero(ok)[0]
+    return bool(step > 0 and len(k)
+                and np.max(np.abs(t_s[ok] - t0 - step * k)) < 0.5 * step)
+
+
+def _grid_origin(t_s: np.ndarray, step_s: float) -> float:
+    """The time of a sample of the grid of period ``step_s`` on which the (finite)
+    stamps lie: the first stamp moved by the circular mean of every stamp's phase on that
+    grid, so that jittered stamps (a logger stamping when it reads) and holes do not move
+    it, as the first stamp alone would by its own jitter."""
+    t0 = float(t_s[0])
+    phase = 2.0 * np.pi * ((t_s - t0) / step_s)
+    return t0 + step_s * float(np.arctan2(np.sin(phase).mean(), np.cos(phase).mean())
+                               / (2.0 * np.pi))
+
+
+def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
+    """(step, time of index 0) to index the first ``m`` rows by (module docstring, 4.):
+    the least-squares line against the row numbers when every finite stamp lies within
+    half its step of it (:func:`_on_line`), else the median step and the median of the
+    first 5 stamps."""
+    t = t_s[:m]
+    ok = np.isfinite(t)
+    if ok.sum() >= 3:
+        step, t0 = _line(np.nonzero(ok)[0].astype(np.float64), t[ok])
+        if _on_line(t, step, t0):
+            return step, t0
+    return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
+
+
 def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = None) -> Timebase:
     """Rate and indices of rows with time stamps ``t_s`` (seconds, any origin).
 
     With ``rate_hz`` (given or from metadata) the indices are ``round((t - t0) *
-    rate)``; otherwise the rate is the least-squares slope (module docstring).
+    rate)``, ``t0`` on the stamps' grid (:func:`_grid_origin`); otherwise the rate is
+    the least-squares slope (module docstring).
     """
     finite = np.isfinite(t_s)
     if len(t_s) and not finite.any():
@@ -186,28 +233,33 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
     if rate_hz is None and n < 3:
         raise RecordingError(f"{where}: {n} row(s) are too few to infer the rate; give "
                              "--rate HZ")
-    t0 = float(np.median(t_s[finite][:5]))  # robust against one bad first stamp
     if rate_hz is not None:
-        index, ok = _indices(t_s, t0, 1.0 / rate_hz)
+        index, ok = _indices(t_s, _grid_origin(t_s[finite], 1.0 / rate_hz), 1.0 / rate_hz)
         keep = _kept(index, ok, where)
         index = index[keep]
         return Timebase(rate_hz, index - index[0], keep, "given")
-    step = _median_step(t_s, where)
+    step, t0 = _first_line(t_s, n, where)
+    if _on_line(t_s, step, t0):  # no sample missing: the rows are the samples
+        keep = finite
+        return Timebase(1.0 / step, np.arange(n, dtype=np.int64)[keep], keep,
+                        "from t (least squares)")
     m = min(n, FIRST_FIT_ROWS)
-    while True:  # fit a prefix, then 10x longer ones, so rounding never slips a period
+    step, t0 = _first_line(t_s, m, where)
+    while True:  # fit a prefix, then 2x longer ones, so rounding never slips a period
         index, ok = _indices(t_s[:m], t0, step)
         keep = _kept(index, ok, where)
         x = index[keep].astype(np.float64)
         if len(x) < 3 or np.ptp(x) == 0:
             raise RecordingError(f"{where}: too few distinct time stamps to infer the rate; "
                                  "give --rate HZ")
-        step = _slope(x, t_s[:m][keep])
+        step, shift = _line(x, t_s[:m][keep] - t0)
         if not step > 0:
             raise RecordingError(f"{where}: the time column does not increase; give "
                                  "--rate HZ")
+        t0 += shift
         if m == n:
             break
-        m = min(n, 10 * m)
+        m = min(n, 2 * m)
     index, ok = _indices(t_s, t0, step)
     keep = _kept(index, ok, where)
     kept = index[keep]
