@@ -65,3 +65,21 @@ def test_parse_taus() -> None:
     assert cmd.parse_taus("octave") == "octave"
     assert cmd.parse_taus("5") == 5
     assert cmd.parse_taus("1,10.5") == [1.0, 10.5]
+
+
+def test_time_deviation_is_in_degrees_and_gaps_are_terms(tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]
+                                                         ) -> None:
+    """TDEV = tau MDEV / sqrt(3) is a phase (deg for a gyro in dps), not a rate; the
+    ``gaps`` column counts the terms a missing sample removed."""
+    p = tmp_path / "g.csv"
+    y = np.random.default_rng(2).standard_normal(2000) * 0.01
+    p.write_text("t,gx\n" + "".join(f"{i / 100:.2f},{v:.5f}\n" for i, v in enumerate(y)
+                                    if i != 1000))
+    out = tmp_path / "tdev.json"
+    assert cli.main(["allan", str(p), "--column", "gx", "--stat", "tdev", "--taus", "1",
+                 "--json", str(out)]) == 0
+    assert "dev in deg" in capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["units"]["dev"] == "deg" and doc["units"]["drift"] == "dps/s"
+    assert doc["units"]["gaps"].startswith("terms") and doc["gaps"][0] > 1

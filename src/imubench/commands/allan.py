@@ -108,32 +108,45 @@ def load_input(path: Path, column: str | None, options: InputOptions
     return data, rate
 
 
-def dev_unit(channel: str) -> str:
-    """The unit of the deviations of ``channel``: its own (dps, g). Frequency data are
-    rates in that unit; phase data are their integral (deg, g*s), whose differences over
-    tau give the same unit."""
-    return UNITS.get(channel, "input unit")
+TIME_DEVIATIONS = frozenset({"tdev", "ttotdev"})
+"""Statistics in phase units: TDEV = tau MDEV / sqrt(3) (SP 1065 eq. 17), TTOT alike."""
+
+
+def dev_unit(channel: str, stat: str = "oadev") -> str:
+    """The unit of ``stat``'s deviations of ``channel``: the channel's own (dps, g) for
+    every statistic of rates (frequency data are rates in that unit; phase data are their
+    integral, whose differences over tau give the same unit), that unit times seconds
+    for a time deviation (TDEV, TTOT: deg for dps)."""
+    u = UNITS.get(channel, "input unit")
+    if stat not in TIME_DEVIATIONS:
+        return u
+    return "deg" if u == "dps" else f"{u}*s"
 
 
 def with_units(doc: dict[str, Any], channel: str, data_type: str) -> dict[str, Any]:
     """An ``allan`` JSON document with its ``channel``, the unit of the data analysed
     (``data_unit``) and the ``units`` of its numbers."""
-    u = dev_unit(channel)
+    rate_unit = dev_unit(channel)
+    u = dev_unit(channel, str(doc.get("stat", "")))
     units = {"rate_hz": "Hz", "tau_s": "s", "m": "samples", "n": "terms", "dev": u,
-             "ci_low": u, "ci_high": u, "var": f"{u}^2", "drift": f"{u}/s", "edf": "1",
-             "alpha": "1 (S(f) ~ f^alpha)", "gaps": "samples", "bias_factor": "1",
+             "ci_low": u, "ci_high": u, "var": f"{u}^2", "drift": f"{rate_unit}/s",
+             "edf": "1", "alpha": "1 (S(f) ~ f^alpha)",
+             "gaps": "terms (skipped: they span a missing sample)", "bias_factor": "1",
              "confidence": "1 (probability of the interval)"}
     return {**doc, "channel": channel,
-            "data_unit": u if data_type == "freq" else f"{u}*s", "units": units}
+            "data_unit": rate_unit if data_type == "freq" else f"{rate_unit}*s",
+            "units": units}
 
 
-def format_table(res: Any, unit: str = "input unit") -> str:
-    """The result as a table; ``unit``: that of ``dev`` and its interval."""
+def format_table(res: Any, channel: str) -> str:
+    """The result as a table, ``dev`` and its interval in :func:`dev_unit`."""
+    unit = dev_unit(channel, res.stat)
     lines = [
         f"# {res.stat}  data_type={res.data_type}  rate={res.rate_hz:g} Hz  "
         f"confidence={res.confidence:g}  bias_corrected={res.bias_corrected}  "
         f"dev in {unit}"
-        + (f"  drift={res.drift:.6g} {unit}/s" if res.drift is not None else ""),
+        + (f"  drift={res.drift:.6g} {dev_unit(channel)}/s" if res.drift is not None
+           else ""),
         f"{'AF':>8} {'tau_s':>12} {'n':>10} {'alpha':>5} {'ci_low':>12} {'dev':>12} "
         f"{'ci_high':>12} {'edf':>9} {'gaps':>6}",
     ]
@@ -180,6 +193,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         write_json(with_units(res.to_dict(), channel, args.data_type), args.json)
     # the table goes to stderr when stdout carries the JSON (docs/cli.md)
-    print(format_table(res, dev_unit(channel)),
+    print(format_table(res, channel),
           file=sys.stderr if args.json == "-" else sys.stdout)
     return 0

@@ -16,6 +16,7 @@ needs alpha.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -138,17 +139,45 @@ class _Confidence:
         return float(bias.bias_factor(var_stat, alpha, m, n_phase))
 
     def limits(
-        self, var_stat: str, alpha: int, m: int, n_phase: int, var: float, confidence: float
+        self, var_stat: str, alpha: int, m: int, runs: np.ndarray, var: float,
+        confidence: float
     ) -> tuple[float, float, float]:
         if alpha == ALPHA_UNKNOWN or not np.isfinite(var):
             return float("nan"), float("nan"), float("nan")
         try:
-            e = float(edf.edf(var_stat, alpha, m, n_phase))
+            e = gapped_edf(var_stat, alpha, m, runs)
             lo, hi = ci.chi2_limits(var, e, confidence)
         except StatsError as exc:
             self.notes.append(f"EDF/CI failed for {var_stat} alpha={alpha} m={m}: {exc}")
             return float("nan"), float("nan"), float("nan")
         return e, float(lo), float(hi)
+
+
+def gapped_edf(var_stat: str, alpha: int, m: int, runs: np.ndarray) -> float:
+    """EDF of ``var_stat`` at ``m`` over a record made of independent gap-free runs of
+    ``runs`` phase points (:meth:`PhaseData.run_lengths`): the sum of the runs' EDFs
+    (:func:`edf.edf` of each run alone; a run too short for a term adds none).
+
+    The estimate is the mean over every term that touches no gap, i.e. the runs' own
+    estimates weighted by their term counts; Satterthwaite's EDF of such a weighted mean,
+    ``(sum w)^2 / sum(w^2 / edf_i)``, is the sum of the EDFs when the weights are
+    proportional to them, as term counts and EDFs both grow with the run's length
+    (Satterthwaite 1946, Biometrics Bulletin 2(6)). One run (no gap) is :func:`edf.edf`
+    itself. Without this, a record with one hole in its middle kept the EDF of the whole
+    length at taus where the hole removes half the terms (a 1 h record at tau = 655 s:
+    terms 228 929 -> 97 857, EDF unchanged)."""
+    if runs.size == 1:
+        return float(edf.edf(var_stat, alpha, m, int(runs[0])))
+    lengths, counts = np.unique(runs, return_counts=True)
+    total = 0.0
+    for length, count in zip(lengths.tolist(), counts.tolist(), strict=True):
+        try:
+            e = float(edf.edf(var_stat, alpha, m, length))
+        except StatsError:  # too short for a term at this m
+            continue
+        if math.isfinite(e) and e > 0:
+            total += count * e
+    return total if total > 0 else float("nan")
 
 
 # Statistics Stable32 bias-corrects (TOTVAR for alpha -1/-2, HTOT, Theo1); MTOT and TTOT
@@ -233,6 +262,7 @@ def _compute_pd(
     lo = np.full(ms.size, np.nan)
     hi = np.full(ms.size, np.nan)
     var = var_raw.copy()
+    runs = pd.run_lengths()
     for k, m in enumerate(ms):
         m = int(m)
         if fixed is not None:
@@ -250,7 +280,7 @@ def _compute_pd(
                 notes.append(f"no bias factor at m={m} (alpha unknown or bias module missing)")
         if stat == "theobr":
             factors[k] = 1.0 / kf
-        edfs[k], lo[k], hi[k] = conf.limits(var_stat, a, m, pd.n_phase, var[k], confidence)
+        edfs[k], lo[k], hi[k] = conf.limits(var_stat, a, m, runs, var[k], confidence)
     notes.extend(n_ for n_ in conf.notes if n_ not in notes)
     tau = ms * tau0 * (0.75 if theo_stat else 1.0)
     return StatResult(
