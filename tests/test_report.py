@@ -257,6 +257,39 @@ def test_report_bad_model_file(recording: Path, tmp_path: Path,
     assert main(["report", str(recording), "--model", str(bad), "--out",
                  str(tmp_path / "o")]) == 2
     assert "bad.toml" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # refused before anything is written
+
+
+def test_report_names_where_a_model_does_not_describe_the_recording(
+        recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--model`` with another sensor's model (``datasheet:CHIP`` too): the pages and
+    fit.json say, per channel, where the model leaves the measured OADEV's interval; the
+    model that made the recording gets no such note."""
+    truth = tmp_path / "truth.toml"
+    truth.write_text(MODEL.to_toml())
+    other = tmp_path / "other.toml"
+    other.write_text(NoiseModel.quiet().with_channel("gx", white=0.012, flicker=0.0015,
+                                                     random_walk=2e-4).to_toml())
+    for path, noisy in ((str(truth), set()), (str(other), {"gx"}),
+                        ("datasheet:lsm6dsl", None)):
+        out = tmp_path / f"rep_{len(path)}"
+        assert main(["report", str(recording), "--model", path, "--out", str(out)]) == 0, \
+            capsys.readouterr().err
+        doc = json.loads((out / "fit.json").read_text())
+        flagged = {n.split(":")[0] for n in doc["model_notes"]}
+        if noisy is not None:
+            assert flagged == noisy, doc["model_notes"]
+        assert doc["model_file"] == path
+        assert load_model(out / "model.toml").to_dict() == load_model(path).to_dict()
+        if flagged:
+            assert "does not describe this recording" in (out / "gyro.html").read_text()
+
+
+def test_report_out_that_is_a_file_is_refused(recording: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "f").write_text("")
+    assert main(["report", str(recording), "--out", str(tmp_path / "f")]) == 2
+    assert "is a file" in capsys.readouterr().err
 
 
 def test_report_model_with_fit_options_is_refused(recording: Path, tmp_path: Path,
@@ -275,6 +308,7 @@ def test_report_bad_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     bad.write_text("x")
     assert main(["report", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "r.txt" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_interval_text_keeps_both_ends_readable() -> None:

@@ -214,7 +214,7 @@ def model_file_fit(model: NoiseModel, rec: Recording, source: str, *,
                        f"(recording channels {list(rec.channels)})")
     fits = {ch: channel_from_model(model[ch], rec.channel(ch), rec.rate_hz, ch)
             for ch in chans}
-    chip = rec.metadata.get("chip") or model.meta.get("chip")
+    chip = rec.metadata.get("chip")  # the recording's: a model's chip is not its sensor
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, MODEL_FILE_METHOD,
                         fits)
 

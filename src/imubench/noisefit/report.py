@@ -21,9 +21,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lsm6ds_sim.model import load_model
+from lsm6ds_sim.model import NoiseModel, load_model
 
 from imubench.noisefit.errors import FitError
+from imubench.noisefit.fit import ChannelFit
 from imubench.noisefit.ieee952 import Readout, ieee952_readouts
 from imubench.noisefit.plots import psd_figure, save_figure, sigma_tau_figure
 from imubench.noisefit.recording_fit import RecordingFit, fit_loaded, model_file_fit
@@ -53,43 +54,86 @@ def _title(kind: str, result: RecordingFit, sensor: str, duration_s: float) -> s
             f"{duration_s / 3600:.3g} h; {source})")
 
 
-def _info(result: RecordingFit, n_samples: int, model_file: Path | None) -> PageInfo:
-    notes: list[str] = []
-    if model_file is not None:
-        model_rate = load_model(model_file).meta.get("rate_hz")
+def _info(result: RecordingFit, n_samples: int, model: NoiseModel | None,
+          notes: list[str]) -> PageInfo:
+    notes = list(notes)
+    if model is not None:
+        model_rate = model.meta.get("rate_hz")
         if isinstance(model_rate, (int, float)) and not np.isclose(model_rate,
                                                                      result.rate_hz):
-            notes.append(f"{model_file} was fitted at {model_rate:g} Hz; the recording is "
+            notes.append(f"{model.source} was fitted at {model_rate:g} Hz; the recording is "
                          f"at {result.rate_hz:g} Hz (densities carry over, a fitted output "
                          "filter does not)")
     return PageInfo(str(result.source), result.rate_hz, n_samples / result.rate_hz,
-                    result.chip, result.method, None if model_file is None
-                    else str(model_file), tuple(notes))
+                    result.chip, result.method, None if model is None else model.source,
+                    tuple(notes))
+
+
+MISFIT_SHARE = 0.2
+"""With ``--model``, a channel whose model lies outside the measured OADEV's 95 %
+interval at more than this share of the taus (and at least 3) gets a note that the model
+does not describe the recording: a model that does lies outside at ~5 % of them."""
+
+
+MISFIT_TOLERANCE = 0.1
+"""... and by more than this in ln(model / measured) (10 %): at the shortest taus the
+interval of a long record is a fraction of a percent wide, narrower than any model's
+shape error."""
+
+
+def misfit_notes(fits: dict[str, ChannelFit], curves: dict[str, Any]) -> list[str]:
+    """Per channel, where a model (not fitted to this recording) leaves the measured
+    OADEV's 95 % interval by more than :data:`MISFIT_TOLERANCE` at a share of the taus
+    (:data:`MISFIT_SHARE`): the pages then say so instead of showing another sensor's
+    numbers as this one's."""
+    notes = []
+    for ch, fit in fits.items():
+        c = curves[ch]
+        ok = np.isfinite(c.dev) & np.isfinite(c.ci_low) & np.isfinite(c.ci_high)
+        if not ok.any():
+            continue
+        model = np.sqrt(fit.model_avar(c.tau_s[ok]))
+        out = (((model < c.ci_low[ok]) | (model > c.ci_high[ok]))
+               & (np.abs(np.log(model / c.dev[ok])) > MISFIT_TOLERANCE))
+        if out.sum() >= max(3, MISFIT_SHARE * ok.sum()):
+            ratio = model[out] / c.dev[ok][out]
+            tau = c.tau_s[ok][out]
+            notes.append(f"{ch}: the model lies outside the measured OADEV's 95 % interval "
+                         f"at {int(out.sum())} of {int(ok.sum())} taus ({tau.min():.3g}-"
+                         f"{tau.max():.3g} s; model / measured {ratio.min():.2f}-"
+                         f"{ratio.max():.2f}): it does not describe this recording there, "
+                         "and its values there are not this sensor's")
+    return notes
 
 
 def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "auto",
                  method: str = "wls", options: InputOptions | None = None,
                  model_file: str | Path | None = None) -> list[Path]:
     """Fit the recording (read with ``options``), or take the noise values from
-    ``model_file`` without fitting, and write every report file into ``out_dir``; return
-    the paths."""
+    ``model_file`` (a file or ``datasheet:CHIP``) without fitting, and write every report
+    file into ``out_dir``; return the paths. The model and the recording are read before
+    anything is written, so a bad one leaves no folder behind."""
     from imubench.recording import load_recording
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"--out {out} is a file; give a folder for the report")
+    model = None if model_file is None else load_model(model_file)
     rec = load_recording(recording, options)
-    model_path = None if model_file is None else Path(model_file)
     with progress(100, "report", unit="%") as bar:
-        if model_path is None:
+        if model is None:
             result = fit_loaded(rec, str(recording), terms=terms, method=method,
                                 on_channel=lambda done, total:
                                 bar.fraction(FIT_SHARE * done / total))
         else:
-            result = model_file_fit(load_model(model_path), rec, str(recording))
+            result = model_file_fit(model, rec, str(recording))
             bar.fraction(FIT_SHARE)
+        out.mkdir(parents=True, exist_ok=True)
         data = {ch: rec.channel(ch) for ch in result.fits}
         n_samples = max(int(np.size(v)) for v in data.values())
-        info = _info(result, n_samples, model_path)
+        curves = {ch: oadev_curve(data[ch], result.rate_hz) for ch in result.fits}
+        info = _info(result, n_samples, model,
+                     [] if model is None else misfit_notes(result.fits, curves))
         files: list[Path] = []
         pages: list[Path] = []
         readouts: dict[str, dict[str, Readout]] = {}
@@ -97,12 +141,12 @@ def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "au
             fits = {ch: result.fits[ch] for ch in chans if ch in result.fits}
             if not fits:
                 continue
-            curves = {ch: oadev_curve(data[ch], result.rate_hz) for ch in fits}
             for ch in fits:
                 readouts[ch] = ieee952_readouts(fits[ch], curves[ch])
             images = save_figure(sigma_tau_figure(
-                _title("Allan deviation", result, sensor, info.duration_s), fits, curves,
-                {ch: readouts[ch] for ch in fits}, sensor), out / f"sigma_tau_{sensor}")
+                _title("Allan deviation", result, sensor, info.duration_s), fits,
+                {ch: curves[ch] for ch in fits}, {ch: readouts[ch] for ch in fits}, sensor),
+                out / f"sigma_tau_{sensor}")
             bands = {ch: band_psd(data[ch], result.rate_hz) for ch in fits}
             images += save_figure(psd_figure(
                 _title("amplitude spectral density", result, sensor, info.duration_s),
@@ -113,20 +157,20 @@ def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "au
             files += images
             pages.append(page)
             bar.fraction(FIT_SHARE + (1 - FIT_SHARE) * (k + 1) / len(SENSORS))
-    files += pages + _write_fit_files(result, out, model_path, info, pages, files)
+    files += pages + _write_fit_files(result, out, model, info, pages, files)
     return files
 
 
-def _write_fit_files(result: RecordingFit, out: Path, model_path: Path | None,
+def _write_fit_files(result: RecordingFit, out: Path, model: NoiseModel | None,
                      info: PageInfo, pages: list[Path], plots: list[Path]) -> list[Path]:
-    """model.toml, fit.json, imu.yaml (when it can be written honestly) and index.html."""
+    """model.toml (the model given, or the fit's), fit.json (with the model's source and
+    its misfit notes), imu.yaml (when it can be written honestly) and index.html."""
     doc = result.to_dict()
-    if model_path is not None:
-        doc["model_file"] = str(model_path)
-        (out / "model.toml").write_text(model_path.read_text(encoding="utf-8"),
-                                        encoding="utf-8")
-    else:
-        (out / "model.toml").write_text(result.noise_model().to_toml(), encoding="utf-8")
+    if model is not None:
+        doc["model_file"] = model.source
+        doc["model_notes"] = list(info.notes)
+    (out / "model.toml").write_text((result.noise_model() if model is None else model)
+                                    .to_toml(), encoding="utf-8")
     (out / "fit.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     written = [out / "model.toml", out / "fit.json"]
     kalibr_text: str | None = None
