@@ -180,6 +180,18 @@ def test_model_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     bad.write_text("[channels.gx]\nwhite = -1\n")
     assert main(["model", str(bad), "--rate", "100", "--taus", "1"]) == 2
     assert "bad.toml" in capsys.readouterr().err
+    # a tau is never moved, dropped or guessed without a word; a huge one is refused
+    # before it allocates (1e9 s at 100 Hz asked for 1.5 TiB)
+    for taus, words in (("0.015,0.01", "1.5 samples"), ("0,1", "not a positive time"),
+                        ("1e9", "the largest computed"), ("1", "write 1.0 for one second")):
+        assert main(["model", str(path), "--rate", "100", f"--taus={taus}"]) == 2
+        assert words in capsys.readouterr().err
+    assert main(["model", str(path), "--rate", "100", "--taus", "0.5", "--n", "100"]) == 2
+    assert "beyond N/4" in capsys.readouterr().err
+    quiet = tmp_path / "quiet.toml"
+    quiet.write_text("[channels.gx]\nwhite = 0.0\n")
+    assert main(["model", str(quiet), "--rate", "100", "--taus", "0.01"]) == 2
+    assert "gives no channel any noise" in capsys.readouterr().err
 
 
 def test_fit_shows_a_progress_bar_that_reaches_its_end(recording: Path, tmp_path: Path,

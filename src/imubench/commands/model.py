@@ -14,6 +14,7 @@ autocovariance, i.e. its spectrum): see docs/noise-fit.md.
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 from typing import Any
 
@@ -44,19 +45,42 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+MAX_FACTOR = 2**24
+"""Largest averaging factor (samples) the model's AVAR is computed at: the exact AVAR
+sums the autocovariance over 2 m lags (134 MB at this m; 45 h at 104 Hz)."""
+
+
 def _factors(spec: str, rate_hz: float, n: int | None) -> np.ndarray:
+    """Averaging factors of ``--taus``: a list of seconds must hold whole numbers of
+    samples at ``rate_hz`` (no tau is moved or dropped without a word), keywords stop at
+    N/4; every factor at most :data:`MAX_FACTOR`."""
     from imubench.stats.taus import averaging_factors, parse_taus
 
     taus = parse_taus(spec)
     if isinstance(taus, list):
-        m = np.unique(np.maximum(np.rint(np.asarray(taus) * rate_hz), 1).astype(np.int64))
-        if n is not None:
-            m = m[m <= max((n - 1) // 4, 1)]
-        return m
-    if n is None:
-        raise FitError(f"--taus {spec}: a keyword or points-per-decade spec needs --n "
-                       "(record length in samples) to know where to stop")
-    return averaging_factors("oadev", n - 1, taus, 1.0 / rate_hz)
+        t = np.asarray(taus, dtype=np.float64)
+        for tau in t:
+            if not (math.isfinite(tau) and tau > 0):
+                raise FitError(f"--taus {spec}: tau {tau:g} s is not a positive time")
+            m = tau * rate_hz
+            if m < 0.5 or abs(m - round(m)) > 1e-6 * max(m, 1.0):
+                raise FitError(f"--taus {spec}: tau {tau:g} s is {m:.6g} samples at "
+                               f"{rate_hz:g} Hz; give whole multiples of {1 / rate_hz:g} s")
+        m = np.unique(np.rint(t * rate_hz).astype(np.int64))
+        if n is not None and m.max() > max((n - 1) // 4, 1):
+            raise FitError(f"--taus {spec}: tau {m.max() / rate_hz:g} s is beyond N/4 = "
+                           f"{max((n - 1) // 4, 1)} samples of a record of --n {n}")
+    elif n is None:
+        raise FitError(f"--taus {spec}: a keyword or points-per-decade spec (an integer "
+                       "is points per decade; write 1.0 for one second) needs --n (record "
+                       "length in samples) to know where to stop")
+    else:
+        m = averaging_factors("oadev", n - 1, taus, 1.0 / rate_hz)
+    if m.size and m.max() > MAX_FACTOR:
+        raise FitError(f"--taus {spec}: tau {m.max() / rate_hz:g} s is {m.max():.3g} samples "
+                       f"at {rate_hz:g} Hz; the largest computed is {MAX_FACTOR} "
+                       f"({MAX_FACTOR / rate_hz:.4g} s)")
+    return m
 
 
 def _expected_ci(tau: np.ndarray, avar: np.ndarray, m: np.ndarray, n: int) -> dict[str, Any]:
@@ -67,6 +91,11 @@ def _expected_ci(tau: np.ndarray, avar: np.ndarray, m: np.ndarray, n: int) -> di
     edfs, lo, hi = confidence_arrays("oavar", alpha, m, n, avar, 0.683)
     return {"edf": edfs.tolist(), "ci_low": np.asarray(lo).tolist(),
             "ci_high": np.asarray(hi).tolist(), "alpha": alpha.tolist()}
+
+
+NOISE_KEYS = ("white", "flicker", "random_walk", "ramp", "quantization", "markov_sigma",
+              "sine_amplitude", "outlier_rate", "output_white", "resonance_height")
+"""A channel with one of these away from its quiet value carries noise."""
 
 
 def predict(model: NoiseModel, rate_hz: float, spec: str, n: int | None) -> dict[str, Any]:
@@ -80,13 +109,13 @@ def predict(model: NoiseModel, rate_hz: float, spec: str, n: int | None) -> dict
         raise FitError(f"--taus {spec}: no averaging time left (need tau >= 1/rate"
                        + (f" and <= N/4 samples with N={n}" if n else "") + ")")
     out: dict[str, Any] = {"rate_hz": rate_hz, "channels": {}}
+    if all(getattr(model[ch], k) == getattr(ChannelModel(), k) for ch in CHANNELS
+           for k in NOISE_KEYS):
+        raise FitError(f"{model.source}: gives no channel any noise; nothing to predict")
     quiet = ChannelModel()
     for ch in CHANNELS:
         cm = model[ch]
-        noise_keys = ("white", "flicker", "random_walk", "ramp", "quantization",
-                      "markov_sigma", "sine_amplitude", "outlier_rate", "output_white",
-                      "resonance_height")
-        if all(getattr(cm, k) == getattr(quiet, k) for k in noise_keys):
+        if all(getattr(cm, k) == getattr(quiet, k) for k in NOISE_KEYS):
             continue
         avar = model_avar_m(cm, m, rate_hz)
         tau = m / rate_hz
