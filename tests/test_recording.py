@@ -405,3 +405,17 @@ def test_repeated_time_stamps_are_a_clear_error(tmp_path: Path,
         load_recording(p)
     rec = load_recording(p, InputOptions(rate_hz=200.0))  # the fix the message names
     assert len(rec) == 5000 and rec.rate_hz == 200.0
+
+
+@pytest.mark.parametrize("rate", [50.0, 100.5, 200.0])
+def test_a_rate_that_contradicts_the_time_column_is_refused(tmp_path: Path,
+                                                           rate: float) -> None:
+    """``--rate`` against stamps 100 Hz apart: read at 50 Hz every second row fell on
+    the sample before it (half the file 'damaged'), at 100.5 Hz 2000 rows left 10 holes;
+    now it is an error naming both rates."""
+    p = tmp_path / "t.csv"
+    p.write_text("t,gx\n" + "".join(f"{i / 100:.2f},{i * 1e-3:.3f}\n" for i in range(2000)))
+    with pytest.raises(RecordingError, match=rf"--rate {rate:g} Hz contradicts the time "
+                                             r"column, which gives 100 Hz"):
+        load_recording(p, InputOptions(rate_hz=rate))
+    assert load_recording(p, InputOptions(rate_hz=100.0)).lost_samples == 0

@@ -324,6 +324,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
             raise RecordingError(f"{where}: the index column has empty values")
         tb = timebase_from_index(index_col, t_s, where, rate)
     elif t_s is not None:
+        if options.rate_hz is not None:
+            _check_given_rate(t_s, options.rate_hz, where)
         tb = timebase_from_times(t_s, where, rate)
         if rate is None and not TIME_RATE_HZ[0] <= tb.rate_hz <= TIME_RATE_HZ[1]:
             raise RecordingError(
@@ -363,6 +365,25 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         (fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
         or (raw.width == 1 and raw.header is None))  # allan's plain series
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
+
+
+def _check_given_rate(t_s: np.ndarray, rate_hz: float, where: str) -> None:
+    """RecordingError when ``--rate`` contradicts the time column's own rate (least
+    squares, where it has one) by enough to move a stamp half a sample over the record:
+    read at that rate, the rows would slip off their samples (stamps 100 Hz apart at
+    --rate 50 put every second row on the sample before it, half the file skipped as
+    damaged; at --rate 100.5, 2000 rows left 10 holes)."""
+    try:
+        tb = timebase_from_times(t_s, where)
+    except RecordingError:
+        return  # the stamps give no rate of their own: --rate decides
+    span = int(tb.index[-1]) if tb.index.size else 0
+    if abs(tb.rate_hz / rate_hz - 1.0) * span > 0.5:
+        raise RecordingError(
+            f"{where}: --rate {rate_hz:g} Hz contradicts the time column, which gives "
+            f"{tb.rate_hz:.8g} Hz (least squares; over its {span + 1} samples the "
+            "difference slips rows off their samples); drop --rate to read the file at its "
+            "own rate")
 
 
 def _meta_rate(meta: dict[str, Any], where: str) -> float | None:
