@@ -296,3 +296,26 @@ def test_summary_prints_the_fit_notes() -> None:
     note = "model discrepancy floor delta = 0.235 (relative std added to every AVAR point)"
     rf = RecordingFit("r.csv", 100.0, None, f.method, {"gx": replace(f, notes=(note,))})
     assert f"    note: {note}" in format_summary(rf)
+
+
+def test_fit_refuses_an_output_it_cannot_write_before_fitting(
+        recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """-o, --json or --kalibr in a missing folder (or naming a folder) is an error before
+    the fit, not after minutes of it."""
+    from imubench.noisefit import recording_fit
+
+    def no_fit(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the fit must not start")
+
+    monkeypatch.setattr(recording_fit, "fit_channel", no_fit)
+    for extra, words in ((["-o", str(tmp_path / "no" / "m.toml")], "-o "),
+                         (["-o", str(tmp_path)], "is a folder"),
+                         (["-o", str(tmp_path / "m.toml"), "--json",
+                           str(tmp_path / "no" / "f.json")], "--json "),
+                         (["-o", str(tmp_path / "m.toml"), "--kalibr",
+                           str(tmp_path / "no" / "imu.yaml")], "--kalibr ")):
+        assert main(["fit", str(recording), *extra]) == 2
+        err = capsys.readouterr().err
+        assert words in err and ("does not exist" in err or "is a folder" in err)
+    assert not (tmp_path / "m.toml").exists()

@@ -17,6 +17,20 @@ from typing import Any, TextIO
 from imubench.errors import ImubenchError
 
 
+def check_writable(dest: str | Path | None, option: str) -> None:
+    """ImubenchError, before a long computation, when the output file ``dest`` of
+    ``option`` cannot be written there: its folder is missing or is not a folder, or
+    ``dest`` is a folder. ``None`` and ``-`` (stdout) pass."""
+    if dest is None or str(dest) == "-":
+        return
+    path = Path(dest)
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ImubenchError(f"{option} {dest}: is a folder; give a file name")
+    if not folder.is_dir():
+        raise ImubenchError(f"{option} {dest}: the folder {folder} does not exist")
+
+
 def write_json(doc: Any, dest: str) -> None:
     """Write ``doc`` as indented JSON to the file ``dest``, or to stdout when ``dest`` is
     ``-`` (the ``--json PATH|-`` option of every subcommand)."""

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from imubench.batchrun import add_batch_options, is_batch
-from imubench.commands import write_json
+from imubench.commands import check_writable, write_json
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.fit import METHODS
 from imubench.noisefit.recording_fit import RecordingFit, fit_recording
@@ -114,7 +114,10 @@ def run(args: argparse.Namespace) -> int:
     if args.output is None:
         raise FitError("-o MODEL.toml is required for one recording (a directory or glob "
                        "writes into --out-dir)")
-    if args.kalibr is not None:  # refused before a long fit, not after it
+    for dest, option in ((args.output, "-o"), (args.json, "--json"),
+                         (args.kalibr, "--kalibr")):
+        check_writable(dest, option)  # refused before a long fit, not after it
+    if args.kalibr is not None:
         check_kalibr_request(args.kalibr_inflate, args.channels.replace(",", " ").split()
                              if args.channels else None)
     try:

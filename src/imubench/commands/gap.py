@@ -18,7 +18,7 @@ from pathlib import Path
 from lsm6ds_sim.model import load_model
 
 from imubench.batchrun import add_batch_options, is_batch
-from imubench.commands import write_json
+from imubench.commands import check_writable, write_json
 from imubench.gap import EFFECTS, GapOptions, diagnose_recording
 from imubench.gap.errors import GapError
 from imubench.gap.explain import explain_channel
@@ -126,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json is None:
         raise GapError("--json OUT is required for one recording (a directory or glob "
                        "writes into --out-dir)")
+    check_writable(args.json, "--json")  # before the diagnosis, not after it
     options = gap_options(args)
     model = load_model(args.model)
     reading = input_options(args)
