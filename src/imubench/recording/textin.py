@@ -296,7 +296,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                 assumed.append(ch)
         values[:, i] = table[:, where_col[ch]] * factor
         used_units[ch] = unit
-    _check_gravity(values, used_units, options, where)
+    _check_gravity(values, used_units, options, where, assumed)
     temp = table[:, where_col["temp"]] if "temp" in where_col else np.full(len(table), np.nan)
 
     meta = dict(raw.meta)
@@ -424,7 +424,7 @@ def _channel_unit(ch: str, col: Column, options: InputOptions, si_format: bool,
 
 
 def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOptions,
-                   where: str) -> None:
+                   where: str, assumed: list[str]) -> None:
     """A static accelerometer reads about 1 g, whatever unit the file or ``--units``
     claims: a median |a| of 5-15 "g" is m/s^2 read as g, 500-1500 is mg read as g, and
     0.07-0.14 with a m/s^2 unit is g read as m/s^2 (refused with the fix)."""
@@ -433,15 +433,20 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
     norm = np.sqrt(np.nansum(values[:, 3:6] ** 2, axis=1))
     med = float(np.nanmedian(norm)) if len(norm) else math.nan
     said = units["ax"] + (" (--units)" if options.accel_unit is not None else "")
-    gyro = units.get("gx", "dps")
+    # the gyro's unit in the fix: the one stated; when nothing states it, the user must
+    # say it (a file in m/s2 often has its gyro in rad/s, which "dps" would read 57x low)
+    gyro = ("GYRO" if any(ch in assumed for ch in ("gx", "gy", "gz"))
+            else units.get("gx", "GYRO"))
+    gyro_hint = (" (GYRO: the gyroscope's unit, dps or rad/s; nothing in the file states "
+                 "it)" if gyro == "GYRO" else "")
     for lo, hi, really in ((5.0, 15.0, "m/s2"), (500.0, 1500.0, "mg")):
         if lo < med < hi:
             raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, "
                                  f"which is {really} read as {said}; give --units "
-                                 f"{gyro},{really}")
+                                 f"{gyro},{really}{gyro_hint}")
     if 0.07 < med < 0.14 and units["ax"] in ("m/s2", "m/s^2"):
         raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, which "
-                             f"is g read as {said}; give --units {gyro},g")
+                             f"is g read as {said}; give --units {gyro},g{gyro_hint}")
 
 
 TIME_RATE_HZ = (1e-3, 1e6)
