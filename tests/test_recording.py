@@ -277,9 +277,9 @@ def test_absolute_unix_times_give_their_unit_by_magnitude(tmp_path: Path, t0: fl
 
 @pytest.mark.parametrize(("az", "units", "fix"), [
     (9.81, ("dps", "g"), "m/s2 read as g (--units); give --units dps,m/s2"),
-    # nothing states the gyro's unit: the fix does not guess it (rad/s read as dps is 57x)
+    # without --units the fix does not guess the gyro's unit (rad/s read as dps is 57x)
     (1000.0, None, "mg read as g; give --units GYRO,mg (GYRO: the gyroscope's unit, dps or "
-                   "rad/s; nothing in the file states it)"),
+                   "rad/s; it is read as dps now)"),
     (1.0, ("dps", "m/s2"), "g read as m/s2 (--units); give --units dps,g"),
 ])
 def test_accelerometer_unit_contradicted_by_gravity_is_refused(

@@ -433,12 +433,14 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
     norm = np.sqrt(np.nansum(values[:, 3:6] ** 2, axis=1))
     med = float(np.nanmedian(norm)) if len(norm) else math.nan
     said = units["ax"] + (" (--units)" if options.accel_unit is not None else "")
-    # the gyro's unit in the fix: the one stated; when nothing states it, the user must
-    # say it (a file in m/s2 often has its gyro in rad/s, which "dps" would read 57x low)
-    gyro = ("GYRO" if any(ch in assumed for ch in ("gx", "gy", "gz"))
-            else units.get("gx", "GYRO"))
-    gyro_hint = (" (GYRO: the gyroscope's unit, dps or rad/s; nothing in the file states "
-                 "it)" if gyro == "GYRO" else "")
+    # the gyro's unit in the fix: the user's --units; otherwise the user must say it (a
+    # file whose accelerometer is not in the unit it claims may have its gyro in rad/s
+    # too, which "dps" would read 57x low)
+    gyro = options.gyro_unit if options.gyro_unit is not None else "GYRO"
+    gyro_hint = ("" if options.gyro_unit is not None else
+                 f" (GYRO: the gyroscope's unit, dps or rad/s; it is read as "
+                 f"{units.get('gx', 'dps')} now" + (", which nothing in the file states)"
+                                                    if "gx" in assumed else ")"))
     for lo, hi, really in ((5.0, 15.0, "m/s2"), (500.0, 1500.0, "mg")):
         if lo < med < hi:
             raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, "
