@@ -389,6 +389,22 @@ def test_kalibr_values_hand_computed() -> None:
     text = kalibr_yaml(k)
     assert "gyroscope_noise_density: 8.726646e-05" in text
     assert "update_rate: 1.040000e+02" in text
+    assert k["markov_folded"] == {}
+
+
+def test_kalibr_folds_a_slow_markov_term_into_the_density() -> None:
+    """Kalibr has no Gauss-Markov term: one of tau_c 1.4 s (Samsung S5 gyros) enters the
+    noise density as sigma sqrt(2 tau_c), the bound of its spectrum, instead of being
+    dropped (which wrote a density 4x below the measured ADEV at 1 s)."""
+    params = {"gx": {"white": 0.004, "random_walk": 1e-4, "markov_sigma": 0.04,
+                     "markov_tau": 1.4},
+              "gy": {"white": 0.005, "random_walk": 2e-5},
+              "az": {"white": 8e-5, "random_walk": 2e-6}}
+    k = kalibr_imu(params, 10.0)
+    n = math.hypot(0.004, 0.04 * math.sqrt(2 * 1.4))
+    assert k["gyroscope_noise_density"] == pytest.approx(n * math.pi / 180)
+    assert k["markov_folded"] == {"gyroscope_noise_density": ["gx"]}
+    assert "holds the Gauss-Markov term of gx" in kalibr_yaml(k)
 
 
 # ------------------------------------------------------------------ model selection (issue 14)
