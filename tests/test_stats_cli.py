@@ -83,3 +83,17 @@ def test_time_deviation_is_in_degrees_and_gaps_are_terms(tmp_path: Path,
     doc = json.loads(out.read_text())
     assert doc["units"]["dev"] == "deg" and doc["units"]["drift"] == "dps/s"
     assert doc["units"]["gaps"].startswith("terms") and doc["gaps"][0] > 1
+
+
+def test_a_plain_series_is_in_its_own_unit_not_dps(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """A one-column file states no unit (a clock's fractional frequency, Stable32's
+    format): its deviations are in the input unit, not labelled dps."""
+    p = tmp_path / "y.txt"
+    p.write_text("".join(f"{v:.6e}\n" for v in np.random.default_rng(3).normal(0, 1e-9, 500)))
+    out = tmp_path / "y.json"
+    assert cli.main(["allan", str(p), "--stat", "oadev", "--taus", "1,2",
+                     "--json", str(out)]) == 0
+    assert "dev in input unit" in capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["units"]["dev"] == "input unit" and doc["data_unit"] == "input unit"

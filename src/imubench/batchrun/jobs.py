@@ -154,10 +154,11 @@ def allan_plan(column: str | None, options: InputOptions, path: Path, name: str
 def allan_work(args: argparse.Namespace, path: Path, name: str, channel: str
                ) -> dict[str, Any]:
     """``imubench allan PATH --column CHANNEL --json``'s document."""
-    from imubench.commands.allan import analyse, load_input, with_units
+    from imubench.commands.allan import analyse, load_channel, with_units
 
-    data, rate = load_input(path, channel, input_options(args))
-    return with_units(dict(analyse(args, data, rate).to_dict()), channel, args.data_type)
+    data, rate, _, unit = load_channel(path, channel, input_options(args))
+    return with_units(dict(analyse(args, data, rate).to_dict()), channel, unit,
+                      args.data_type)
 
 
 def allan_rows(rec: Path, channel: str, doc: dict[str, Any]) -> Iterable[dict[str, Any]]:

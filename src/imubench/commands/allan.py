@@ -84,10 +84,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def load_channel(path: Path, column: str | None, options: InputOptions
-                 ) -> tuple[np.ndarray, float, str]:
-    """(data, rate_hz, channel) of one channel of a recording or a text table (the one
-    reader, :func:`imubench.recording.load_recording`; a file that states no rate and has
-    no time column is read at 1 Hz, tau in samples, as Stable32 and allantools do)."""
+                 ) -> tuple[np.ndarray, float, str, str]:
+    """(data, rate_hz, channel, unit) of one channel of a recording or a text table (the
+    one reader, :func:`imubench.recording.load_recording`; a file that states no rate and
+    has no time column is read at 1 Hz, tau in samples, as Stable32 and allantools do).
+    ``unit`` is the channel's (dps, g), or "input unit" when nothing in the file or the
+    options states it (a plain series: a clock's fractional frequency is no rate in
+    dps)."""
     from imubench.recording import load_recording
 
     rec = load_recording(path, dataclasses.replace(options, default_rate_hz=1.0))
@@ -98,55 +101,52 @@ def load_channel(path: Path, column: str | None, options: InputOptions
         column = chans[0]
     if column not in chans:
         raise RecordingError(f"{path}: no channel {column!r}; channels are {chans}")
-    return np.asarray(rec.channel(column), dtype=np.float64), float(rec.rate_hz), column
+    assumed = rec.metadata.get("units_assumed") or []
+    unit = INPUT_UNIT if column in assumed else UNITS.get(column, INPUT_UNIT)
+    return (np.asarray(rec.channel(column), dtype=np.float64), float(rec.rate_hz), column,
+            unit)
 
 
-def load_input(path: Path, column: str | None, options: InputOptions
-               ) -> tuple[np.ndarray, float]:
-    """(data, rate_hz) of :func:`load_channel`."""
-    data, rate, _ = load_channel(path, column, options)
-    return data, rate
+INPUT_UNIT = "input unit"
 
 
 TIME_DEVIATIONS = frozenset({"tdev", "ttotdev"})
 """Statistics in phase units: TDEV = tau MDEV / sqrt(3) (SP 1065 eq. 17), TTOT alike."""
 
 
-def dev_unit(channel: str, stat: str = "oadev") -> str:
-    """The unit of ``stat``'s deviations of ``channel``: the channel's own (dps, g) for
-    every statistic of rates (frequency data are rates in that unit; phase data are their
-    integral, whose differences over tau give the same unit), that unit times seconds
-    for a time deviation (TDEV, TTOT: deg for dps)."""
-    u = UNITS.get(channel, "input unit")
+def dev_unit(unit: str, stat: str = "oadev") -> str:
+    """The unit of ``stat``'s deviations of a series in ``unit``: that unit for every
+    statistic of rates (frequency data are rates in it; phase data are their integral,
+    whose differences over tau give the same unit), that unit times seconds for a time
+    deviation (TDEV, TTOT: deg for dps)."""
     if stat not in TIME_DEVIATIONS:
-        return u
-    return "deg" if u == "dps" else f"{u}*s"
+        return unit
+    return "deg" if unit == "dps" else f"{unit}*s"
 
 
-def with_units(doc: dict[str, Any], channel: str, data_type: str) -> dict[str, Any]:
+def with_units(doc: dict[str, Any], channel: str, unit: str, data_type: str
+               ) -> dict[str, Any]:
     """An ``allan`` JSON document with its ``channel``, the unit of the data analysed
-    (``data_unit``) and the ``units`` of its numbers."""
-    rate_unit = dev_unit(channel)
-    u = dev_unit(channel, str(doc.get("stat", "")))
+    (``data_unit``) and the ``units`` of its numbers (``unit``: the series', see
+    :func:`load_channel`)."""
+    u = dev_unit(unit, str(doc.get("stat", "")))
     units = {"rate_hz": "Hz", "tau_s": "s", "m": "samples", "n": "terms", "dev": u,
-             "ci_low": u, "ci_high": u, "var": f"{u}^2", "drift": f"{rate_unit}/s",
+             "ci_low": u, "ci_high": u, "var": f"{u}^2", "drift": f"{unit}/s",
              "edf": "1", "alpha": "1 (S(f) ~ f^alpha)",
              "gaps": "terms (skipped: they span a missing sample)", "bias_factor": "1",
              "confidence": "1 (probability of the interval)"}
     return {**doc, "channel": channel,
-            "data_unit": rate_unit if data_type == "freq" else f"{rate_unit}*s",
-            "units": units}
+            "data_unit": unit if data_type == "freq" else f"{unit}*s", "units": units}
 
 
-def format_table(res: Any, channel: str) -> str:
-    """The result as a table, ``dev`` and its interval in :func:`dev_unit`."""
-    unit = dev_unit(channel, res.stat)
+def format_table(res: Any, unit: str) -> str:
+    """The result as a table, ``dev`` and its interval in :func:`dev_unit` of ``unit``."""
+    dev = dev_unit(unit, res.stat)
     lines = [
         f"# {res.stat}  data_type={res.data_type}  rate={res.rate_hz:g} Hz  "
         f"confidence={res.confidence:g}  bias_corrected={res.bias_corrected}  "
-        f"dev in {unit}"
-        + (f"  drift={res.drift:.6g} {dev_unit(channel)}/s" if res.drift is not None
-           else ""),
+        f"dev in {dev}"
+        + (f"  drift={res.drift:.6g} {unit}/s" if res.drift is not None else ""),
         f"{'AF':>8} {'tau_s':>12} {'n':>10} {'alpha':>5} {'ci_low':>12} {'dev':>12} "
         f"{'ci_high':>12} {'edf':>9} {'gaps':>6}",
     ]
@@ -184,15 +184,16 @@ def run(args: argparse.Namespace) -> int:
         from imubench.batchrun.jobs import run_allan_batch
 
         return run_allan_batch(args)
-    data, rec_rate, channel = load_channel(args.input, args.column, input_options(args))
+    data, rec_rate, channel, unit = load_channel(args.input, args.column,
+                                                 input_options(args))
     with progress(100, args.stat, unit="%") as bar:
         try:
             res = analyse(args, data, rec_rate, bar.fraction)
         except StatsError as exc:  # e.g. too few samples left: name the file
             raise StatsError(f"{args.input} {channel}: {exc}") from None
     if args.json is not None:
-        write_json(with_units(res.to_dict(), channel, args.data_type), args.json)
+        write_json(with_units(res.to_dict(), channel, unit, args.data_type), args.json)
     # the table goes to stderr when stdout carries the JSON (docs/cli.md)
-    print(format_table(res, channel),
+    print(format_table(res, unit),
           file=sys.stderr if args.json == "-" else sys.stdout)
     return 0
