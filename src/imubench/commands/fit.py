@@ -74,7 +74,9 @@ def format_summary(result: RecordingFit) -> str:
                 continue
             lo, hi = f.ci.get(key, (float("nan"), float("nan")))
             unit = param_units(ch)[key]
-            parts.append(f"{key}={f.params[key]:.4g} {unit} [{lo:.3g}, {hi:.3g}]")
+            interval = (f"[{lo:.3g}, {hi:.3g}]" if math.isfinite(lo) and math.isfinite(hi)
+                        else "(no interval: fixed, see its reason)")
+            parts.append(f"{key}={f.params[key]:.4g} {unit} {interval}")
         lines.append(f"{ch}: " + ("  ".join(parts) if parts else "(no term found)"))
         n, ci = f.coefficient(WHITE_EQUIVALENT)
         if n > 0 and not math.isclose(n, f.params.get("white", 0.0)):
