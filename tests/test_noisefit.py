@@ -664,3 +664,32 @@ def test_block_increment_covariance_matches_closed_forms() -> None:
     np.testing.assert_allclose(lag0, 2 * model_avar_m(full, np.array([m]), fs)[0], rtol=1e-6)
     with pytest.raises(FitError, match="n_lags 0"):
         block_increment_acv(full, m, 0, fs)
+
+
+def test_terms_the_data_do_not_split_are_named() -> None:
+    """Estimates that correlate beyond 0.9 get a note that only their joint effect is
+    fixed; moderately correlated ones do not."""
+    from imubench.noisefit.fit import entangled_terms
+
+    cov = np.array([[1.0, -0.95, 0.2], [-0.95, 1.0, 0.1], [0.2, 0.1, 4.0]])
+    notes = entangled_terms(("white", "output_white", "random_walk"), cov)
+    assert len(notes) == 1 and notes[0].startswith("white and output_white are not "
+                                                   "separately identified (their "
+                                                   "estimates correlate -0.95)")
+
+
+def test_an_unidentified_filter_bandwidth_is_named_on_a_real_record(reference_dir) -> None:
+    """ADIS16405 rep 1 gx, first hour: the output filter's bandwidth interval spans
+    0.0076-24.8 Hz, and the white / quantization split moved beyond its intervals when one
+    sample was lost; the fit now says their intervals hold at the fitted bandwidth only."""
+    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep1.npz"
+    if not path.is_file():
+        pytest.skip("ADIS16405 reference data not present")
+    d = np.load(path)
+    y = d["gyro_counts"][:360_000, 0] * float(d["gyro_lsb_dps"])
+    fit = fit_channel(y, float(d["fs_hz"]), channel="gx")
+    assert "bandwidth_hz" in fit.present
+    lo, hi = fit.ci["bandwidth_hz"]
+    assert hi / lo > 10
+    assert any(n.startswith("the output filter's bandwidth is not identified")
+               for n in fit.notes), fit.notes

@@ -1239,9 +1239,54 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     if pts.delta > 0:
         notes.append(f"model discrepancy floor delta = {pts.delta:.3g} (relative std added "
                      "to every AVAR point so that chi2 = dof)")
+    notes.extend(entangled_terms(st.terms, sol.cov_theta))
+    if "bandwidth_hz" in present:
+        lo, hi = ci.get("bandwidth_hz", (math.nan, math.nan))
+        if not (lo > 0 and hi / lo <= UNIDENTIFIED_RANGE):
+            shaped = [t for t in ("white", "output_white", "quantization", "markov",
+                                  "resonance")
+                      if AMPLITUDE_KEY[t] in present]
+            notes.append(f"the output filter's bandwidth is not identified (95 % interval "
+                         f"[{lo:.3g}, {hi:.3g}] Hz): the intervals of "
+                         f"{', '.join(shaped) or 'the filtered terms'} hold at the fitted "
+                         f"{st.bandwidth_hz:.3g} Hz only, and a small change of the record "
+                         "can move them beyond (the white-equivalent N is robust)")
     return ChannelFit(channel, float(rate_hz), "wls", params, ci, tuple(present), pts.tau_s,
                       pts.avar, pts.edf, bias, sol.chi2, dof, tuple(notes), reasons,
                       {k: float(v) for k, v in drops.items()})
+
+
+UNIDENTIFIED_RANGE: float = 10.0
+"""A nonlinear parameter whose 95 % interval spans more than this factor (or reaches 0)
+is not identified, and the amplitude intervals computed at its estimate are conditional
+on it: ADIS16405 gx, 1 h, bandwidth [0.0076, 24.8] Hz; one lost sample moved the
+bandwidth from 22.6 to 19.2 Hz and the quantization term from 0.00067 [0.00048, 0.00082]
+to 0.00139 dps*s."""
+ENTANGLED_CORRELATION: float = 0.9
+"""Two terms whose estimates (squared amplitudes) correlate beyond this are reported as
+not separately identified: the data fix their sum, not their split."""
+
+
+def entangled_terms(terms: Sequence[str], cov_theta: np.ndarray) -> list[str]:
+    """A note for each pair of fitted terms whose estimates correlate by more than
+    :data:`ENTANGLED_CORRELATION` in ``cov_theta`` (the squared amplitudes' covariance):
+    e.g. white noise before and after the output filter, or a quantization term and the
+    filter's shape, on the ADIS16405 gyros, whose split moved outside its own intervals
+    between two hours of one record, and when one sample was lost, while their sum (N)
+    stayed within 0.03 %."""
+    sd = np.sqrt(np.maximum(np.diag(cov_theta), 0.0))
+    notes = []
+    for i in range(len(terms)):
+        for j in range(i + 1, len(terms)):
+            if sd[i] > 0 and sd[j] > 0:
+                r = float(cov_theta[i, j] / (sd[i] * sd[j]))
+                if abs(r) > ENTANGLED_CORRELATION:
+                    notes.append(f"{terms[i]} and {terms[j]} are not separately identified "
+                                 f"(their estimates correlate {r:+.2f}): the data fix their "
+                                 "joint effect, not the split; their intervals are the "
+                                 "model's, and a small change of the record can move the "
+                                 "split beyond them (the white-equivalent N is robust)")
+    return notes
 
 
 def fit_channel(y: np.ndarray | Sequence[float], rate_hz: float, *,
