@@ -80,6 +80,12 @@ STYLES: dict[str, SensorStyle] = {
 }
 
 
+
+LABEL_BOX: dict[str, object] = {"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none",
+                                "alpha": 0.75}
+"""Background of the slope and term labels: drawn above the markers and lines, on a
+translucent white box, so a data point or a curve never hides one."""
+
 def _pyplot() -> Any:
     import matplotlib
 
@@ -137,7 +143,7 @@ def _term_label(ax: Axes, term: str, tau: np.ndarray, y: np.ndarray, total: np.n
     right_half = k > tau.size // 2  # write towards the middle, not out of the frame
     return ax.annotate(TERM_LABELS.get(term, term), (tau[k], y[k]), fontsize=7, color=color,
                        textcoords="offset points", xytext=(-3 if right_half else 3, -9),
-                       ha="right" if right_half else "left")
+                       ha="right" if right_half else "left", zorder=6, bbox=LABEL_BOX)
 
 
 def _tau_grid(curve: StatResult, rate_hz: float) -> np.ndarray:
@@ -206,7 +212,8 @@ def sigma_tau_figure(title: str, fits: dict[str, ChannelFit], curves: dict[str, 
             slope_labels.append(ax.annotate(f"{slopes[i]:+.2f}", (c.tau_s[i], c.ci_low[i]),
                                             fontsize=6, color=color,
                                             textcoords="offset points", xytext=(0, -4),
-                                            ha="center", va="top"))
+                                            ha="center", va="top", zorder=6,
+                                            bbox=LABEL_BOX))
     for tau_read in READ_TAU_S.values():
         if xlim[0] <= tau_read <= xlim[1]:
             ax.axvline(tau_read, color="0.6", ls=":", lw=0.8, zorder=1)
