@@ -16,7 +16,6 @@ needs alpha.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -24,9 +23,10 @@ import numpy as np
 
 from imubench.errors import StatsError
 from imubench.stats import allan as _allan
-from imubench.stats import bias, ci, edf, noise_id
+from imubench.stats import bias, ci, noise_id
 from imubench.stats import theo as _theo
 from imubench.stats import total as _total
+from imubench.stats.confidence import runs_edf
 from imubench.stats.edf import VAR_NAME as _VAR_NAME
 from imubench.stats.prep import PhaseData, to_phase
 from imubench.stats.result import StatResult
@@ -145,39 +145,12 @@ class _Confidence:
         if alpha == ALPHA_UNKNOWN or not np.isfinite(var):
             return float("nan"), float("nan"), float("nan")
         try:
-            e = gapped_edf(var_stat, alpha, m, runs)
+            e = float(runs_edf(var_stat, alpha, m, runs))
             lo, hi = ci.chi2_limits(var, e, confidence)
         except StatsError as exc:
             self.notes.append(f"EDF/CI failed for {var_stat} alpha={alpha} m={m}: {exc}")
             return float("nan"), float("nan"), float("nan")
         return e, float(lo), float(hi)
-
-
-def gapped_edf(var_stat: str, alpha: int, m: int, runs: np.ndarray) -> float:
-    """EDF of ``var_stat`` at ``m`` over a record made of independent gap-free runs of
-    ``runs`` phase points (:meth:`PhaseData.run_lengths`): the sum of the runs' EDFs
-    (:func:`edf.edf` of each run alone; a run too short for a term adds none).
-
-    The estimate is the mean over every term that touches no gap, i.e. the runs' own
-    estimates weighted by their term counts; Satterthwaite's EDF of such a weighted mean,
-    ``(sum w)^2 / sum(w^2 / edf_i)``, is the sum of the EDFs when the weights are
-    proportional to them, as term counts and EDFs both grow with the run's length
-    (Satterthwaite 1946, Biometrics Bulletin 2(6)). One run (no gap) is :func:`edf.edf`
-    itself. Without this, a record with one hole in its middle kept the EDF of the whole
-    length at taus where the hole removes half the terms (a 1 h record at tau = 655 s:
-    terms 228 929 -> 97 857, EDF unchanged)."""
-    if runs.size == 1:
-        return float(edf.edf(var_stat, alpha, m, int(runs[0])))
-    lengths, counts = np.unique(runs, return_counts=True)
-    total = 0.0
-    for length, count in zip(lengths.tolist(), counts.tolist(), strict=True):
-        try:
-            e = float(edf.edf(var_stat, alpha, m, length))
-        except StatsError:  # too short for a term at this m
-            continue
-        if math.isfinite(e) and e > 0:
-            total += count * e
-    return total if total > 0 else float("nan")
 
 
 # Statistics Stable32 bias-corrects (TOTVAR for alpha -1/-2, HTOT, Theo1); MTOT and TTOT

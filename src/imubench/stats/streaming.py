@@ -324,6 +324,10 @@ class StreamingAllan:
         self._inbox_rows = 0
         self._gaps_seen = False
         self.n_gaps = np.zeros(nch, np.int64)
+        # gap-free runs of samples per channel, for the EDF (confidence.runs_edf): the
+        # lengths of the closed runs (length -> count) and of the open one
+        self._runs: list[dict[int, int]] = [{} for _ in range(nch)]
+        self._open_run = np.zeros(nch, np.int64)
         self._ref = np.zeros(nch, dtype)
         self._ref_set = np.zeros(nch, bool)
         self._x_last = np.zeros((1, nch), dtype)
@@ -506,6 +510,7 @@ class StreamingAllan:
                           out=self._work("g", c, np.dtype(np.int64)))
             g += self._g_last
             self.n_gaps += np.count_nonzero(gaps, axis=0)
+        self._count_runs(gaps, c)
         self._x_last = x[-1:].copy()
         self._g_last = g[-1:].copy()
         self._n_proc += c
@@ -519,6 +524,34 @@ class StreamingAllan:
             csum = np.cumsum(x, axis=0, out=self._work("csum", c, self._dtype))
         for lv in self.levels.values():
             self._update_level(lv, p0, x, g, csum)
+
+    def _count_runs(self, gaps: np.ndarray | None, c: int) -> None:
+        """Extend the gap-free runs by a chunk of ``c`` samples (``gaps``: its mask)."""
+        if gaps is None:
+            self._open_run += c
+            return
+        for j in range(gaps.shape[1]):
+            at = np.nonzero(gaps[:, j])[0]
+            if at.size == 0:
+                self._open_run[j] += c
+                continue
+            closed = np.diff(np.concatenate(([-1], at))) - 1
+            closed[0] += self._open_run[j]
+            runs = self._runs[j]
+            for length in closed[closed > 0].tolist():
+                runs[length] = runs.get(length, 0) + 1
+            self._open_run[j] = c - 1 - at[-1]
+
+    def run_lengths(self, channel: int) -> np.ndarray:
+        """Lengths (phase points) of the channel's gap-free runs, as
+        :meth:`imubench.stats.prep.PhaseData.run_lengths` gives them for the same
+        samples in one batch: a run of L samples links L + 1 phase points."""
+        runs = dict(self._runs[channel])
+        if self._open_run[channel] > 0:
+            open_len = int(self._open_run[channel])
+            runs[open_len] = runs.get(open_len, 0) + 1
+        lengths = [length + 1 for length, count in sorted(runs.items()) for _ in range(count)]
+        return np.array(lengths or [1], np.int64)
 
     def _first_gap(self) -> None:
         """Start keeping gap counts: every G so far is 0."""
@@ -799,8 +832,9 @@ class StreamingAllan:
 
         overlapping = STREAM_STATS[stat][1]
         stride = np.array([self._stride(int(mm)) if overlapping else 1 for mm in m], dtype=np.int64)
+        runs = [self.run_lengths(ch) for ch in range(var.shape[0])]
         edf, lo, hi = confidence_arrays(
-            stat, alpha, m, n_freq + 1, var, self.confidence, stride=stride
+            stat, alpha, m, runs, var, self.confidence, stride=stride
         )
         out = []
         for ch in range(var.shape[0]):
@@ -842,7 +876,10 @@ class StreamingAllan:
             "x_last": self._x_last,
             "g_last": self._g_last,
             "n_gaps": self.n_gaps,
+            "open_run": self._open_run,
         }
+        for j, runs in enumerate(self._runs):
+            arrays[f"runs/{j}"] = np.array(sorted(runs.items()), np.int64).reshape(-1, 2)
         for (stat, m), acc in self.acc.items():
             for k, v in acc.state().items():
                 arrays[f"acc/{stat}/{m}/{k}"] = v
@@ -929,6 +966,13 @@ class StreamingAllan:
             eng._x_last = z["x_last"]
             eng._g_last = z["g_last"]
             eng.n_gaps = z["n_gaps"]
+            if "open_run" in z.files:
+                eng._open_run = z["open_run"].copy()
+                eng._runs = [{int(k): int(v) for k, v in z[f"runs/{j}"]}
+                             for j in range(meta["nch"])]
+            else:  # saved before the runs were kept: the gap-free runs are unknown, and
+                # the EDF is that of one run of every sample, as it was then
+                eng._open_run[:] = meta["n_samples"]
             for (stat, m), acc in eng.acc.items():
                 for k in acc.__slots__:  # in place: n, skipped, sum2, comp are table views
                     getattr(acc, k)[...] = z[f"acc/{stat}/{m}/{k}"]
