@@ -421,3 +421,33 @@ def test_a_rate_that_contradicts_the_time_column_is_refused(tmp_path: Path,
                                              r"column, which gives 100 Hz"):
         load_recording(p, InputOptions(rate_hz=rate))
     assert load_recording(p, InputOptions(rate_hz=100.0)).lost_samples == 0
+
+
+@pytest.mark.parametrize("n", [400, 10_000])
+def test_a_repeated_line_costs_that_line_only(tmp_path: Path, n: int) -> None:
+    """A logger that wrote one line twice: the copy is skipped as damaged, every other row
+    keeps its sample and the rate is exact (the copy once shifted the first line's row
+    numbers: 104.0267 Hz and 7116 of 10 000 rows on the wrong sample)."""
+    rows = [f"{i / 104:.6f},{i}" for i in range(n)]
+    rows.insert(n // 3, rows[n // 3])
+    p = tmp_path / "dup.csv"
+    p.write_text("t,gx\n" + "\n".join(rows) + "\n")
+    rec = load_recording(p, InputOptions(gyro_unit="dps"))
+    assert rec.rate_hz == pytest.approx(104.0, rel=1e-9)
+    assert len(rec) == n and rec.lost_samples == 0
+    assert rec.damage is not None and rec.damage.startswith("1 data line(s) skipped")
+    np.testing.assert_array_equal(rec.channel("gx"), np.arange(n))
+
+
+@pytest.mark.parametrize("header", ["timestamp,gyro_x [deg/s]", "gyro_x [deg/s],timestamp"])
+def test_a_byte_order_mark_hides_no_column(tmp_path: Path, header: str) -> None:
+    """A UTF-8 byte-order mark before the header (Excel's CSV export) is not part of the
+    first column's name."""
+    first_t = header.startswith("timestamp")
+    rows = [(f"{i / 100:.2f},{i * 0.5}" if first_t else f"{i * 0.5},{i / 100:.2f}")
+            for i in range(50) if i != 20]
+    p = tmp_path / "bom.csv"
+    p.write_bytes(b"\xef\xbb\xbf" + (header + "\n" + "\n".join(rows) + "\n").encode())
+    rec = load_recording(p)
+    assert rec.rate_hz == pytest.approx(100.0) and rec.lost_samples == 1
+    assert rec.channel("gx")[19] == 9.5 and np.isnan(rec.channel("gx")[20])

@@ -75,10 +75,12 @@ class TextRead:
 
 def open_text(path: Path) -> IO[str]:
     """The file as text (gzip when it ends in ``.gz``); undecodable bytes become U+FFFD
-    so a damaged byte costs its line, not the file."""
+    so a damaged byte costs its line, not the file. A UTF-8 byte-order mark (Excel,
+    Windows loggers) is dropped: read as text, it stuck to the first column's name and hid
+    that column (a ``timestamp`` first: "no time column"; a ``gyro_x`` first: gx missing)."""
     if path.name.lower().endswith(".gz"):
-        return gzip.open(path, "rt", encoding="utf-8", errors="replace", newline="")
-    return open(path, encoding="utf-8", errors="replace", newline="")
+        return gzip.open(path, "rt", encoding="utf-8-sig", errors="replace", newline="")
+    return open(path, encoding="utf-8-sig", errors="replace", newline="")
 
 
 def _delimiter(line: str) -> str | None:

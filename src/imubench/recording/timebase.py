@@ -227,8 +227,12 @@ def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
         return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
     tt = t[rows]
     missing = np.zeros(len(rows))
+    # the kept rows' ranks, not their row numbers: a row dropped as out of time order (a
+    # repeated line) is no sample, and counting it put every later stamp a step late
+    # (+257 ppm on the rate of 10 000 rows at 104 Hz, 7116 rows on the wrong sample)
+    rank = np.arange(len(rows), dtype=np.float64)
     for _ in range(FIRST_HOLES + 1):
-        x = rows + missing
+        x = rank + missing
         step, t0 = _line(x, tt)
         if not step > 0:
             break
