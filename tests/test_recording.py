@@ -451,3 +451,15 @@ def test_a_byte_order_mark_hides_no_column(tmp_path: Path, header: str) -> None:
     rec = load_recording(p)
     assert rec.rate_hz == pytest.approx(100.0) and rec.lost_samples == 1
     assert rec.channel("gx")[19] == 9.5 and np.isnan(rec.channel("gx")[20])
+
+
+def test_an_uptime_counter_is_not_taken_for_unix_seconds(tmp_path: Path) -> None:
+    """Milliseconds since boot after 15 days (1.3e9) have the size of Unix seconds: read
+    as such, 100 Hz data became 0.1 Hz. Both readings are plausible: refused with the
+    fix; the given unit reads it."""
+    p = tmp_path / "uptime.csv"
+    p.write_text("timestamp,gyro_x [deg/s]\n" + "".join(
+        f"{1_300_000_000 + 10 * i},{i % 5}\n" for i in range(500)))
+    with pytest.raises(RecordingError, match=r"read as Unix times in s give 0\.1 Hz; in ms"):
+        load_recording(p)
+    assert load_recording(p, InputOptions(time_unit="ms")).rate_hz == pytest.approx(100.0)

@@ -98,13 +98,22 @@ def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
     if len(finite) and MJD_RANGE[0] <= float(np.median(finite)) <= MJD_RANGE[1] and (
             step < 1.0):
         return "d", SECONDS_PER_DAY
+    lo, hi = PLAUSIBLE_RATE_HZ
+    fits = [(u, s) for u, s in TIME_UNITS_S.items() if lo < 1.0 / (step * s) <= hi]
     if len(finite):
         level = float(np.median(np.abs(finite)))
         for unit, scale in TIME_UNITS_S.items():
             if EPOCH_S[0] <= level * scale <= EPOCH_S[1]:
+                if 1.0 / (step * scale) < SLOW_LOGGER_HZ and len(fits) == 1:
+                    # an uptime counter (ms since boot: 1.3e9 after 15 days) has the size of
+                    # Unix seconds; read as such, 100 Hz became 0.1 Hz (below any IMU's
+                    # rate, while another unit gives a plausible one)
+                    raise RecordingError(
+                        f"{where}: the time column's values (~{level:.3g}) read as Unix "
+                        f"times in {unit} give {1.0 / (step * scale):.4g} Hz; in "
+                        f"{fits[0][0]} (a counter since boot?) {1.0 / (step * fits[0][1]):.4g}"
+                        " Hz; give --time-unit s|ms|us|ns or --rate HZ")
                 return unit, scale
-    lo, hi = PLAUSIBLE_RATE_HZ
-    fits = [(u, s) for u, s in TIME_UNITS_S.items() if lo < 1.0 / (step * s) <= hi]
     if len(fits) != 1:
         raise RecordingError(
             f"{where}: cannot tell the unit of the time column (median step {step:.6g}); "
