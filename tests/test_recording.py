@@ -463,3 +463,34 @@ def test_an_uptime_counter_is_not_taken_for_unix_seconds(tmp_path: Path) -> None
     with pytest.raises(RecordingError, match=r"read as Unix times in s give 0\.1 Hz; in ms"):
         load_recording(p)
     assert load_recording(p, InputOptions(time_unit="ms")).rate_hz == pytest.approx(100.0)
+
+
+def _indexed(tmp_path: Path, index: list[int], t: list[float]) -> Path:
+    p = tmp_path / "idx.csv"
+    p.write_text("sample,timestamp,gyro_x [deg/s]\n" + "".join(
+        f"{i},{s:.6f},{k * 0.1}\n" for k, (i, s) in enumerate(zip(index, t, strict=True))))
+    return p
+
+
+def test_an_index_column_that_contradicts_the_time_stamps(tmp_path: Path) -> None:
+    """A sample-index column is checked against the stamps: a counter of rows written
+    beside a 1 s hole in the stamps (read as 97 Hz, nothing lost) and a wrapping 8-bit
+    counter (1744 of 2000 rows 'damaged') are refused naming the line; one row whose index
+    has a wrong digit (a 90 000-sample hole) is that row's damage only."""
+    n = 600
+    t = [k / 100 + (1.0 if k >= 300 else 0.0) for k in range(n)]
+    with pytest.raises(RecordingError, match=r"disagree at line 302: t advances 1\.01 s while "
+                                             r"the index advances 1 samples"):
+        load_recording(_indexed(tmp_path, list(range(n)), t))
+    with pytest.raises(RecordingError, match=r"goes back 2 time\(s\) \(first at line 258\)"):
+        load_recording(_indexed(tmp_path, [k % 256 for k in range(n)],
+                                [k / 100 for k in range(n)]))
+    index = list(range(n))
+    index[-1] += 90_000
+    rec = load_recording(_indexed(tmp_path, index, [k / 100 for k in range(n)]))
+    assert len(rec) == n - 1 and rec.lost_samples == 0 and rec.rate_hz == pytest.approx(100)
+    assert rec.damage is not None and rec.damage.startswith("1 data line(s) skipped")
+    index = list(range(n))
+    index[200] = 2_000  # one wrong digit inside the record: that row only
+    rec = load_recording(_indexed(tmp_path, index, [k / 100 for k in range(n)]))
+    assert len(rec) == n - 1 and rec.lost_samples == 1

@@ -324,7 +324,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if index_col is not None:
         if not np.all(np.isfinite(index_col)):
             raise RecordingError(f"{where}: the index column has empty values")
-        tb = timebase_from_index(index_col, t_s, where, rate)
+        tb = timebase_from_index(index_col, t_s, where, rate,
+                                 np.asarray(raw.row_lines))
     elif t_s is not None:
         if options.rate_hz is not None:
             _check_given_rate(t_s, options.rate_hz, where)

@@ -310,12 +310,88 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
     return Timebase(1.0 / step, kept - kept[0], keep, "from t (least squares)")
 
 
+INDEX_BACK_SHARE = 0.01
+"""An index column that goes back more than once, or whose longest increasing run leaves
+more than this share of the rows, is refused: an 8-bit counter that wraps lost 1744 of
+2000 rows as "damaged"."""
+
+
+def _row_name(lines: np.ndarray | None, row: int) -> str:
+    return f"line {int(lines[row])}" if lines is not None else f"row {row + 1}"
+
+
+def _consistent_with_times(index: np.ndarray, t_s: np.ndarray, keep: np.ndarray,
+                           where: str, lines: np.ndarray | None) -> np.ndarray:
+    """``keep`` less the rows whose index contradicts the time stamps of the rows around
+    it (one wrong digit in an index: a 90 000-sample hole), or RecordingError when the
+    two columns disagree over a stretch (a counter of rows written beside stamps with a
+    1 s hole: read as 97 Hz with nothing lost). Between consecutive rows the stamps must
+    advance by the index step times the median period, within 3 periods (jitter) and
+    0.1 % of the step (a clock running off the sample rate)."""
+    rows = np.nonzero(keep & np.isfinite(t_s))[0]
+    if rows.size < 3:
+        return keep
+    idx, t = index[rows].astype(np.float64), t_s[rows]
+    period = float(np.median(np.diff(t) / np.diff(idx)))
+    if not period > 0:
+        return keep
+
+    def agree(a: int, b: int) -> bool:  # positions in rows
+        di = idx[b] - idx[a]
+        return bool(abs(t[b] - t[a] - period * di) <= 3 * period + 1e-3 * period * di)
+
+    bad = [k for k in range(rows.size - 1) if not agree(k, k + 1)]
+    if not bad:
+        return keep
+    drop: set[int] = set()
+    for k in bad:
+        if k in drop or k + 1 in drop:
+            continue
+        # the row after the interval, or the one before, is the odd one out when the rows
+        # around it agree (the first and last rows have one side only)
+        if k + 1 == rows.size - 1 or (k + 2 < rows.size and agree(k, k + 2)):
+            drop.add(k + 1)
+        elif k == 0 or agree(k - 1, k + 1):
+            drop.add(k)
+        else:
+            first = rows[k + 1]
+            raise RecordingError(
+                f"{where}: the index column and the time column disagree at "
+                f"{_row_name(lines, int(first))}: t advances {t[k + 1] - t[k]:.6g} s while "
+                f"the index advances {idx[k + 1] - idx[k]:.0f} samples "
+                f"({period * (idx[k + 1] - idx[k]):.6g} s at the period the file gives "
+                "elsewhere); a counter of rows written is no sample index: leave one of "
+                "them out (--columns)")
+    if len(drop) > max(1, INDEX_BACK_SHARE * rows.size):
+        raise RecordingError(
+            f"{where}: the index column and the time column disagree at {len(drop)} rows "
+            f"(first at {_row_name(lines, int(rows[min(drop)]))}); leave one of them out "
+            "(--columns)")
+    out = keep.copy()
+    out[rows[sorted(drop)]] = False
+    return out
+
+
 def timebase_from_index(index: np.ndarray, t_s: np.ndarray | None, where: str,
-                        rate_hz: float | None = None) -> Timebase:
+                        rate_hz: float | None = None,
+                        lines: np.ndarray | None = None) -> Timebase:
     """Rate of rows with a sample-index column: given, else the least-squares slope of
-    the times against the index. Rows whose index does not increase are dropped."""
+    the times against the index. Rows whose index does not increase are dropped, and
+    rows whose index contradicts the time stamps around them
+    (:func:`_consistent_with_times`); a counter that wraps or restarts
+    (:data:`INDEX_BACK_SHARE`) is refused. ``lines``: the file's line number of each
+    row, for messages."""
     index = np.asarray(index, dtype=np.int64)
     keep = increasing_rows(index)
+    back = np.nonzero(np.diff(index) < 0)[0]
+    if back.size > 1 or (~keep).sum() > max(1, INDEX_BACK_SHARE * index.size):
+        raise RecordingError(
+            f"{where}: the index column goes back {back.size} time(s) (first at "
+            f"{_row_name(lines, int(back[0]) + 1) if back.size else '?'}): a counter that "
+            "wraps or restarts is no sample index; leave it out (--columns without it) to "
+            "index the rows by their time stamps")
+    if t_s is not None:
+        keep = _consistent_with_times(index, t_s, keep, where, lines)
     kept = index[keep]
     if rate_hz is not None:
         return Timebase(rate_hz, kept, keep, "given")
