@@ -69,6 +69,26 @@ def test_truncated_tail_of_a_crashed_writer_keeps_earlier_data(tmp_path: Path) -
     assert len(rec) == 1000 - 104  # 7 full records of 128 samples + none of the last 104
 
 
+@pytest.mark.parametrize("how", ["repeated", "swapped"])
+def test_a_record_out_of_order_is_damage_not_data(tmp_path: Path, how: str) -> None:
+    """A data record written twice, or two records swapped (a copy tool's fault): the
+    record that does not follow the last one taken is skipped and named, its samples
+    count as lost, so kept + lost = produced (the copy was read as 288 duplicated
+    samples with a lost count off by 288)."""
+    batches = make_batches(hole_at=999, lost=0)
+    order = ([*batches[:4], batches[3], *batches[4:]] if how == "repeated"
+             else [*batches[:3], batches[4], batches[3], *batches[5:]])
+    path = tmp_path / "r.imbr"
+    with open_writer(path, meta(storage="raw_int16")) as w:
+        for b in order:
+            w._write(b, len(b))  # the writer itself refuses this order: forge the file
+    rec = load_recording(path)
+    assert rec.damage is not None and "repeated or out of order" in rec.damage
+    assert len(rec) + rec.lost_samples == 1000
+    assert len(rec) == (1000 if how == "repeated" else 1000 - 128)
+    assert np.all(np.diff(rec.index) > 0)
+
+
 def test_csv_round_trip_and_convert_cli(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     src = tmp_path / "a.imbr"
     with open_writer(src, meta(storage="raw_int16")) as w:

@@ -230,6 +230,7 @@ class NativeReader:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.damaged: list[str] = []
+        self._last_index: int | None = None  # of the last data record taken
         """Every damaged or truncated stretch, in file order (what was skipped)."""
         self.end: dict[str, Any] | None = None
         self.gaps: list[Gap] = []
@@ -307,7 +308,12 @@ class NativeReader:
                 else:
                     problem = self._take(kind, payload, offset)
                     if problem is None and kind == b"D":
-                        yield self._decode(payload)
+                        batch = self._decode(payload)
+                        problem = self._out_of_order(batch, offset)
+                        if problem is None:
+                            if len(batch):
+                                self._last_index = int(batch.index[-1])
+                            yield batch
             if problem is not None:
                 nxt = self._resync(offset + 1)
                 if nxt is None:
@@ -315,6 +321,21 @@ class NativeReader:
                     return
                 self.damaged.append(f"{problem}; resumed at byte {nxt}")
                 fh.seek(nxt)
+
+    def _out_of_order(self, batch: Batch, offset: int) -> str | None:
+        """Why a data record that passed its CRC is still not taken: its sample indices
+        do not increase, or do not follow the last record taken (a record written twice,
+        or records swapped: read as they came, 288 samples were duplicated and the lost
+        count was off), else None. Its samples then count as lost, in the open."""
+        if len(batch) == 0:
+            return None
+        if np.any(np.diff(batch.index) <= 0):
+            return f"data record at byte {offset} has sample indices that do not increase"
+        if self._last_index is not None and int(batch.index[0]) <= self._last_index:
+            return (f"data record at byte {offset} holds samples {int(batch.index[0])}-"
+                    f"{int(batch.index[-1])}, not after {self._last_index} (repeated or out "
+                    "of order)")
+        return None
 
     def _take(self, kind: bytes, payload: bytes, offset: int) -> str | None:
         """Check a record that passed its CRC; take gap and end records. A problem
