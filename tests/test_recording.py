@@ -514,3 +514,25 @@ def test_an_index_column_that_contradicts_the_time_stamps(tmp_path: Path) -> Non
     index[200] = 2_000  # one wrong digit inside the record: that row only
     rec = load_recording(_indexed(tmp_path, index, [k / 100 for k in range(n)]))
     assert len(rec) == n - 1 and rec.lost_samples == 1
+
+
+def test_a_corrupt_gzip_is_refused_and_a_cut_one_keeps_its_rows(tmp_path: Path) -> None:
+    """A flipped bit inside a .csv.gz decodes into wrong text that only the CRC at the
+    end reveals: no row is kept. A stream cut short (a writer that crashed) keeps every
+    whole row before the cut."""
+    import gzip
+
+    text = "t,gx\n" + "".join(f"{i / 100:.2f},{(i * 7919) % 1000 * 1e-3:.3f}\n"
+                              for i in range(20_000))
+    data = bytearray(gzip.compress(text.encode()))
+    data[len(data) // 2] ^= 0x10
+    bad = tmp_path / "flip.csv.gz"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(RecordingError, match="compressed data are corrupt"):
+        load_recording(bad, InputOptions(gyro_unit="dps"))
+    cut = tmp_path / "cut.csv.gz"
+    cut.write_bytes(gzip.compress(text.encode())[:-5000])
+    rec = load_recording(cut, InputOptions(gyro_unit="dps"))
+    assert 0 < len(rec) < 20_000 and rec.damage is not None
+    np.testing.assert_allclose(rec.channel("gx")[:100],
+                               [(i * 7919) % 1000 * 1e-3 for i in range(100)])

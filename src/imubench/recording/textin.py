@@ -142,10 +142,21 @@ def _scan(path: Path) -> _Raw:
         with fh:
             for lineno, line in enumerate(fh, 1):
                 _take_line(raw, line.strip(), lineno, path)
-    except (OSError, EOFError, zlib.error) as exc:  # gzip: truncated or corrupt stream
+    except EOFError as exc:  # gzip: the stream ends early (a writer that crashed)
         if not raw.rows:
             raise RecordingError(f"{path}: cannot read: {exc}") from None
         raw.bad_lines.append(-1)  # the rest of the compressed stream is lost
+    except (gzip.BadGzipFile, zlib.error) as exc:
+        # corrupt, not cut short: deflate decodes damaged bits into wrong text without
+        # noticing until the CRC at the end (one flipped bit kept 276 rows with wrong
+        # values or indices), so no row decoded from it can be trusted
+        raise RecordingError(
+            f"{path}: the compressed data are corrupt ({exc}); no row decoded from them "
+            "can be trusted: use an intact copy") from None
+    except OSError as exc:
+        if not raw.rows:
+            raise RecordingError(f"{path}: cannot read: {exc}") from None
+        raw.bad_lines.append(-1)  # the rest of the file could not be read
     return raw
 
 
