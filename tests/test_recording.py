@@ -536,3 +536,32 @@ def test_a_corrupt_gzip_is_refused_and_a_cut_one_keeps_its_rows(tmp_path: Path) 
     assert 0 < len(rec) < 20_000 and rec.damage is not None
     np.testing.assert_allclose(rec.channel("gx")[:100],
                                [(i * 7919) % 1000 * 1e-3 for i in range(100)])
+
+
+@pytest.mark.parametrize(("t_head", "t_scale", "temp_head", "temp", "want"), [
+    ("time [min]", 1 / 60, "temperature [K]", 299.15, 26.0),
+    ("time [s]", 1.0, "temp [F]", 78.8, 26.0),
+    ("time [s]", 1.0, "temp [degC]", 26.0, 26.0),
+])
+def test_header_units_of_time_and_temperature_are_applied(
+        tmp_path: Path, t_head: str, t_scale: float, temp_head: str, temp: float,
+        want: float) -> None:
+    """``time [min]`` was read as seconds (100 Hz as 6000 Hz), ``temperature [K]`` as
+    298.15 degC: the header's unit is applied, or the file refused."""
+    p = tmp_path / "u.csv"
+    p.write_text(f"{t_head},gyro_x [deg/s],{temp_head}\n" + "".join(
+        f"{i / 100 * t_scale:.9f},{i % 3},{temp}\n" for i in range(300)))
+    rec = load_recording(p)
+    assert rec.rate_hz == pytest.approx(100.0, rel=1e-6)
+    assert np.nanmean(rec.temp_c) == pytest.approx(want)
+
+
+def test_unknown_time_and_temperature_units_are_refused(tmp_path: Path) -> None:
+    for head, words in (("time [fortnights],gyro_x [deg/s]", "imubench reads s, ms"),
+                        ("t,gyro_x [deg/s],temp [R]", "imubench reads degC, K or degF")):
+        p = tmp_path / "u.csv"
+        p.write_text(head + "\n" + "".join(
+            f"{i / 100},{i % 3}" + (",20\n" if "temp" in head else "\n")
+            for i in range(50)))
+        with pytest.raises(RecordingError, match=words):
+            load_recording(p)

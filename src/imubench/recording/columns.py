@@ -58,7 +58,8 @@ _UNIT_WORDS = {
     "rad s^-1": "rad/s", "rad/s": "rad/s", "rad s-1": "rad/s", "rads": "rad/s",
     "deg/s": "dps", "dps": "dps", "deg s^-1": "dps", "°/s": "dps", "mdps": "mdps",
     "m s^-2": "m/s2", "m/s^2": "m/s2", "m/s2": "m/s2", "m s-2": "m/s2", "g": "g", "mg": "mg",
-    "s": "s", "sec": "s", "ms": "ms", "us": "us", "µs": "us", "ns": "ns",
+    "s": "s", "sec": "s", "ms": "ms", "us": "us", "µs": "us", "ns": "ns", "min": "min",
+    "h": "h",
     "degc": "degC", "°c": "degC", "c": "degC",
 }
 

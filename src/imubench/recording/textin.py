@@ -310,7 +310,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         values[:, i] = table[:, where_col[ch]] * factor
         used_units[ch] = unit
     _check_gravity(values, used_units, options, where, assumed)
-    temp = table[:, where_col["temp"]] if "temp" in where_col else np.full(len(table), np.nan)
+    temp = (_in_degc(table[:, where_col["temp"]], cols[where_col["temp"]], where)
+            if "temp" in where_col else np.full(len(table), np.nan))
 
     meta = dict(raw.meta)
     t_raw = table[:, where_col["t"]] if "t" in where_col else None
@@ -470,6 +471,27 @@ TIME_RATE_HZ = (1e-3, 1e6)
 contradicts the file) is wrong, and the file is refused rather than read at that rate."""
 
 
+TEMP_UNITS: dict[str, tuple[float, float]] = {
+    "degC": (1.0, 0.0), "K": (1.0, -273.15), "degF": (5.0 / 9.0, -32.0 * 5.0 / 9.0)}
+"""A temperature column's header unit -> (factor, offset) to degC."""
+_TEMP_WORDS = {"k": "K", "kelvin": "K", "f": "degF", "degf": "degF", "°f": "degF"}
+LONG_TIME_UNITS_S: dict[str, float] = {"min": 60.0, "h": 3600.0}
+"""Time units a header may state beyond ``--time-unit``'s (a spreadsheet's minutes)."""
+
+
+def _in_degc(values: np.ndarray, col: Column, where: str) -> np.ndarray:
+    """A temperature column in degC from its header unit (none: degC); an unknown unit is
+    refused (``temperature [K]`` was read as 298.15 degC)."""
+    unit = col.unit if col.unit is None else _TEMP_WORDS.get(col.unit.lower(), col.unit)
+    if unit is None:
+        return values
+    if unit not in TEMP_UNITS:
+        raise RecordingError(f"{where}: the temperature column {col.text.strip()!r} is in "
+                             f"{unit!r}; imubench reads degC, K or degF")
+    factor, offset = TEMP_UNITS[unit]
+    return values * factor + offset
+
+
 def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
                rate: float | None, where: str) -> tuple[str, float]:
     """(unit name, seconds per unit) of the time column."""
@@ -480,6 +502,12 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
         return options.time_unit, TIME_UNITS_S[options.time_unit]
     if col.unit in TIME_UNITS_S:
         return f"{col.unit} (header)", TIME_UNITS_S[col.unit]
+    if col.unit in LONG_TIME_UNITS_S:
+        return f"{col.unit} (header)", LONG_TIME_UNITS_S[col.unit]
+    if col.unit is not None:  # a time unit that is no time unit: refused, not ignored
+        raise RecordingError(f"{where}: the time column {col.text.strip()!r} is in "
+                             f"{col.unit!r}; imubench reads s, ms, us, ns, min or h "
+                             "(--time-unit s|ms|us|ns)")
     if ros:
         return "ns (ROS)", 1e-9
     try:
