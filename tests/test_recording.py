@@ -565,3 +565,22 @@ def test_unknown_time_and_temperature_units_are_refused(tmp_path: Path) -> None:
             for i in range(50)))
         with pytest.raises(RecordingError, match=words):
             load_recording(p)
+
+
+def test_convert_keeps_the_start_time_and_never_invents_it(tmp_path: Path) -> None:
+    """``start_utc`` is the source's: stated, else its first Unix time stamp, else
+    unknown (null), never the time of the conversion (which dated a 2023 acquisition
+    2026 in its Stable32 export)."""
+    from imubench.recording import convert
+
+    epoch = tmp_path / "epoch.csv"
+    epoch.write_text("timestamp,gyro_x [deg/s]\n" + "".join(
+        f"{1_700_000_000 + i / 100:.2f},{i % 3}\n" for i in range(300)))
+    plain = tmp_path / "plain.csv"
+    plain.write_text("t,gyro_x [deg/s]\n" + "".join(f"{i / 100:.2f},{i % 3}\n"
+                                                    for i in range(300)))
+    for src, want in ((epoch, "2023-11-14T22:13:20.000000Z"), (plain, None)):
+        for suffix in (".imbr", ".csv"):
+            dst = tmp_path / f"{src.stem}_out{suffix}"
+            convert(src, dst)
+            assert load_recording(dst).metadata.get("start_utc") == want, dst

@@ -288,6 +288,9 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
         log.warning("%s: dropped %d secret(s) from the header: %s (not copied to %s)", src,
                     len(dropped), ", ".join(dropped), dst)
     meta["converted_from"] = str(src)
+    # the start of the source, never the conversion's time: its own, else its first
+    # absolute time stamp, else unknown (null), which a writer does not replace with now
+    meta.setdefault("start_utc", _start_from_stamps(rec.t_s))
     meta.pop("format", None)  # the source's container format; the writer states its own
     if kind == "native":
         meta["storage"] = STORAGE_RAW if rec.raw is not None else STORAGE_FLOAT
@@ -312,6 +315,19 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
         if j < len(gaps):  # the recording ended in a gap
             writer.write(Batch.empty(with_raw=rec.raw is not None, gaps=gaps[j:]))
     return Converted(rec, writer.gaps, writer.lost_samples)
+
+
+def _start_from_stamps(t_s: np.ndarray) -> str | None:
+    """The UTC start of a recording whose time stamps are Unix seconds (2001-2099), as
+    ISO 8601; None when they count from anything else (a start that is not known)."""
+    import datetime as _dt
+
+    from imubench.recording.timebase import EPOCH_S
+
+    if not len(t_s) or not EPOCH_S[0] <= float(t_s[0]) <= EPOCH_S[1]:
+        return None
+    start = _dt.datetime.fromtimestamp(float(t_s[0]), _dt.UTC)
+    return start.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def _calibrated(rec: Recording, path: str | Path) -> Recording:

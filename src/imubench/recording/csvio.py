@@ -30,6 +30,7 @@ import io
 import json
 import math
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -70,6 +71,9 @@ class CsvWriter:
             raise RecordingError(f"{self.path}: exists already; recordings are never overwritten")
         self.metadata = dict(metadata)
         self.metadata["units"] = COLUMN_UNITS  # the header says what the columns are in
+        # a live recording starts now, as a native one (convert states the source's)
+        self.metadata.setdefault("start_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ",
+                                                            time.gmtime()))
         self.samples = 0
         self.gaps = 0
         self.lost_samples = 0
