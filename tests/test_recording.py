@@ -584,3 +584,23 @@ def test_convert_keeps_the_start_time_and_never_invents_it(tmp_path: Path) -> No
             dst = tmp_path / f"{src.stem}_out{suffix}"
             convert(src, dst)
             assert load_recording(dst).metadata.get("start_utc") == want, dst
+
+
+@pytest.mark.parametrize(("text", "rows"), [
+    ('"t","gyro_x [deg/s]"\n' + "".join(f'"{i / 100:.2f}","{i * 0.5}"\n' for i in range(50)),
+     50),  # every field quoted (a spreadsheet's export)
+    ("t,gyro_x [deg/s]\n" + "".join(f"{i / 100:.2f},{i * 0.5},\n" for i in range(50)), 50),
+    ("t\tgyro_x [deg/s]\n" + "".join(f"{i / 100:.2f}\t{i * 0.5}\n".replace(".", ",")
+                                     for i in range(50)), 50),  # tabs, decimal commas
+    ("t,gyro_x [deg/s]\n" + "".join(f"{i / 100:.2f},{'inf' if i == 7 else i * 0.5}\n"
+                                    for i in range(50)), 49),  # an inf cell: damaged
+])
+def test_spreadsheet_exports_read_to_their_values(tmp_path: Path, text: str,
+                                                  rows: int) -> None:
+    p = tmp_path / ("x.tsv" if "\t" in text else "x.csv")
+    p.write_text(text)
+    rec = load_recording(p)
+    assert len(rec) == rows and rec.rate_hz == pytest.approx(100.0)
+    gx = rec.channel("gx")
+    assert gx[3] == 1.5 and gx[49] == 24.5
+    assert (rec.damage is None) == (rows == 50)

@@ -91,10 +91,13 @@ def _delimiter(line: str) -> str | None:
 
 
 def _split(line: str, delim: str | None) -> list[str]:
+    """The fields of a line, each stripped of blanks and of the double quotes a
+    spreadsheet puts around it; in a file separated by ``;`` or tabs a comma is a
+    decimal comma (a locale's export)."""
     if delim is None:
-        return line.split()
-    fields = [f.strip() for f in line.split(delim)]
-    if delim == ";":
+        return [f.strip('"') for f in line.split()]
+    fields = [f.strip().strip('"').strip() for f in line.split(delim)]
+    if delim in (";", "\t"):
         fields = [f.replace(",", ".") for f in fields]
     return fields
 
@@ -112,9 +115,15 @@ def _looks_like_header(fields: list[str]) -> bool:
 
 
 def _number(text: str) -> float:
+    """The field's value: NaN for an empty field (a hole); ValueError for text that is
+    no finite number (an ``inf`` cell is a damaged one, not a value that every command
+    later refuses without saying where)."""
     if text == "":
         return math.nan
-    return float(text)
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(text)
+    return value
 
 
 @dataclass
@@ -195,6 +204,8 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
             return
         raw.width = len(fields)
     fields = _split(line, raw.delim)
+    if len(fields) == raw.width + 1 and fields[-1] == "" and raw.header is not None:
+        fields.pop()  # a trailing separator on the data lines only
     if len(fields) != raw.width:
         raw.bad_lines.append(lineno)
         return
