@@ -604,3 +604,15 @@ def test_spreadsheet_exports_read_to_their_values(tmp_path: Path, text: str,
     gx = rec.channel("gx")
     assert gx[3] == 1.5 and gx[49] == 24.5
     assert (rec.damage is None) == (rows == 50)
+
+
+def test_a_whitespace_comment_header_names_the_columns(tmp_path: Path) -> None:
+    """``# time gx gy gz`` above whitespace-separated data (docs: a leading # is removed)
+    was '4 columns without a header'; prose in a comment is still no header."""
+    p = tmp_path / "ws.txt"
+    p.write_text("# time gx gy gz\n" + "".join(f"{i / 100:.2f} {i} 0 0\n" for i in range(60)))
+    rec = load_recording(p)
+    assert rec.channels == ["gx", "gy", "gz"] and rec.rate_hz == pytest.approx(100.0)
+    q = tmp_path / "prose.txt"
+    q.write_text("# logged with the gx gy rig\n" + "".join(f"{i * 0.5}\n" for i in range(60)))
+    assert len(load_recording(q, InputOptions(rate_hz=10.0))) == 60

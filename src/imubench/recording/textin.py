@@ -179,8 +179,10 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
             return
         if raw.header is None and not raw.rows:
             delim = _delimiter(line)
-            fields = _split(line, delim)
-            if delim is not None and ":" not in line and _looks_like_header(fields) and sum(
+            # whitespace-separated: the '#' is no column ('# time gx gy gz' was "4
+            # columns without a header"); if the data do not fit it, it was a comment
+            fields = _split(line if delim is not None else line.lstrip("#%"), delim)
+            if ":" not in line and _looks_like_header(fields) and sum(
                     c.channel is not None for c in map_columns(fields)) >= 2:
                 raw.header, raw.header_line, raw.delim = fields, lineno, delim
                 raw.width = len(fields)
