@@ -12,7 +12,8 @@ One rule for every reader (the CSV/text reader, ROS 2 bags, MCAP):
    and so on to the whole record: the rate is the least-squares slope over all of it.
    (Indexing everything with a first estimate at once would slip a period every
    1 / (relative error) samples.) The first line is the least-squares line of the first
-   4000 stamps against their row numbers plus the samples missing before them, each
+   4000 stamps against their ranks (the rows in time order) plus the samples missing
+   before them, each
    hole located where the residuals' cumulative sum departs from zero
    (:func:`_first_line`); with more than :data:`FIRST_HOLES` holes there, the median
    spacing and the first stamps. A median step is biased by the rounding of printed
@@ -221,8 +222,8 @@ def _grid_origin(t_s: np.ndarray, step_s: float) -> float:
 def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
     """(step, time of index 0) to index the first ``m`` rows by (module docstring, 4.).
 
-    The least-squares line of the stamps against their row numbers plus the samples
-    missing before each row, found one hole at a time (binary segmentation, at most
+    The least-squares line of the stamps against their ranks plus the samples missing
+    before each row, found one hole at a time (binary segmentation, at most
     :data:`FIRST_HOLES`): a hole is where the cumulative sum of the line's residuals
     departs most from zero, kept when its size (the least-squares coefficient of a step
     there, in steps) rounds to a whole number of samples and the departure exceeds
