@@ -616,3 +616,19 @@ def test_a_whitespace_comment_header_names_the_columns(tmp_path: Path) -> None:
     q = tmp_path / "prose.txt"
     q.write_text("# logged with the gx gy rig\n" + "".join(f"{i * 0.5}\n" for i in range(60)))
     assert len(load_recording(q, InputOptions(rate_hz=10.0))) == 60
+
+
+def test_iso_date_times_are_read_as_utc_seconds(tmp_path: Path) -> None:
+    """A logger's (or pandas') ISO 8601 time column, with a 3-sample hole."""
+    import datetime as dt
+
+    t0 = dt.datetime(2024, 5, 1, 12, 0, 0)
+    stamp = [(t0 + dt.timedelta(milliseconds=10 * i)).isoformat(sep=" ", timespec="milliseconds")
+             for i in range(400)]
+    rows = [f"{stamp[i]},{i}" for i in range(400) if not 100 <= i < 103]
+    p = tmp_path / "iso.csv"
+    p.write_text("timestamp,gyro_x [deg/s]\n" + "\n".join(rows) + "\n")
+    rec = load_recording(p)
+    assert rec.rate_hz == pytest.approx(100.0) and rec.lost_samples == 3
+    assert rec.t_s[0] == pytest.approx(t0.replace(tzinfo=dt.UTC).timestamp())
+    assert rec.channel("gx")[103] == 103

@@ -115,13 +115,23 @@ def _looks_like_header(fields: list[str]) -> bool:
     return len(fields) >= 2 and sum(not _is_number(f) for f in fields) >= len(fields) / 2
 
 
+ISO_TIME = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(\.\d+)?Z?$")
+"""A date and time as loggers and pandas write them (ISO 8601, UTC when no zone)."""
+
+
 def _number(text: str) -> float:
-    """The field's value: NaN for an empty field (a hole); ValueError for text that is
-    no finite number (an ``inf`` cell is a damaged one, not a value that every command
+    """The field's value: NaN for an empty field (a hole); an ISO 8601 date and time
+    (``2024-05-01 12:00:00.010``, UTC) as Unix seconds; ValueError for text that is no
+    finite number (an ``inf`` cell is a damaged one, not a value that every command
     later refuses without saying where)."""
     if text == "":
         return math.nan
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        if not ISO_TIME.match(text):
+            raise
+        return float(np.datetime64(text.rstrip("Z"), "ns").astype(np.int64)) * 1e-9
     if not math.isfinite(value):
         raise ValueError(text)
     return value
