@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -632,3 +633,14 @@ def test_iso_date_times_are_read_as_utc_seconds(tmp_path: Path) -> None:
     assert rec.rate_hz == pytest.approx(100.0) and rec.lost_samples == 3
     assert rec.t_s[0] == pytest.approx(t0.replace(tzinfo=dt.UTC).timestamp())
     assert rec.channel("gx")[103] == 103
+
+
+def test_a_whitespace_header_keeps_units_after_a_space(tmp_path: Path) -> None:
+    """``time gyro_x [rad/s]`` separated by spaces: the bracket is the column's unit, not
+    a column of its own (the file was 'no readable data lines')."""
+    p = tmp_path / "ws.txt"
+    p.write_text("time gyro_x [rad/s] gyro_y [rad/s]\n" + "".join(
+        f"{i / 100:.2f}  {i * 0.01}  0\n" for i in range(60)))
+    rec = load_recording(p)
+    assert rec.channels == ["gx", "gy"]
+    assert rec.channel("gx")[10] == pytest.approx(0.1 * 180 / math.pi)

@@ -96,7 +96,13 @@ def _split(line: str, delim: str | None) -> list[str]:
     spreadsheet puts around it; in a file separated by ``;`` or tabs a comma is a
     decimal comma (a locale's export)."""
     if delim is None:
-        return [f.strip('"') for f in line.split()]
+        fields: list[str] = []
+        for f in line.split():  # 'gyro_x [deg/s]': a unit after a space is its column's
+            if fields and f[:1] in "[(" and not _is_number(f):
+                fields[-1] += " " + f
+            else:
+                fields.append(f.strip('"'))
+        return fields
     fields = [f.strip().strip('"').strip() for f in line.split(delim)]
     if delim in (";", "\t"):
         fields = [f.replace(",", ".") for f in fields]
