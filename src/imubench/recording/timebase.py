@@ -11,13 +11,12 @@ One rule for every reader (the CSV/text reader, ROS 2 bags, MCAP):
    least-squares line of t against them a better one, which indexes 1.5x as many rows,
    and so on to the whole record: the rate is the least-squares slope over all of it.
    (Indexing everything with a first estimate at once would slip a period every
-   1 / (relative error) samples.) The first line is the least-squares line of the first
-   4000 stamps against their ranks (the rows in time order) plus the samples missing
-   before them, each
-   hole located where the residuals' cumulative sum departs from zero
-   (:func:`_first_line`); with more than :data:`FIRST_HOLES` holes there, the median
-   spacing and the first stamps. A median step is biased by the rounding of printed
-   times (104 Hz printed to 6 decimals: median step 0.009615 s -> 104.004 Hz) and, with
+   1 / (relative error) samples.) The first line's step is the period on which the
+   first 4000 stamps are most in phase (the periodogram of a point process: jitter up to
+   half a period and any number of missing samples leave the true period's phase
+   coherence intact), its origin the stamps' circular mean phase on it
+   (:func:`_first_line`). A median step is biased by the rounding of printed times
+   (104 Hz printed to 6 decimals: median step 0.009615 s -> 104.004 Hz) and, with
    jittered stamps (a logger stamping when it reads, +-0.45 periods), off by ~1 %; the
    line is not, and its fitted time of index 0 keeps every stamp within half a step of
    its sample as long as the jitter stays below half a period.
@@ -31,7 +30,6 @@ damaged, so a single bad time stamp costs one row, never the rest of the record.
 from __future__ import annotations
 
 import bisect
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +48,10 @@ SLOW_LOGGER_HZ = 1.0
 rate in seconds (steps of 1/7 to 1 unit: 1-7 Hz in s, 1-7 kHz in ms) is ambiguous: a
 slow logger in seconds and a fast one in milliseconds write the same numbers, so it is
 refused (``--time-unit``) rather than guessed."""
+BOOT_COUNTER_HZ = 4.0
+"""Stamps the size of Unix times that read below this rate while another unit reads
+plausibly are refused as ambiguous (a counter since boot?). A logger at 4 Hz or more with
+Unix seconds is read as such; ms since boot at 4 kHz or more is not caught."""
 EPOCH_S = (1.0e9, 4.1e9)
 """Unix times in seconds of 2001-2099: time stamps of this size (or 1e3, 1e6, 1e9 times
 it) are absolute, and their magnitude gives the unit (s, ms, us, ns)."""
@@ -63,17 +65,12 @@ GROWTH = 1.5
 +-0.45 steps, a slope fitted on m rows (sd 0.9 / m^1.5 steps per row) moves the stamps of
 the next 0.5 m rows by at most 3 sd x 1.0 m, 0.043 steps at m = 4000: within the 0.05
 left between the jitter and half a step."""
-STAMP_RESOLUTION = 1e-6
-"""Smallest residual scale (in steps) the hole search assumes: exact stamps have none."""
-FIRST_HOLES = 8
-"""Holes the first line locates among the first :data:`FIRST_FIT_ROWS` rows."""
-HOLE_CUSUM = 3.0
-"""A hole is located where the cumulative sum of the first line's residuals departs
-from zero by more than this many times ``scale * sqrt(rows)`` (the residuals' scale from
-their differences, at least :data:`STAMP_RESOLUTION`): the supremum of a
-Brownian bridge, which the sum of residuals without a step follows, exceeds 1.63 with
-probability 1 % (Kolmogorov's distribution); a missing sample among 4000 rows jittered
-by +-0.45 steps departs by ~20."""
+PERIOD_SEARCH = 0.05
+"""The period is searched within this fraction of the median spacing (which jittered
+stamps put within ~1.5 % after 1000 rows)."""
+COARSE_ROWS = 2000
+"""Stamps of the coarse search of the period (its peak then ~1/2000 wide, searched at 20
+points per width); the fine search uses all the first rows near it."""
 
 
 @dataclass(frozen=True)
@@ -105,10 +102,10 @@ def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
         level = float(np.median(np.abs(finite)))
         for unit, scale in TIME_UNITS_S.items():
             if EPOCH_S[0] <= level * scale <= EPOCH_S[1]:
-                if 1.0 / (step * scale) < SLOW_LOGGER_HZ and len(fits) == 1:
+                if 1.0 / (step * scale) < BOOT_COUNTER_HZ and len(fits) == 1:
                     # an uptime counter (ms since boot: 1.3e9 after 15 days) has the size of
-                    # Unix seconds; read as such, 100 Hz became 0.1 Hz (below any IMU's
-                    # rate, while another unit gives a plausible one)
+                    # Unix seconds; read as such, 100 Hz became 0.1 Hz and 2 kHz 2 Hz (below
+                    # an IMU's rate, while another unit gives a plausible one)
                     raise RecordingError(
                         f"{where}: the time column's values (~{level:.3g}) read as Unix "
                         f"times in {unit} give {1.0 / (step * scale):.4g} Hz; in "
@@ -222,47 +219,44 @@ def _grid_origin(t_s: np.ndarray, step_s: float) -> float:
 def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
     """(step, time of index 0) to index the first ``m`` rows by (module docstring, 4.).
 
-    The least-squares line of the stamps against their ranks plus the samples missing
-    before each row, found one hole at a time (binary segmentation, at most
-    :data:`FIRST_HOLES`): a hole is where the cumulative sum of the line's residuals
-    departs most from zero, kept when its size (the least-squares coefficient of a step
-    there, in steps) rounds to a whole number of samples and the departure exceeds
-    :data:`HOLE_CUSUM` times the residuals' scale. Else (more holes, or no line) the
-    median step and the median of the first 5 stamps. Rows whose stamps are out of time
-    order (a damaged stamp) take no part."""
+    The step is the period on which the stamps are most in phase: the maximum of
+    ``|mean(exp(2 pi i t / P))|`` over P within :data:`PERIOD_SEARCH` of the median
+    spacing, first on the first :data:`COARSE_ROWS` stamps, then on all ``m`` near that
+    (the periodogram of a point process: stamps jittered by up to half a period stay in
+    phase, and missing samples take nothing from it, however many). The time of index 0
+    is on that grid (:func:`_grid_origin`). Rows whose stamps are out of time order (a
+    damaged stamp) take no part."""
     t = t_s[:m]
     rows = np.nonzero(np.isfinite(t))[0]
     rows = rows[increasing_rows(t[rows])]  # a stamp out of time order is no sample time
     if len(rows) < 3:
         return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
-    tt = t[rows]
-    missing = np.zeros(len(rows))
-    # the kept rows' ranks, not their row numbers: a row dropped as out of time order (a
-    # repeated line) is no sample, and counting it put every later stamp a step late
-    # (+257 ppm on the rate of 10 000 rows at 104 Hz, 7116 rows on the wrong sample)
-    rank = np.arange(len(rows), dtype=np.float64)
-    for _ in range(FIRST_HOLES + 1):
-        x = rank + missing
-        step, t0 = _line(x, tt)
-        if not step > 0:
-            break
-        r = (tt - t0) / step - x  # residuals in steps
-        cusum = np.cumsum(r)
-        j = int(np.argmax(np.abs(cusum[:-1]))) + 1
-        # the residuals' own scale, from their differences (a step inflates their std,
-        # which hid a hole among 50 exact stamps): 1.4826 MAD / sqrt(2)
-        noise = 1.0484 * float(np.median(np.abs(np.diff(r))))
-        scale = max(noise, STAMP_RESOLUTION) * math.sqrt(len(r))
-        if abs(float(cusum[j - 1])) < HOLE_CUSUM * scale:
-            return step, t0  # no hole left: residuals without a step
-        after = (np.arange(len(rows)) >= j).astype(np.float64)
-        coef = np.linalg.lstsq(np.column_stack([np.ones_like(x), x, after]), tt,
-                               rcond=None)[0]
-        size = round(float(coef[2] / coef[1]))
-        if size < 1:
-            return step, t0  # the departure is not a missing sample
-        missing[j:] += size
-    return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
+    u = t[rows] - t[rows][0]
+    step = float(np.median(np.diff(u)))
+    if not step > 0:
+        return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
+    for part in (u[:COARSE_ROWS], u):
+        periods = max(part[-1] / step, 1.0)  # the peak is ~1 / periods wide (relative)
+        span = PERIOD_SEARCH if part is not u or part.size <= COARSE_ROWS else 4.0 / periods
+        grid = step * (1.0 + np.linspace(-span, span, int(20 * span * periods) + 3))
+        step = _most_in_phase(part, grid)
+    return step, _grid_origin(t[rows], step)
+
+
+def _most_in_phase(u: np.ndarray, grid: np.ndarray) -> float:
+    """The period in ``grid`` on which the times ``u`` are most in phase, refined by a
+    parabola through the best point and its neighbours."""
+    power = np.empty(grid.size)
+    for lo in range(0, grid.size, 64):  # blocks keep the (periods x stamps) array small
+        phase = np.exp(2j * np.pi * np.outer(1.0 / grid[lo:lo + 64], u))
+        power[lo:lo + 64] = np.abs(phase.mean(axis=1))
+    k = int(np.argmax(power))
+    if 0 < k < grid.size - 1:
+        y0, y1, y2 = power[k - 1], power[k], power[k + 1]
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            return float(grid[k] + 0.5 * (y0 - y2) / den * (grid[1] - grid[0]))
+    return float(grid[k])
 
 
 def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = None) -> Timebase:
@@ -311,10 +305,14 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
     return Timebase(1.0 / step, kept - kept[0], keep, "from t (least squares)")
 
 
-INDEX_BACK_SHARE = 0.01
-"""An index column that goes back more than once, or whose longest increasing run leaves
-more than this share of the rows, is refused: an 8-bit counter that wraps lost 1744 of
-2000 rows as "damaged"."""
+INDEX_DISAGREE_SHARE = 0.01
+"""An index column that contradicts the time stamps at more than this share of the rows
+(and more than one) is refused rather than read around."""
+RESTART_RUN = 10
+"""An index that goes back and then counts up for this many rows, all below where it
+was, is a counter that wraps or restarts (an 8-bit one lost 1744 of 2000 rows as
+"damaged"); a row or two out of order (swapped lines, a damaged digit, a repeated line)
+is not, and costs those rows only."""
 
 
 HOST_JITTER_S = 0.05
@@ -370,7 +368,7 @@ def _consistent_with_times(index: np.ndarray, t_s: np.ndarray, keep: np.ndarray,
                 f"({period * (idx[k + 1] - idx[k]):.6g} s at the period the file gives "
                 "elsewhere); a counter of rows written is no sample index: leave one of "
                 "them out (--columns)")
-    if len(drop) > max(1, INDEX_BACK_SHARE * rows.size):
+    if len(drop) > max(1, INDEX_DISAGREE_SHARE * rows.size):
         raise RecordingError(
             f"{where}: the index column and the time column disagree at {len(drop)} rows "
             f"(first at {_row_name(lines, int(rows[min(drop)]))}); leave one of them out "
@@ -387,17 +385,20 @@ def timebase_from_index(index: np.ndarray, t_s: np.ndarray | None, where: str,
     the times against the index. Rows whose index does not increase are dropped, and
     rows whose index contradicts the time stamps around them
     (:func:`_consistent_with_times`); a counter that wraps or restarts
-    (:data:`INDEX_BACK_SHARE`) is refused. ``lines``: the file's line number of each
+    (:data:`RESTART_RUN`) is refused. ``lines``: the file's line number of each
     row, for messages."""
     index = np.asarray(index, dtype=np.int64)
     keep = increasing_rows(index)
-    back = np.nonzero(np.diff(index) < 0)[0]
-    if back.size > 1 or (~keep).sum() > max(1, INDEX_BACK_SHARE * index.size):
-        raise RecordingError(
-            f"{where}: the index column goes back {back.size} time(s) (first at "
-            f"{_row_name(lines, int(back[0]) + 1) if back.size else '?'}): a counter that "
-            "wraps or restarts is no sample index; leave it out (--columns without it) to "
-            "index the rows by their time stamps")
+    for b in np.nonzero(np.diff(index) < 0)[0].tolist():
+        run = index[b + 1:b + 1 + RESTART_RUN]
+        before = index[b - 1] if b else index[b]  # below the row before too: not one
+        if (run.size == RESTART_RUN and bool(np.all(np.diff(run) > 0))  # high outlier
+                and run[-1] < index[b] and run[0] <= before):
+            raise RecordingError(
+                f"{where}: the index column goes back at {_row_name(lines, b + 1)} "
+                f"({index[b]} -> {index[b + 1]}) and counts up again from there: a counter "
+                "that wraps or restarts is no sample index; leave it out (--columns "
+                "without it) to index the rows by their time stamps")
     if t_s is not None:
         keep = _consistent_with_times(index, t_s, keep, where, lines)
     kept = index[keep]
