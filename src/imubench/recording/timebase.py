@@ -68,6 +68,11 @@ left between the jitter and half a step."""
 PERIOD_SEARCH = 0.05
 """The period is searched within this fraction of the median spacing (which jittered
 stamps put within ~1.5 % after 1000 rows)."""
+PHASE_NOISE = 3.0
+"""The best period's phase coherence must exceed this over sqrt(stamps), else the
+median spacing is used: stamps with no period have a coherence of ~1/sqrt(stamps) and
+its largest over the search grid is ~2.8/sqrt(stamps); uniform jitter of 0.45 periods
+leaves 0.11 of a perfect grid's 1, jitter of 0.49 periods 0.02."""
 COARSE_ROWS = 2000
 """Stamps of the coarse search of the period (its peak then ~1/2000 wide, searched at 20
 points per width); the fine search uses all the first rows near it."""
@@ -235,17 +240,22 @@ def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
     step = float(np.median(np.diff(u)))
     if not step > 0:
         return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
+    median = step
     for part in (u[:COARSE_ROWS], u):
         periods = max(part[-1] / step, 1.0)  # the peak is ~1 / periods wide (relative)
         span = PERIOD_SEARCH if part is not u or part.size <= COARSE_ROWS else 4.0 / periods
         grid = step * (1.0 + np.linspace(-span, span, int(20 * span * periods) + 3))
-        step = _most_in_phase(part, grid)
+        step, coherence = _most_in_phase(part, grid)
+        if coherence < PHASE_NOISE / np.sqrt(part.size):
+            # no period stands out of the noise (jitter near half a period on few rows):
+            # the median spacing, as before this search, and the first stamps
+            return median, float(np.median(t[rows][:5]))
     return step, _grid_origin(t[rows], step)
 
 
-def _most_in_phase(u: np.ndarray, grid: np.ndarray) -> float:
-    """The period in ``grid`` on which the times ``u`` are most in phase, refined by a
-    parabola through the best point and its neighbours."""
+def _most_in_phase(u: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
+    """(the period in ``grid`` on which the times ``u`` are most in phase, refined by a
+    parabola through the best point and its neighbours; that phase coherence)."""
     power = np.empty(grid.size)
     for lo in range(0, grid.size, 64):  # blocks keep the (periods x stamps) array small
         phase = np.exp(2j * np.pi * np.outer(1.0 / grid[lo:lo + 64], u))
@@ -255,8 +265,8 @@ def _most_in_phase(u: np.ndarray, grid: np.ndarray) -> float:
         y0, y1, y2 = power[k - 1], power[k], power[k + 1]
         den = y0 - 2 * y1 + y2
         if den < 0:
-            return float(grid[k] + 0.5 * (y0 - y2) / den * (grid[1] - grid[0]))
-    return float(grid[k])
+            return float(grid[k] + 0.5 * (y0 - y2) / den * (grid[1] - grid[0])), float(y1)
+    return float(grid[k]), float(power[k])
 
 
 def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = None) -> Timebase:
