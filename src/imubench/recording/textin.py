@@ -452,7 +452,7 @@ def _check_given_rate(t_s: np.ndarray, rate_hz: float, where: str) -> None:
     if abs(tb.rate_hz / rate_hz - 1.0) * span > 0.5:
         given = timebase_from_times(t_s, where, rate_hz)
         if given.keep.sum() > tb.keep.sum():
-            return  # the given rate reads the stamps better than the rate found in them
+            return  # the given rate reads more of the stamps than the rate found in them
         raise RecordingError(
             f"{where}: --rate {rate_hz:g} Hz contradicts the time column, which gives "
             f"{tb.rate_hz:.8g} Hz (least squares; over its {span + 1} samples the "
