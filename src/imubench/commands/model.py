@@ -108,15 +108,14 @@ def predict(model: NoiseModel, rate_hz: float, spec: str, n: int | None) -> dict
     if m.size == 0:
         raise FitError(f"--taus {spec}: no averaging time left (need tau >= 1/rate"
                        + (f" and <= N/4 samples with N={n}" if n else "") + ")")
-    out: dict[str, Any] = {"rate_hz": rate_hz, "channels": {}}
-    if all(getattr(model[ch], k) == getattr(ChannelModel(), k) for ch in CHANNELS
-           for k in NOISE_KEYS):
-        raise FitError(f"{model.source}: gives no channel any noise; nothing to predict")
     quiet = ChannelModel()
-    for ch in CHANNELS:
+    noisy = [ch for ch in CHANNELS
+             if any(getattr(model[ch], k) != getattr(quiet, k) for k in NOISE_KEYS)]
+    if not noisy:
+        raise FitError(f"{model.source}: gives no channel any noise; nothing to predict")
+    out: dict[str, Any] = {"rate_hz": rate_hz, "channels": {}}
+    for ch in noisy:
         cm = model[ch]
-        if all(getattr(cm, k) == getattr(quiet, k) for k in NOISE_KEYS):
-            continue
         avar = model_avar_m(cm, m, rate_hz)
         tau = m / rate_hz
         entry: dict[str, Any] = {"tau_s": tau.tolist(), "dev": np.sqrt(avar).tolist()}

@@ -230,8 +230,8 @@ class NativeReader:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.damaged: list[str] = []
-        self._last_index: int | None = None  # of the last data record taken
         """Every damaged or truncated stretch, in file order (what was skipped)."""
+        self._last_index: int | None = None  # of the last data record taken
         self.end: dict[str, Any] | None = None
         self.gaps: list[Gap] = []
         try:

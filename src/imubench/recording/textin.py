@@ -164,6 +164,10 @@ class _Raw:
     row_fail: dict[int, list[int]] = field(default_factory=dict)
     """Row -> columns that were not numbers (NaN in the row): the row is damaged if a
     column it needs is among them (a ROS export's ``frame_id`` is text, and unused)."""
+    bad_lines: list[int] = field(default_factory=list)
+    width: int = 0
+    comment_header: bool = False
+    """The header came from a ``#`` line (EuRoC): dropped if the data do not fit it."""
 
     def add(self, row: list[float], lineno: int) -> None:
         """Append a data row read from line ``lineno``."""
@@ -182,10 +186,6 @@ class _Raw:
         if len(self.blocks) > 1:
             self.blocks = [np.concatenate(self.blocks)]
         return self.blocks[0] if self.blocks else np.zeros((0, self.width))
-    bad_lines: list[int] = field(default_factory=list)
-    width: int = 0
-    comment_header: bool = False
-    """The header came from a ``#`` line (EuRoC): dropped if the data do not fit it."""
 
 
 def _scan(path: Path) -> _Raw:
@@ -395,9 +395,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         tb = timebase_from_index(index_col, t_s, where, rate,
                                  np.asarray(raw.row_lines))
     elif t_s is not None:
-        if options.rate_hz is not None:
-            _check_given_rate(t_s, options.rate_hz, where)
         tb = timebase_from_times(t_s, where, rate)
+        if options.rate_hz is not None:
+            _check_given_rate(t_s, tb, where)
         if rate is None and not TIME_RATE_HZ[0] <= tb.rate_hz <= TIME_RATE_HZ[1]:
             raise RecordingError(
                 f"{where}: the time column gives {tb.rate_hz:.4g} Hz with t in "
@@ -438,24 +438,23 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
 
 
-def _check_given_rate(t_s: np.ndarray, rate_hz: float, where: str) -> None:
-    """RecordingError when ``--rate`` contradicts the time column's own rate (least
-    squares, where it has one) by enough to move a stamp half a sample over the record:
-    read at that rate, the rows would slip off their samples (stamps 100 Hz apart at
-    --rate 50 put every second row on the sample before it, half the file skipped as
-    damaged; at --rate 100.5, 2000 rows left 10 holes)."""
+def _check_given_rate(t_s: np.ndarray, given: Timebase, where: str) -> None:
+    """RecordingError when ``--rate`` (``given``: the stamps read at it) contradicts the
+    time column's own rate (least squares, where it has one) by enough to move a stamp
+    half a sample over the record, unless it reads more of the stamps than that rate:
+    read at it, the rows would slip off their samples (stamps 100 Hz apart at --rate 50
+    put every second row on the sample before it, half the file skipped as damaged; at
+    --rate 100.5, 2000 rows left 10 holes)."""
     try:
-        tb = timebase_from_times(t_s, where)
+        own = timebase_from_times(t_s, where)
     except RecordingError:
         return  # the stamps give no rate of their own: --rate decides
-    span = int(tb.index[-1]) if tb.index.size else 0
-    if abs(tb.rate_hz / rate_hz - 1.0) * span > 0.5:
-        given = timebase_from_times(t_s, where, rate_hz)
-        if given.keep.sum() > tb.keep.sum():
-            return  # the given rate reads more of the stamps than the rate found in them
+    span = int(own.index[-1]) if own.index.size else 0
+    if (abs(own.rate_hz / given.rate_hz - 1.0) * span > 0.5
+            and given.keep.sum() <= own.keep.sum()):
         raise RecordingError(
-            f"{where}: --rate {rate_hz:g} Hz contradicts the time column, which gives "
-            f"{tb.rate_hz:.8g} Hz (least squares; over its {span + 1} samples the "
+            f"{where}: --rate {given.rate_hz:g} Hz contradicts the time column, which "
+            f"gives {own.rate_hz:.8g} Hz (least squares; over its {span + 1} samples the "
             "difference slips rows off their samples); drop --rate to read the file at its "
             "own rate")
 

@@ -351,12 +351,13 @@ def _consistent_with_times(index: np.ndarray, t_s: np.ndarray, keep: np.ndarray,
     if not period > 0:
         return keep
 
-    def agree(a: int, b: int) -> bool:  # positions in rows
-        di = idx[b] - idx[a]
-        return bool(abs(t[b] - t[a] - period * di)
-                    <= 3 * period + 1e-3 * period * di + HOST_JITTER_S)
+    def off(dt: np.ndarray, di: np.ndarray) -> np.ndarray:  # stamps against the index
+        return np.abs(dt - period * di) > 3 * period + 1e-3 * period * di + HOST_JITTER_S
 
-    bad = [k for k in range(rows.size - 1) if not agree(k, k + 1)]
+    def agree(a: int, b: int) -> bool:  # positions in rows
+        return not bool(off(t[b] - t[a], idx[b] - idx[a]))
+
+    bad = np.nonzero(off(np.diff(t), np.diff(idx)))[0].tolist()  # one pass, not per row
     if not bad:
         return keep
     drop: set[int] = set()

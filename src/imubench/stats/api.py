@@ -26,7 +26,7 @@ from imubench.stats import allan as _allan
 from imubench.stats import bias, ci, noise_id
 from imubench.stats import theo as _theo
 from imubench.stats import total as _total
-from imubench.stats.confidence import runs_edf
+from imubench.stats.confidence import Runs, runs_edf
 from imubench.stats.edf import VAR_NAME as _VAR_NAME
 from imubench.stats.prep import PhaseData, to_phase
 from imubench.stats.result import StatResult
@@ -139,7 +139,7 @@ class _Confidence:
         return float(bias.bias_factor(var_stat, alpha, m, n_phase))
 
     def limits(
-        self, var_stat: str, alpha: int, m: int, runs: np.ndarray, var: float,
+        self, var_stat: str, alpha: int, m: int, runs: Runs, var: float,
         confidence: float
     ) -> tuple[float, float, float]:
         if alpha == ALPHA_UNKNOWN or not np.isfinite(var):
@@ -235,7 +235,7 @@ def _compute_pd(
     lo = np.full(ms.size, np.nan)
     hi = np.full(ms.size, np.nan)
     var = var_raw.copy()
-    runs = pd.run_lengths()
+    runs = pd.runs()
     for k, m in enumerate(ms):
         m = int(m)
         if fixed is not None:

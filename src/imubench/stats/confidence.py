@@ -69,10 +69,14 @@ def strided_edf(stat: str, alpha: int, m: int, n_phase: int, stride: int) -> flo
     return edf_greenhall(int(alpha), d, mp, int(n_eq), modified, True)
 
 
-def runs_edf(stat: str, alpha: int, m: int, runs: np.ndarray, stride: int = 1) -> float:
-    """EDF of ``stat`` at ``m`` over a record made of independent gap-free runs of
-    ``runs`` phase points (one entry per run): the sum of the runs' EDFs
-    (:func:`strided_edf` of each run alone; a run too short for a term adds none).
+Runs = tuple[np.ndarray, np.ndarray]
+"""A record's gap-free runs: (their lengths in phase points, how many runs have each)."""
+
+
+def runs_edf(stat: str, alpha: int, m: int, runs: Runs, stride: int = 1) -> float:
+    """EDF of ``stat`` at ``m`` over a record made of independent gap-free runs
+    (:data:`Runs`): the sum of the runs' EDFs (:func:`strided_edf` of each run alone; a
+    run too short for a term adds none).
 
     The estimate is the mean over every term that touches no gap, i.e. the runs' own
     estimates weighted by their term counts; Satterthwaite's EDF of such a weighted mean,
@@ -83,10 +87,9 @@ def runs_edf(stat: str, alpha: int, m: int, runs: np.ndarray, stride: int = 1) -
     the EDF of the whole length at taus where the hole removes half the terms (1 h of an
     ADIS16405 gyro at tau = 655 s: terms 228 929 -> 97 857, EDF 4.7 unchanged; now 3.0).
     Raises :class:`StatsError` like :func:`strided_edf` when there is one run."""
-    runs = np.asarray(runs, dtype=np.int64)
-    if runs.size == 1:
-        return strided_edf(stat, alpha, m, int(runs[0]), stride)
-    lengths, counts = np.unique(runs, return_counts=True)
+    lengths, counts = runs
+    if counts.sum() == 1:
+        return strided_edf(stat, alpha, m, int(lengths[0]), stride)
     total = 0.0
     for length, count in zip(lengths.tolist(), counts.tolist(), strict=True):
         try:
@@ -102,7 +105,7 @@ def confidence_arrays(
     stat: str,
     alpha: np.ndarray,
     m: np.ndarray,
-    runs: int | Sequence[np.ndarray],
+    runs: int | Sequence[Runs],
     var: np.ndarray,
     confidence: float,
     stride: np.ndarray | None = None,
@@ -111,21 +114,21 @@ def confidence_arrays(
     where ``stride`` > 1), limits from :func:`imubench.stats.ci.chi2_limits`. ``alpha``
     and ``var`` have one entry per m (shape ``(k,)``) or one row per channel (``(channels,
     k)``); ``runs`` is the number of phase points of a gap-free record, or per channel row
-    the lengths of its gap-free runs; the EDF is computed once per distinct (alpha, m,
+    its gap-free runs (:data:`Runs`); the EDF is computed once per distinct (alpha, m,
     runs). Where the EDF is undefined (alpha outside the method's range, too few points)
     or the variance is NaN, the three are NaN."""
     alpha = np.asarray(alpha)
     var = np.asarray(var, dtype=float)
     strides = np.ones(m.shape, np.int64) if stride is None else np.asarray(stride)
     rows = alpha.shape[0] if alpha.ndim > 1 else 1
-    per_row = ([np.array([runs], np.int64)] * rows if isinstance(runs, (int, np.integer))
-               else [np.asarray(r, np.int64) for r in runs])
+    per_row = ([(np.array([runs], np.int64), np.ones(1, np.int64))] * rows
+               if isinstance(runs, (int, np.integer)) else list(runs))
     edf = np.full(alpha.shape, np.nan)
     cache: dict[tuple[int, int, bytes], float] = {}
     for idx in np.ndindex(alpha.shape):
         i = idx[-1]
         row = per_row[idx[0] if alpha.ndim > 1 else 0]
-        key = (int(alpha[idx]), i, row.tobytes())
+        key = (int(alpha[idx]), i, row[0].tobytes() + row[1].tobytes())
         e = cache.get(key)
         if e is None:
             try:

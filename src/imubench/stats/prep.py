@@ -40,13 +40,13 @@ class PhaseData:
     def n_phase(self) -> int:
         return int(self.x.size)
 
-    def run_lengths(self) -> np.ndarray:
-        """Lengths (phase points) of the gap-free runs: ``[n_phase]`` without gaps. A
-        phase gap removes its point; a frequency gap y[k] cuts x[k] from x[k+1], so a run
-        of L frequency samples is L + 1 phase points. Runs of one point are left out
-        (they hold no difference)."""
+    def runs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gap-free runs: (their distinct lengths in phase points, how many runs have
+        each); ``([n_phase], [1])`` without gaps. A phase gap removes its point; a
+        frequency gap y[k] cuts x[k] from x[k+1], so a run of L frequency samples is L + 1
+        phase points. Runs of one point are left out (they hold no difference)."""
         if self.gap_prefix is None:
-            return np.array([self.n_phase], dtype=np.int64)
+            return np.array([self.n_phase], dtype=np.int64), np.ones(1, dtype=np.int64)
         bad = np.diff(self.gap_prefix) > 0
         if self.gap_end_offset == 1:  # phase: bad[k] is x[k] missing
             good = ~bad
@@ -56,7 +56,8 @@ class PhaseData:
             extra = 1
         edges = np.diff(np.concatenate(([0], good.astype(np.int8), [0])))
         lengths = np.nonzero(edges == -1)[0] - np.nonzero(edges == 1)[0] + extra
-        return lengths[lengths > 1].astype(np.int64)
+        lengths, counts = np.unique(lengths[lengths > 1], return_counts=True)
+        return lengths.astype(np.int64), counts.astype(np.int64)
 
     def span_ok(self, a: np.ndarray | int, b: np.ndarray | int) -> np.ndarray | bool:
         """True where phase points a..b (inclusive) contain no gap."""

@@ -542,16 +542,18 @@ class StreamingAllan:
                 runs[length] = runs.get(length, 0) + 1
             self._open_run[j] = c - 1 - at[-1]
 
-    def run_lengths(self, channel: int) -> np.ndarray:
-        """Lengths (phase points) of the channel's gap-free runs, as
-        :meth:`imubench.stats.prep.PhaseData.run_lengths` gives them for the same
-        samples in one batch: a run of L samples links L + 1 phase points."""
+    def runs(self, channel: int) -> tuple[np.ndarray, np.ndarray]:
+        """The channel's gap-free runs as :meth:`imubench.stats.prep.PhaseData.runs`
+        gives them for the same samples in one batch (a run of L samples links L + 1
+        phase points)."""
         runs = dict(self._runs[channel])
         if self._open_run[channel] > 0:
             open_len = int(self._open_run[channel])
             runs[open_len] = runs.get(open_len, 0) + 1
-        lengths = [length + 1 for length, count in sorted(runs.items()) for _ in range(count)]
-        return np.array(lengths or [1], np.int64)
+        if not runs:
+            return np.ones(1, np.int64), np.ones(1, np.int64)
+        lengths, counts = zip(*sorted(runs.items()), strict=True)
+        return np.array(lengths, np.int64) + 1, np.array(counts, np.int64)
 
     def _first_gap(self) -> None:
         """Start keeping gap counts: every G so far is 0."""
@@ -832,7 +834,7 @@ class StreamingAllan:
 
         overlapping = STREAM_STATS[stat][1]
         stride = np.array([self._stride(int(mm)) if overlapping else 1 for mm in m], dtype=np.int64)
-        runs = [self.run_lengths(ch) for ch in range(var.shape[0])]
+        runs = [self.runs(ch) for ch in range(var.shape[0])]
         edf, lo, hi = confidence_arrays(
             stat, alpha, m, runs, var, self.confidence, stride=stride
         )
