@@ -321,6 +321,28 @@ def test_a_candidate_the_held_out_part_contradicts_is_not_kept() -> None:
     assert rejected and "held-out" in rejected[0].note
 
 
+def test_the_candidates_refused_after_a_kept_effect_are_reported() -> None:
+    """A sine throughout and a temperature response only in the fit part: the sine is
+    kept, then the temperature is fitted and refused by the held-out part. The JSON's
+    ``not_kept`` and the explanation say what was tried next and why it was not kept
+    (it only said "a significant departure remains")."""
+    n = int(900 * RATE)
+    rng = np.random.default_rng(13)
+    temp = _temp_profile(n)
+    y = white(rng, n) + 0.01 * np.sin(2 * np.pi * 3.3 * np.arange(n) / RATE + 0.4)
+    y[: n // 2] += 0.004 * (temp[: n // 2] - 25.0)
+    d = diagnose_channel(MODEL, "gx", Series(y, temp, RATE, "settle"),
+                         GapOptions(seed=4, realisations=5))
+    out = d.to_dict()
+    assert [k["effect"] for k in out["kept"]] == ["sine"]
+    assert out["residual_significant"]
+    tried = {x["effect"]: x["reason"] for x in out["not_kept"]}
+    assert "held-out" in tried["temperature"], tried
+    assert all(tried.values())
+    text = "\n".join(explain_channel(out, 5))
+    assert "tried next and not kept: " in text and "temperature (temp_coeff = " in text
+
+
 # ------------------------------------------------------------------ plain words
 def test_headline_is_plain_words_with_the_held_out_closure() -> None:
     c: dict[str, Any] = {

@@ -185,6 +185,11 @@ class ChannelDiagnosis:
     (:func:`_exchange`) or the backward step (:func:`_prune`) dropped, each with its
     ``note``."""
     replicates: list[tuple[str, Comparison, Comparison | None]] = field(default_factory=list)
+    not_kept: list[Candidate] = field(default_factory=list)
+    """The candidates examined at the step where the forward selection stopped with a
+    significant departure left (after at least one kept effect), each with the ``note``
+    that refused it: what a second or third effect would have been and why it was not
+    kept."""
 
     @property
     def winner(self) -> Candidate | None:
@@ -217,6 +222,8 @@ class ChannelDiagnosis:
             "kept": [_kept_dict(c) for c in self.kept],
             "dropped": [{"effect": c.effect, "params": c.params, "reason": c.note}
                         for c in self.pruned],
+            "not_kept": [{"effect": c.effect, "params": c.params, "reason": c.note}
+                         for c in self.not_kept],
             "residual_significant": self.residual_significant,
             "gap_after": ff.gap,
             "gap_null": self.before.gap_null,
@@ -833,6 +840,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     ranked0: list[Candidate] = []
     ev0: dict[str, Any] = {}
     kept: list[Candidate] = []
+    not_kept: list[Candidate] = []
     residual = False
     reason = ""
     bg_summary: dict[str, Any] | None = None
@@ -863,6 +871,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
         chosen, chosen_sims = _choose(ranked, best_sims, hold, st, check)
         if chosen is None or chosen_sims is None:
             residual = True
+            if k > 0:
+                not_kept = [c for c in ranked if c.note]
             break
         chosen.accepted = True
         kept.append(chosen)
@@ -915,7 +925,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             temp_record_z=first.temp_z, temp_fired=first.temp_fired,
                             temp_note=rtemp.note,
                             residual_significant=residual, background=bg_summary,
-                            pruned=pruned)
+                            pruned=pruned, not_kept=not_kept if residual else [])
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag

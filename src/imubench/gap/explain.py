@@ -330,7 +330,11 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if dropped:
         out.append("Kept first, then dropped: " + "; ".join(dropped) + ".")
     if c.get("residual_significant") and c["verdict"] not in ("none",):
-        out.append("A significant departure remains after the kept effects.")
+        tried = [f"{d['effect']} ({params_text(d['params'], units)}): {d['reason']}"
+                 for d in c.get("not_kept", [])]
+        out.append("A significant departure remains after the kept effects"
+                   + ("; tried next and not kept: " + "; ".join(tried) if tried else "")
+                   + ".")
     return out
 
 
