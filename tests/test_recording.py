@@ -549,12 +549,15 @@ def test_a_corrupt_gzip_is_refused_and_a_cut_one_keeps_its_rows(tmp_path: Path) 
     ("time [min]", 1 / 60, "temperature [K]", 299.15, 26.0),
     ("time [s]", 1.0, "temp [F]", 78.8, 26.0),
     ("time [s]", 1.0, "temp [degC]", 26.0, 26.0),
+    ("time_h", 1 / 3600, "temp_c", 26.0, 26.0),
+    ("t_min", 1 / 60, "temp", 26.0, 26.0),
 ])
 def test_header_units_of_time_and_temperature_are_applied(
         tmp_path: Path, t_head: str, t_scale: float, temp_head: str, temp: float,
         want: float) -> None:
     """``time [min]`` was read as seconds (100 Hz as 6000 Hz), ``temperature [K]`` as
-    298.15 degC: the header's unit is applied, or the file refused."""
+    298.15 degC, and ``time_h`` was no time column: the header's unit (in brackets or
+    as a suffix) is applied, or the file refused."""
     p = tmp_path / "u.csv"
     p.write_text(f"{t_head},gyro_x [deg/s],{temp_head}\n" + "".join(
         f"{i / 100 * t_scale:.9f},{i % 3},{temp}\n" for i in range(300)))

@@ -28,7 +28,7 @@ _ACCEL_STEMS = ("a", "acc", "accel", "accelerometer", "acceleration", "linear_ac
                 "a_rs_s")
 _TIME_NAMES = ("t", "time", "timestamp", "stamp", "time_s", "t_s", "header_stamp",
                "seconds", "sec", "time_stamp")
-_TIME_SUFFIXES = {"_ms": "ms", "_us": "us", "_ns": "ns", "_s": "s"}
+_TIME_SUFFIXES = {"_ms": "ms", "_us": "us", "_ns": "ns", "_s": "s", "_min": "min", "_h": "h"}
 
 
 def _aliases() -> dict[str, str]:
