@@ -418,3 +418,16 @@ def test_unexplained_without_candidates_says_why_each_effect_was_not_fitted() ->
     assert "Temperature: the temperature only drifts, at a constant rate." in lines
     assert (f"Verdict unexplained: no candidate effect applies to this evidence; "
             f"temperature: {why}.") in lines
+
+
+def test_a_departure_left_after_the_most_effects_says_the_selection_stopped() -> None:
+    """Three effects kept and a departure left: it said only that a departure remains,
+    as if nothing had been tried."""
+    from imubench.gap.diagnose import MAX_EFFECTS
+
+    kept = [{"effect": e, "params": {}, "gap_after": 0.1} for e in
+            ("resonance", "bias_step", "flicker")[:MAX_EFFECTS]]
+    c = _entry("resonance", kept=kept, residual_significant=True, not_kept=[])
+    text = "\n".join(explain_channel(c, 10))
+    assert (f"A significant departure remains after the kept effects (the selection "
+            f"keeps at most {MAX_EFFECTS} effects).") in text, text

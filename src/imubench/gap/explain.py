@@ -29,7 +29,7 @@ from imubench.gap.curves import (
     stat_fired,
     t_threshold,
 )
-from imubench.gap.diagnose import MIN_CLOSURE, removes
+from imubench.gap.diagnose import MAX_EFFECTS, MIN_CLOSURE, removes
 
 
 def _f(v: float | None, digits: int = 3) -> str:
@@ -332,9 +332,13 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if c.get("residual_significant") and c["verdict"] not in ("none",):
         tried = [f"{d['effect']} ({params_text(d['params'], units)}): {d['reason']}"
                  for d in c.get("not_kept", [])]
-        out.append("A significant departure remains after the kept effects"
-                   + ("; tried next and not kept: " + "; ".join(tried) if tried else "")
-                   + ".")
+        if tried:
+            why = "; tried next and not kept: " + "; ".join(tried)
+        elif len(kept) >= MAX_EFFECTS:
+            why = f" (the selection keeps at most {MAX_EFFECTS} effects)"
+        else:
+            why = ""
+        out.append(f"A significant departure remains after the kept effects{why}.")
     return out
 
 
