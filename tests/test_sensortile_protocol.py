@@ -163,6 +163,20 @@ def test_rtc_timeline_host_check_reanchors_after_rtc_reset() -> None:
     assert tl.reanchors == 1
 
 
+def test_rtc_timeline_trusts_the_rtc_when_the_host_was_late() -> None:
+    """A host paused 2.6 s reads the frames that waited in the serial buffers in one
+    burst: each stamp is one period after the last, the host delta 2.6 s. The index
+    follows the RTC (the host's delta invented 260 lost frames and stamped every later
+    frame 2.6 s late)."""
+    tl = RtcTimeline(period_cs=1, host_check_s=2.0)
+    assert tl.accept(5000, host_s=100.0) == 0
+    assert tl.accept(5001, host_s=100.01) == 1
+    assert tl.accept(5002, host_s=102.61) == 2  # read late, after the pause
+    assert tl.accept(5003, host_s=102.611) == 3  # the rest of the burst
+    assert tl.accept(5263, host_s=102.62) == 263  # frames the kit did lose: counted
+    assert tl.reanchors == 0
+
+
 # --------------------------------------------------------------------- DataLog ASCII
 DATALOG_TEXT = (
     b"TimeStamp: 1200\r\n"

@@ -138,11 +138,17 @@ class RtcTimeline:
     not move forward (``delta mod 12 h`` in the upper half, or zero) is rejected: the
     frame is a duplicate or damaged.
 
-    With ``host_check_s`` set (wall-clock sources), the RTC delta between two accepted
-    frames is compared with the host clock's; when they differ by more than
-    ``host_check_s + 10 %`` the firmware RTC was reset (reboot after a USB unplug of a
-    bus-powered kit) or jumped, and the index continues from the host delta instead
-    (``reanchors`` counts these).
+    With ``host_check_s`` set (wall-clock sources), the RTC is checked against the host
+    clock: a frame is read after it was stamped, so the host's time since the first frame
+    less the RTC's (the frame's latency, plus the clocks' drift) never falls more than
+    ``host_check_s`` below its lowest value so far unless the firmware RTC was reset
+    (reboot after a USB unplug of a bus-powered kit: a stamp back at 00:00:00 reads as
+    nearly 12 h ahead) or jumped; the index then continues from the host's delta instead
+    (``reanchors`` counts these). A latency that GROWS is the host being late, not the
+    kit: a busy host reads the frames that waited in the serial buffers in one burst,
+    and the RTC, not the host, says which frames they are and which the kit lost (taking
+    the host's delta there counted a 2.6 s pause as 260 lost frames and stamped every
+    later frame 2.6 s late).
     """
 
     def __init__(self, period_cs: float, host_check_s: float | None = None) -> None:
@@ -154,6 +160,8 @@ class RtcTimeline:
         self._unwrapped = 0
         self._last_host: float | None = None
         self._last_index = -1
+        self._first_host: float | None = None
+        self._least_latency_cs = 0.0
         self.reanchors = 0
 
     @property
@@ -165,18 +173,23 @@ class RtcTimeline:
         if self._last_cs is None:
             self._last_cs = rtc_cs
             self._last_host = host_s
+            self._first_host = host_s
             self._last_index = 0
             return 0
         delta = (rtc_cs - self._last_cs) % RTC_WRAP_CS
         use_host = False
-        if self.host_check_s is not None and host_s is not None and self._last_host is not None:
-            host_delta_cs = (host_s - self._last_host) * 100.0
-            tol = self.host_check_s * 100.0 + 0.1 * abs(host_delta_cs)
-            use_host = abs(delta - host_delta_cs) > tol
+        latency_cs = 0.0
+        if (self.host_check_s is not None and host_s is not None
+                and self._first_host is not None):
+            latency_cs = (host_s - self._first_host) * 100.0 - (self._unwrapped + delta)
+            use_host = latency_cs < self._least_latency_cs - self.host_check_s * 100.0
         if use_host:
             assert host_s is not None and self._last_host is not None
             delta = max(round((host_s - self._last_host) * 100.0), 1)
             self.reanchors += 1
+            assert self._first_host is not None
+            latency_cs = (host_s - self._first_host) * 100.0 - (self._unwrapped + delta)
+            self._least_latency_cs = latency_cs
         elif delta == 0 or delta > RTC_WRAP_CS // 2:
             return None
         index = round((self._unwrapped + delta) / self.period_cs)
@@ -186,6 +199,7 @@ class RtcTimeline:
         self._last_cs = rtc_cs
         self._last_host = host_s
         self._last_index = index
+        self._least_latency_cs = min(self._least_latency_cs, latency_cs)
         return index
 
     def time_s(self, index: int) -> float:
