@@ -112,6 +112,10 @@ def test_crystal_error_keeps_index_exact_across_resets(bus: str) -> None:
     steps = np.diff(t)[np.diff(index) == 1]
     assert np.median(steps) == pytest.approx(1 / 107.9, rel=1e-3)
     assert src.measured_odr_hz == pytest.approx(107.9, rel=1e-4)  # stats JSON key
+    # each refinement of the tick period moved the later stamps: they ran backwards by
+    # 26.7 ms after the first second; now they are joined without a step back
+    assert np.all(np.diff(t) > 0)
+    assert steps.min() > 0.85 / 107.9 and steps.max() < 1.15 / 107.9
 
 
 def test_sim_uri_errors_name_the_parameter() -> None:

@@ -40,6 +40,7 @@ and restarts.
 from __future__ import annotations
 
 import contextlib
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,6 +57,11 @@ MAX_BURST_BYTES = 4092
 HOST_JITTER_S = 0.002
 """Host timing error allowed when the words a FIFO dropped are estimated from the host
 clock (between two status reads), s."""
+SLEW_PER_SAMPLE = 0.1
+"""Most a sample's time stamp departs from the clock model's, per sample, while a change
+of that model (the tick period's estimate, a host read time) is taken in: a tenth of the
+sample period, so the stamps never run backwards and each step stays within 10 % of the
+period (the stamps converge in ten times the change: a 37 ms correction in 0.37 s)."""
 BITS_PER_BYTE = 9
 BUDGET_FRACTION = 0.95
 """Share of the bus payload limit the stream may plan to use."""
@@ -168,6 +174,7 @@ class FifoStream:
         self._drift_cur: tuple[float, float] | None = None  # this epoch: (host s, ticks)
         self._drift_sum: tuple[float, float] = (0.0, 0.0)  # finished epochs, summed
         self._last_sample_host_t: float | None = None
+        self._stamped: tuple[int, float] | None = None  # (index, time stamp) of the last sample
         self._pending_gap_reason: str | None = None
         self._last_verify_t = 0.0
         self._last_data_t = 0.0
@@ -457,6 +464,7 @@ class FifoStream:
         else:
             t_s = t_newest + (index - index[-1]) / self.odr_hz
         self._last_sample_host_t = float(t_s[-1])
+        t_s = self._slewed(np.asarray(t_s, dtype=np.float64), index)
         n_lost = sum(g[1] for g in gaps)
         self.counters["samples"] += len(index)
         self.counters["gaps"] += len(gaps)
@@ -464,6 +472,31 @@ class FifoStream:
         return StreamChunk(
             index=index.astype(np.int64), raw=raw, t_s=np.asarray(t_s), temp_c=temp_c, gaps=gaps
         )
+
+    def _slewed(self, t_s: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """The clock model's times ``t_s`` of the samples ``index``, joined to the stamps
+        already given without a step back.
+
+        The model is the epoch origin plus ticks times the tick period's estimate (or,
+        without the timestamp, the host's read time); each refinement of the estimate
+        moves every later time, by 37 ms after the first second of a crystal 3.75 % fast,
+        and a host read time by its jitter. Taken as it comes, that made the stamps run
+        backwards (by 26.7 ms at 104 Hz, and by 6 periods after bus NACKs). Here the
+        offset between where the last stamp was and where the model now puts it decays
+        by :data:`SLEW_PER_SAMPLE` periods per sample: the stamps stay strictly
+        increasing and rejoin the model."""
+        if self._stamped is None:
+            self._stamped = int(index[-1]), float(t_s[-1])
+            return t_s
+        last_index, last_t = self._stamped
+        period = 1.0 / (self.measured_odr_hz if self.ts_decimation else self.odr_hz)
+        offset = last_t - (float(t_s[0]) - (int(index[0]) - last_index) * period)
+        if offset != 0.0:
+            since = (index - last_index).astype(np.float64)
+            left = np.maximum(abs(offset) - SLEW_PER_SAMPLE * period * since, 0.0)
+            t_s = t_s + math.copysign(1.0, offset) * left
+        self._stamped = int(index[-1]), float(t_s[-1])
+        return t_s
 
     def _measure_drift(self) -> None:
         """Estimate the sensor clock against the host clock: read the timestamp counter
