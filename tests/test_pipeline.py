@@ -11,7 +11,7 @@ import pytest
 
 from imubench.batch import UNEXPLAINED, Batch
 from imubench.commands import acquire as acquire_cmd
-from imubench.pipeline import Consumer, Pipeline
+from imubench.pipeline import NOT_PROCESSED, Consumer, Pipeline
 from imubench.recorder import Recorder
 from imubench.recording import load_recording
 from imubench.sources.registry import open_source
@@ -154,6 +154,30 @@ def test_stop_ends_an_endless_wall_clock_source_promptly() -> None:
     assert pipeline.join(2.0)
     assert time.monotonic() - t0 < 1.0
     check_accounts(pipeline, [c])
+
+
+def test_a_consumer_cut_short_at_a_stop_counts_what_it_did_not_take() -> None:
+    """At a stop the daemon waits 1.5 s, then went on while a lagging engine still ran:
+    its account was 20290 samples short of produced. Cut short, the consumer counts
+    every sample it has not taken as lost with a reason and finishes; one that drains at
+    a stop (a recorder) is not cut."""
+    slow = Collect("slow", delay_s=0.05)  # 64 samples per 0.05 s: a third of 3330 Hz
+    keep = Collect("keep", delay_s=0.05)
+    keep.drains_at_stop = True
+    pipeline = Pipeline(open_source("sim://lsm6dsl?odr_hz=3330&clock=wall&seed=2"),
+                        [slow, keep], capacity_s=30.0, max_chunk=64)
+    pipeline.prepare()
+    pipeline.start()
+    time.sleep(1.0)
+    pipeline.stop()
+    assert not pipeline.join(0.2)  # both still behind
+    lagging = pipeline.cut_short()
+    assert list(lagging) == ["slow"] and lagging["slow"] > 1000
+    assert pipeline.join(60.0)
+    check_accounts(pipeline, [slow, keep])
+    acc = pipeline.accounts()
+    assert acc["slow"].lost_by_reason[f"{NOT_PROCESSED}: slow"] >= lagging["slow"] - 64
+    assert acc["keep"].lost == 0  # drained everything
 
 
 def test_recorder_writes_each_gap_once_with_the_driver_reason(tmp_path: Path) -> None:

@@ -40,13 +40,17 @@ import time
 from typing import Any, TextIO
 
 from imubench.config import Config
+from imubench.pipeline import NOT_PROCESSED
 from imubench.sensorrun import SensorRun, utc_stamp
 from imubench.service import ServiceNotifier
 
 log = logging.getLogger("imubench.daemon")
 
 STOP_GRACE_S = 1.5
-"""Longest wait for the pipeline to drain after a stop request, s."""
+"""Longest wait for the pipeline to drain after a stop request, s; a consumer still
+behind then is cut short (:meth:`imubench.pipeline.Pipeline.cut_short`)."""
+CUT_JOIN_S = 60.0
+"""Longest wait, once cut short, for a consumer to finish the batch in hand, s."""
 PREPARE_JOIN_S = 1.0
 """Longest wait, after a stop request, for the sensor being prepared to finish, s."""
 SNAPSHOT_LEAD = 0.25
@@ -275,8 +279,16 @@ class Daemon:
             for pipeline in pipelines:
                 left = max(0.0, deadline - time.monotonic())
                 if not await asyncio.to_thread(pipeline.join, left):
-                    log.warning("pipeline %s still draining after %.1f s; stopping anyway",
-                                pipeline.info.uri, STOP_GRACE_S)
+                    lagging = pipeline.cut_short()
+                    behind = ", ".join(f"{n} {lag} samples" for n, lag in lagging.items())
+                    log.warning("pipeline %s still draining %.1f s after the stop%s",
+                                pipeline.info.uri, STOP_GRACE_S,
+                                f": not processed and counted lost ({NOT_PROCESSED}): "
+                                f"{behind}" if lagging else "; waiting for the recording")
+                    if not await asyncio.to_thread(pipeline.join, CUT_JOIN_S):
+                        log.error("pipeline %s: a consumer is still busy %.0f s after it was "
+                                  "cut short; its account below is incomplete",
+                                  pipeline.info.uri, CUT_JOIN_S)
             for t in tasks:
                 t.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)

@@ -24,7 +24,9 @@ check it under stalls, faults and slow consumers.
 ``duration_s`` ends the stream after ``round(duration_s * odr_hz)`` sample periods from
 its first index (a gap across that end is cut there). :meth:`Pipeline.stop` ends it at
 once: the source is interrupted, the ring closed, every consumer drains what the ring
-holds and finishes (closes its file).
+holds and finishes (closes its file). A consumer too far behind to drain in the time a
+stop allows is cut short by :meth:`Pipeline.cut_short`: what it has not taken yet is
+counted lost, ``not processed before the stop: <name>``, and it finishes.
 """
 
 from __future__ import annotations
@@ -45,6 +47,9 @@ log = logging.getLogger(__name__)
 
 MIN_CAPACITY = 4096
 """Smallest ring, samples (a few FIFO bursts at the highest ODR)."""
+NOT_PROCESSED = "not processed before the stop"
+"""Loss reason of the samples a consumer cut short at a stop had not taken
+(:meth:`Pipeline.cut_short`), followed by its name."""
 
 
 class Consumer(abc.ABC):
@@ -58,6 +63,10 @@ class Consumer(abc.ABC):
     """
 
     name: str = "consumer"
+    drains_at_stop: bool = False
+    """A stop waits for this consumer to take everything the ring holds (a recorder:
+    every sample in memory reaches the file); one that does not is cut short when it
+    lags (:meth:`Pipeline.cut_short`)."""
 
     def prepare(self, info: SourceInfo) -> None:  # noqa: B027 - optional hook
         """Before the source starts: everything slow that must not stall the stream."""
@@ -87,6 +96,16 @@ class Account:
 
     def add(self, batch: Batch) -> None:
         self.delivered += len(batch)
+        self._follow(batch)
+
+    def add_unprocessed(self, batch: Batch, reason: str) -> None:
+        """``batch`` was not handed to the consumer: its samples are lost for ``reason``
+        (its holes keep their own reasons)."""
+        if len(batch):
+            self.lost_by_reason[reason] = self.lost_by_reason.get(reason, 0) + len(batch)
+        self._follow(batch)
+
+    def _follow(self, batch: Batch) -> None:
         for gap in batch.gaps:
             self.lost_by_reason[gap.reason] = self.lost_by_reason.get(gap.reason, 0) + gap.lost
         if len(batch):
@@ -105,6 +124,8 @@ class _Runner(threading.Thread):
         self.max_chunk = max_chunk
         self.account = Account()
         self.error: BaseException | None = None
+        self.cut = threading.Event()
+        """Set by :meth:`Pipeline.cut_short`: count the rest as lost instead of consuming."""
 
     def run(self) -> None:
         try:
@@ -120,6 +141,10 @@ class _Runner(threading.Thread):
                 gaps = tuple(explain_holes(batch, self.account.last_index))
                 if gaps != batch.gaps:
                     batch = dataclasses.replace(batch, gaps=gaps)
+                if self.cut.is_set():
+                    self.account.add_unprocessed(
+                        batch, f"{NOT_PROCESSED}: {self.consumer.name}")
+                    continue
                 self.account.add(batch)
                 self.consumer.consume(batch)
         except BaseException as exc:  # reported by the pipeline, never swallowed
@@ -212,6 +237,16 @@ class Pipeline:
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
             t.join(left)
         return not any(t.is_alive() for t in threads)
+
+    def cut_short(self) -> dict[str, int]:
+        """After :meth:`stop`: every consumer still draining, except those that drain at a
+        stop (:attr:`Consumer.drains_at_stop`), counts what it has not taken as lost
+        (:data:`NOT_PROCESSED`) instead of consuming it, and finishes once the batch in
+        hand is done. Returns each cut consumer's lag (samples) at the cut."""
+        cut = [r for r in self._runners if r.is_alive() and not r.consumer.drains_at_stop]
+        for r in cut:
+            r.cut.set()
+        return {r.consumer.name: r.reader.lag for r in cut}
 
     @property
     def running(self) -> bool:

@@ -74,6 +74,7 @@ class Recorder(Consumer):
     """
 
     name = "recorder"
+    drains_at_stop = True
 
     def __init__(self, path: Path, metadata: dict[str, Any], *, fsync_interval_s: float = 1.0,
                  retry_s: float = 5.0,
