@@ -118,6 +118,26 @@ def test_crystal_error_keeps_index_exact_across_resets(bus: str) -> None:
     assert steps.min() > 0.85 / 107.9 and steps.max() < 1.15 / 107.9
 
 
+@pytest.mark.parametrize("suffix", [".imbr", ".csv"])
+def test_a_recording_of_a_fast_clock_is_read_at_its_measured_rate(
+        tmp_path: Path, suffix: str) -> None:
+    """The header says 104 Hz, the chip sampled at 107.9 (its clock 3.75 % fast) and the
+    time stamps say so: the file is read at 107.9 Hz (every tau was 3.75 % long);
+    ``--rate`` still rules, and an exact clock keeps the nominal rate."""
+    from imubench.cli import main
+    from imubench.recording import InputOptions
+
+    for ppm, want in ((37500, 107.9), (0, 104.0)):
+        out = tmp_path / f"c{ppm}{suffix}"
+        assert main(["acquire", f"sim://lsm6dsm?odr_hz=104&crystal_ppm={ppm}&seed=1",
+                     "--duration-s", "40", "--out", str(out), "--progress", "off"]) == 0
+        rec = load_recording(out)
+        assert rec.metadata["odr_hz"] == 104.0
+        assert rec.rate_hz == pytest.approx(want, rel=2e-5)
+        assert ("measured_odr_hz" in rec.metadata) == (ppm != 0)
+        assert load_recording(out, InputOptions(rate_hz=100.0)).rate_hz == 100.0
+
+
 def test_sim_uri_errors_name_the_parameter() -> None:
     with pytest.raises(SourceError, match=r"unknown parameter.*odr"):
         open_source("sim://lsm6dsl?odr=104")

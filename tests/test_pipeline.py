@@ -180,6 +180,24 @@ def test_a_consumer_cut_short_at_a_stop_counts_what_it_did_not_take() -> None:
     assert acc["keep"].lost == 0  # drained everything
 
 
+def test_the_live_engine_reports_taus_at_the_measured_rate() -> None:
+    """The daemon's engine gave every tau at the nominal 104 Hz for a chip sampling at
+    107.9 Hz (the source knew its measured ODR, 3.75 % off)."""
+    from imubench.allan_consumer import AllanConsumer
+    from imubench.stats.streaming import StreamingAllan
+
+    src = open_source("sim://lsm6dsm?odr_hz=104&crystal_ppm=37500&seed=1")
+    eng = AllanConsumer(
+        lambda info, raw: StreamingAllan(info.odr_hz, taus=[1.0], stats=("oadev",),
+                                         scale=[1.0] * 6 if raw else None),
+        lambda: src.measured_odr_hz)
+    run(Pipeline(src, [eng], duration_s=20.0))
+    snap = eng.request_snapshot().result(5.0)
+    gx = snap[0]["oadev"]  # type: ignore[index]
+    assert list(gx.m) == [104]
+    assert gx.tau_s[0] == pytest.approx(104 / 107.9, rel=1e-4)
+
+
 def test_recorder_writes_each_gap_once_with_the_driver_reason(tmp_path: Path) -> None:
     """Acceptance 2 at the pipeline level (the daemon test runs it end to end)."""
     out = tmp_path / "faults.imbr"

@@ -11,6 +11,7 @@ import allantools
 import numpy as np
 import pytest
 
+from imubench.errors import StatsError
 from imubench.stats.streaming import StreamingAllan
 
 ALLANTOOLS = {
@@ -156,6 +157,30 @@ def test_save_and_restore_resumes(memory: str, rtol: float) -> None:
         for stat in ("oadev", "mdev", "ostdev"):
             np.testing.assert_array_equal(ra[stat].n, rb[stat].n)
             np.testing.assert_allclose(ra[stat].var, rb[stat].var, rtol=rtol)
+
+
+def test_a_measured_rate_moves_the_taus_not_the_factors() -> None:
+    """A chip 3.75 % fast samples at 107.9 Hz for its nominal 104: the taus are reported
+    at the measured rate, on the factors chosen at the nominal one, also after a saved
+    state is resumed; the deviations are those of batch statistics at 107.9 Hz."""
+    from imubench.stats.api import compute
+
+    rng = np.random.default_rng(4)
+    y = rng.normal(size=30000)
+    eng = StreamingAllan(104.0, taus=[0.1, 1.0, 10.0], stats=("oadev", "tdev"))
+    eng.update(y[:10000])
+    eng.set_rate(107.9)
+    resumed = StreamingAllan.load_state(eng.save_state())
+    resumed.update(y[10000:])
+    assert resumed.rate_hz == 107.9 and resumed.nominal_rate_hz == 104.0
+    for stat in ("oadev", "tdev"):
+        got = resumed.snapshot()[stat]  # type: ignore[index]
+        np.testing.assert_array_equal(got.m, [10, 104, 1040])
+        np.testing.assert_allclose(got.tau_s, got.m / 107.9)
+        ref = compute(stat, y, 107.9, "freq", list(got.m / 107.9))
+        np.testing.assert_allclose(got.dev, ref.dev, rtol=1e-9)
+    with pytest.raises(StatsError, match="not within 10 %"):
+        eng.set_rate(208.0)
 
 
 def test_standard_deviations_match_numpy() -> None:

@@ -45,8 +45,12 @@ class AllanConsumer(Consumer):
 
     name = "engine"
 
-    def __init__(self, make_engine: Callable[[SourceInfo, bool], StreamingAllan]) -> None:
+    def __init__(self, make_engine: Callable[[SourceInfo, bool], StreamingAllan],
+                 measured_rate: Callable[[], float | None] | None = None) -> None:
         self.make_engine = make_engine
+        self.measured_rate = measured_rate
+        """The source's ODR measured against the host clock (None until known): each
+        snapshot reports its taus at it (:meth:`StreamingAllan.set_rate`)."""
         self.engine: StreamingAllan | None = None
         self.use_raw = False
         self._last_index: int | None = None
@@ -85,6 +89,9 @@ class AllanConsumer(Consumer):
             return
         try:
             assert self.engine is not None
+            rate = self.measured_rate() if self.measured_rate is not None else None
+            if rate is not None:
+                self.engine.set_rate(rate)
             fut.set_result(self.engine.snapshot())
         except BaseException as exc:
             fut.set_exception(exc)

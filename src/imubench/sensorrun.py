@@ -98,7 +98,8 @@ class SensorRun:
         source = open_source(self.spec.uri)
         info = source.info
         self.say(f"source {info.uri}: {info.chip} at {info.odr_hz:g} Hz")
-        self.engine_consumer = AllanConsumer(self._make_engine)
+        self.engine_consumer = AllanConsumer(self._make_engine,
+                                             lambda: source.measured_odr_hz)
         consumers: list[Consumer] = [self.engine_consumer]
         if self.recorder is not None:
             consumers.insert(0, self.recorder)
@@ -122,7 +123,8 @@ class SensorRun:
         if state is not None and state.exists():
             try:
                 eng = StreamingAllan.load_state(state.read_bytes())
-                if abs(eng.rate_hz - info.odr_hz) < 1e-9 and list(eng.stats) == list(a.stats):
+                if (abs(eng.nominal_rate_hz - info.odr_hz) < 1e-9
+                        and list(eng.stats) == list(a.stats)):
                     self.say(f"resumed Allan state from {state} ({eng.n_samples} samples)")
                     return eng
                 self.say(f"ignoring {state}: it was made with other settings")

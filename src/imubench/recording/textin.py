@@ -72,6 +72,10 @@ class TextRead:
     not stated by the file or ``--rate``."""
     item: str = "data line"
     """What ``bad_lines`` number: data lines, or messages of a bag."""
+    rate_stated: bool = False
+    """The rate is the one the file states (``# odr_hz``), not read off its time column:
+    the time stamps may then show the chip's clock off it
+    (:func:`imubench.recording.measured_rate`)."""
 
 
 def open_text(path: Path) -> IO[str]:
@@ -435,7 +439,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     inferred = bool(overridden) or not (
         (fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
         or (raw.width == 1 and raw.header is None))  # allan's plain series
-    return TextRead(meta, batch, raw.gaps, bad, notes, inferred)
+    return TextRead(meta, batch, raw.gaps, bad, notes, inferred,
+                    rate_stated=how == "# odr_hz" and "t" in where_col)
 
 
 def _check_given_rate(t_s: np.ndarray, given: Timebase, where: str) -> None:

@@ -285,7 +285,10 @@ class StreamingAllan:
             raise StatsError(f"rate_hz must be positive, got {rate_hz}")
         if memory not in ("exact", "bounded"):
             raise StatsError(f"memory must be 'exact' or 'bounded', got {memory!r}")
+        self.nominal_rate_hz = float(rate_hz)
+        """The rate the averaging factors were chosen at (the chip's nominal ODR)."""
         self.rate_hz = float(rate_hz)
+        """The rate taus are reported in (:meth:`set_rate`)."""
         self.tau0_s = 1.0 / self.rate_hz
         self.stats = tuple(dict.fromkeys(_canonical(s) for s in stats))
         self.taus = taus
@@ -430,6 +433,18 @@ class StreamingAllan:
             return
         self._flush_inbox()
         self._process(arr, mask)
+
+    def set_rate(self, rate_hz: float) -> None:
+        """Report taus at ``rate_hz``, the rate the samples were really taken at (a chip
+        whose clock runs 3.75 % fast samples at 107.9 Hz for its nominal 104: at the
+        nominal rate every tau would read 3.75 % long). The averaging factors stay those
+        chosen at :attr:`nominal_rate_hz`; a rate more than 10 % from it is not a clock
+        error but another ODR, and is refused."""
+        if not (rate_hz > 0 and abs(rate_hz / self.nominal_rate_hz - 1.0) <= 0.1):
+            raise StatsError(f"set_rate: {rate_hz} Hz is not within 10 % of the nominal "
+                             f"{self.nominal_rate_hz:g} Hz the engine was made for")
+        self.rate_hz = float(rate_hz)
+        self.tau0_s = 1.0 / self.rate_hz
 
     @property
     def n_samples(self) -> int:
@@ -747,7 +762,8 @@ class StreamingAllan:
         for stat in self.stats:
             try:
                 allowed = set(
-                    int(m) for m in averaging_factors(stat, n_freq, self.taus, self.tau0_s)
+                    int(m) for m in averaging_factors(stat, n_freq, self.taus,
+                                                      1.0 / self.nominal_rate_hz)
                 )
             except StatsError:
                 allowed = set()
@@ -898,7 +914,8 @@ class StreamingAllan:
                     arrays[f"lv/{s}/{name}"] = seq.view(seq.stop - held, seq.stop)
                     arrays[f"lv/{s}/{name}/start"] = np.array([seq.stop - held, seq.stop])
         meta = {
-            "rate_hz": self.rate_hz,
+            "rate_hz": self.nominal_rate_hz,
+            "measured_rate_hz": self.rate_hz,
             "taus": self.taus,
             "stats": list(self.stats),
             "max_m": self.max_m,
@@ -957,6 +974,7 @@ class StreamingAllan:
                 confidence=meta["confidence"],
                 alpha=meta["alpha"],
             )
+            eng.set_rate(meta.get("measured_rate_hz", meta["rate_hz"]))
             dtype = np.int64 if meta["int"] else np.float64
             eng._one_d = meta["one_d"]
             eng._setup(np.zeros((0, meta["nch"]), dtype))
