@@ -708,3 +708,46 @@ def test_an_index_column_with_a_few_rows_out_of_order_costs_those_rows(
     gx = rec.channel("gx")
     ok = np.isfinite(gx)
     np.testing.assert_allclose(gx[ok], np.nonzero(ok)[0] * 0.01, atol=1e-9)
+
+
+def _stamped(tmp_path: Path, name: str, stamps: list[str], head: str) -> Path:
+    p = tmp_path / name
+    rng = np.random.default_rng(3)
+    p.write_text(f"{head},gyro_x [dps]\n" + "".join(
+        f"{s},{rng.normal():.4f}\n" for s in stamps))
+    return p
+
+
+def test_stamps_rounded_near_the_sample_period_are_read_at_their_rate(
+        tmp_path: Path) -> None:
+    """An Arduino's millis() at 833 Hz (steps 1, 1, 1, 1, 2 ms) was read as 1000 Hz with
+    every sixth sample a hole, and --rate 833 refused; MJD tags with 5 decimals at 1 s as
+    1.157 Hz. Rounded stamps are read at their mean spacing, with a note; a 1 kHz grid
+    whose holes fall at random keeps its rate and its holes."""
+    n = 4000
+    p = _stamped(tmp_path, "millis.csv",
+                 [str(int(123456 + k * 1000.0 / 833.0)) for k in range(n)], "timestamp_ms")
+    rec = load_recording(p)
+    assert rec.rate_hz == pytest.approx(833.0, rel=1e-4) and rec.lost_samples == 0
+    assert load_recording(p, InputOptions(rate_hz=833.0)).lost_samples == 0
+    rng = np.random.default_rng(5)
+    k = np.sort(rng.choice(int(n * 1.2), n, replace=False))
+    holes = load_recording(_stamped(tmp_path, "holes.csv", [str(123456 + v) for v in k],
+                                    "timestamp_ms"))
+    assert holes.rate_hz == pytest.approx(1000.0) and holes.lost_samples == k[-1] - k[0] + 1 - n
+    mjd = _stamped(tmp_path, "mjd.txt", [f"{60000.5 + s / 86400:.5f}" for s in range(n)],
+                   "# mjd")
+    assert load_recording(mjd).rate_hz == pytest.approx(1.0, rel=1e-4)
+
+
+def test_stamps_rounded_coarser_than_the_period_are_refused_with_the_fix(
+        tmp_path: Path) -> None:
+    """millis() at 1666 Hz: rows share stamps. It was read as 1000 Hz with 40 % of the
+    rows skipped as damaged; now refused, and --rate with --columns t=- reads every row
+    in order."""
+    p = _stamped(tmp_path, "fast.csv",
+                 [str(int(123456 + k * 1000.0 / 1666.0)) for k in range(3000)], "timestamp_ms")
+    with pytest.raises(RecordingError, match=r"rounded to 0\.001 s.*--columns t=-"):
+        load_recording(p)
+    rec = load_recording(p, InputOptions(rate_hz=1666.0, columns={"t": "-"}))
+    assert len(rec) == 3000 and rec.rate_hz == 1666.0 and rec.lost_samples == 0

@@ -62,6 +62,11 @@ class InputOptions:
     None = such a file is refused without ``--rate``."""
 
 
+NO_TIME_COLUMN = "-"
+"""``--columns t=-``: read no time column (rows in order at ``--rate``), for stamps that
+cannot index the rows (rounded as coarse as the sample period)."""
+
+
 def parse_columns(text: str) -> dict[str, str]:
     """``gx=gyro_x,ax=3`` -> ``{"gx": "gyro_x", "ax": "3"}``; RecordingError if malformed."""
     out: dict[str, str] = {}

@@ -39,6 +39,7 @@ from imubench.recording.columns import OWN_NAMES, Column, is_euroc, is_ros_expor
 from imubench.recording.options import (
     ACCEL_UNITS_G,
     GYRO_UNITS_DPS,
+    NO_TIME_COLUMN,
     TIME_UNITS_S,
     InputOptions,
 )
@@ -323,6 +324,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                if raw.width == 2 else fmt)
     where_col: dict[str, int] = {c.channel: k for k, c in enumerate(cols) if c.channel}
     for target, spec in options.columns.items():
+        if target == "t" and spec == NO_TIME_COLUMN:
+            where_col.pop("t", None)  # rows in order, at the rate given
+            continue
         k = _pick(cols, spec, where)
         where_col = {ch: j for ch, j in where_col.items() if j != k and ch != target}
         where_col[target] = k

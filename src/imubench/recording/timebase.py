@@ -73,6 +73,14 @@ PHASE_NOISE = 3.0
 median spacing is used: stamps with no period have a coherence of ~1/sqrt(stamps) and
 its largest over the search grid is ~2.8/sqrt(stamps); uniform jitter of 0.45 periods
 leaves 0.11 of a perfect grid's 1, jitter of 0.49 periods 0.02."""
+SHARED_STAMPS = 0.005
+"""Share of consecutive rows with the same stamp beyond which the stamps are taken as
+rounded coarser than the sample period (rows that share a stamp cannot be told apart by
+it), not as the odd repeated line."""
+PAUSE_STEPS = 1000
+"""A step longer than this many median spacings ends the stamps the period is searched
+on: the search grid is as fine as one period over the stamps' span, so a pause of an
+hour among the first stamps made it 26 s and a wrong digit in a day number hung it."""
 COARSE_ROWS = 2000
 """Stamps of the coarse search of the period (its peak then ~1/2000 wide, searched at 20
 points per width); the fine search uses all the first rows near it."""
@@ -221,8 +229,9 @@ def _grid_origin(t_s: np.ndarray, step_s: float) -> float:
                                / (2.0 * np.pi))
 
 
-def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
-    """(step, time of index 0) to index the first ``m`` rows by (module docstring, 4.).
+def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float, str]:
+    """(step, time of index 0, a note) to index the first ``m`` rows by (module
+    docstring, 4.); the note is :func:`_rounded_period`'s.
 
     The step is the period on which the stamps are most in phase: the maximum of
     ``|mean(exp(2 pi i t / P))|`` over P within :data:`PERIOD_SEARCH` of the median
@@ -235,12 +244,16 @@ def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
     rows = np.nonzero(np.isfinite(t))[0]
     rows = rows[increasing_rows(t[rows])]  # a stamp out of time order is no sample time
     if len(rows) < 3:
-        return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
+        return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5])), ""
     u = t[rows] - t[rows][0]
     step = float(np.median(np.diff(u)))
     if not step > 0:
-        return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5]))
+        return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5])), ""
     median = step
+    pause = np.nonzero(np.diff(u) > PAUSE_STEPS * median)[0]
+    if pause.size and pause[0] >= 2:  # the stamps before the first long pause
+        u, rows = u[:pause[0] + 1], rows[:pause[0] + 1]
+    step, note = _rounded_period(t[:rows[-1] + 1], u, median, where)
     for part in (u[:COARSE_ROWS], u):
         periods = max(part[-1] / step, 1.0)  # the peak is ~1 / periods wide (relative)
         span = PERIOD_SEARCH if part is not u or part.size <= COARSE_ROWS else 4.0 / periods
@@ -249,8 +262,63 @@ def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float]:
         if coherence < PHASE_NOISE / np.sqrt(part.size):
             # no period stands out of the noise (jitter near half a period on few rows):
             # the median spacing, as before this search, and the first stamps
-            return median, float(np.median(t[rows][:5]))
-    return step, _grid_origin(t[rows], step)
+            return median, float(np.median(t[rows][:5])), ""
+    return step, _grid_origin(t[rows], step), note
+
+
+def _on_resolution(steps: np.ndarray, r: float) -> bool:
+    """Whether every step is a whole number (0, 1, 2, ...) of ``r`` (to 0.1 %: stamps
+    written with a few decimals)."""
+    q = steps / r
+    return bool(np.all(np.abs(q - np.rint(q)) < 1e-3))
+
+
+def _resolution(steps: np.ndarray, median: float) -> float | None:
+    """The resolution the stamps are rounded to: the largest ``median / k`` (k = 1..10)
+    of which every step is a whole number (steps of 2 and 3 ms: 1 ms); None if none."""
+    for k in range(1, 11):
+        if _on_resolution(steps, median / k):
+            return median / k
+    return None
+
+
+def _rounded_period(t: np.ndarray, u: np.ndarray, median: float, where: str
+                    ) -> tuple[float, str]:
+    """The step to search the period near: ``median``, or the mean spacing of stamps
+    rounded to a resolution as coarse as the sample period (with a note saying so).
+
+    Stamps rounded to a resolution (every step a whole number of it: an Arduino's
+    ``millis()``, seconds printed with 2 decimals) whose mean spacing is more than
+    :data:`PERIOD_SEARCH` longer are a sampling period the resolution cannot show (833 Hz
+    in whole milliseconds: steps 1, 1, 1, 1, 2 ms), when the stamps are in phase on that
+    mean spacing (:data:`PHASE_NOISE`); the median read them as 1000 Hz with every sixth
+    sample a hole. A grid whose holes fall at random is in phase on no such period and
+    keeps its median. Holes in a regular pattern (every tenth sample) look exactly like
+    rounding and are read as the longer period: the note says so. Stamps rounded coarser
+    than the period (rows share stamps: 104 Hz printed to 10 ms) cannot be indexed by
+    them and are refused with the fix."""
+    tf = t[np.isfinite(t)]
+    steps = np.diff(tf)
+    r = _resolution(steps, median) if len(steps) >= 3 and np.all(steps >= 0) else None
+    if r is None:
+        return median, ""
+    if np.count_nonzero(steps == 0) > SHARED_STAMPS * len(steps):
+        raise RecordingError(
+            f"{where}: the time stamps are rounded to {r:.6g} s, as "
+            f"coarse as the sample period ({float(tf[-1] - tf[0]) / len(steps):.6g} s on "
+            "average): rows share a stamp and cannot be told apart by it; give --rate HZ "
+            "and --columns t=- to read the rows in order without the time column")
+    mean = float(tf[-1] - tf[0]) / len(steps)
+    if mean <= median * (1.0 + PERIOD_SEARCH):
+        return median, ""
+    grid = mean * (1.0 + np.linspace(-PERIOD_SEARCH, PERIOD_SEARCH, 201))
+    period, coherence = _most_in_phase(u[:COARSE_ROWS], grid)
+    if coherence < PHASE_NOISE / np.sqrt(min(u.size, COARSE_ROWS)):
+        return median, ""
+    return period, (f"the stamps are rounded to {r:.6g} s, as coarse as the "
+                    "sample period: the rate is read from their mean spacing; holes are not "
+                    "seen at that resolution, and samples dropped in a regular pattern "
+                    "would read as a lower rate (give --rate HZ if so)")
 
 
 def _most_in_phase(u: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
@@ -279,7 +347,7 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
     finite = np.isfinite(t_s)
     if len(t_s) and not finite.any():
         raise RecordingError(f"{where}: the time column has no numeric value; give "
-                             "--rate HZ (and --columns without t)")
+                             "--rate HZ and --columns t=- (no time column)")
     n = len(t_s)
     if n == 0:
         return Timebase(rate_hz or 0.0, np.zeros(0, np.int64), np.ones(0, bool),
@@ -293,7 +361,7 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
         index = index[keep]
         return Timebase(rate_hz, index - index[0], keep, "given")
     m = min(n, FIRST_FIT_ROWS)
-    step, t0 = _first_line(t_s, m, where)
+    step, t0, note = _first_line(t_s, m, where)
     while True:  # fit a prefix, then GROWTH x longer ones, so rounding never slips
         index, ok = _indices(t_s[:m], t0, step)
         keep = _kept(index, ok, where)
@@ -312,7 +380,8 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
     index, ok = _indices(t_s, t0, step)
     keep = _kept(index, ok, where)
     kept = index[keep]
-    return Timebase(1.0 / step, kept - kept[0], keep, "from t (least squares)")
+    return Timebase(1.0 / step, kept - kept[0], keep,
+                    "from t (least squares" + (f"; {note})" if note else ")"))
 
 
 INDEX_DISAGREE_SHARE = 0.01
