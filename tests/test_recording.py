@@ -751,3 +751,18 @@ def test_stamps_rounded_coarser_than_the_period_are_refused_with_the_fix(
         load_recording(p)
     rec = load_recording(p, InputOptions(rate_hz=1666.0, columns={"t": "-"}))
     assert len(rec) == 3000 and rec.rate_hz == 1666.0 and rec.lost_samples == 0
+
+
+def test_a_time_column_is_found_by_its_unit_or_named_in_the_refusal(tmp_path: Path) -> None:
+    """``Zeit [s]`` was dropped and `allan` read the table at 1 Hz with its taus labelled
+    in seconds (100x wrong at 100 Hz): a column whose header states a time unit is the
+    time; a table with a header and no time column is never read at allan's 1 Hz, and
+    the refusal names the columns it did not read."""
+    body = "".join(f"{k / 100:.2f},{k % 7 * 0.01:.3f}\n" for k in range(500))
+    p = tmp_path / "zeit.csv"
+    p.write_text("Zeit [s],gyro_x [dps]\n" + body)
+    assert load_recording(p).rate_hz == pytest.approx(100.0)
+    q = tmp_path / "unknown.csv"
+    q.write_text("Uhr,gyro_x [dps]\n" + body)
+    with pytest.raises(RecordingError, match=r"--columns t=NAME \(columns not read: Uhr\)"):
+        load_recording(q, InputOptions(default_rate_hz=1.0))

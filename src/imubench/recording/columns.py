@@ -27,7 +27,8 @@ _GYRO_STEMS = ("g", "gyro", "gyr", "gyroscope", "w", "omega", "angular_velocity"
 _ACCEL_STEMS = ("a", "acc", "accel", "accelerometer", "acceleration", "linear_acceleration",
                 "a_rs_s")
 _TIME_NAMES = ("t", "time", "timestamp", "stamp", "time_s", "t_s", "header_stamp",
-               "seconds", "sec", "time_stamp")
+               "seconds", "sec", "time_stamp", "elapsed", "elapsed_time", "sample_time",
+               "zeit")
 _TIME_SUFFIXES = {"_ms": "ms", "_us": "us", "_ns": "ns", "_s": "s", "_min": "min", "_h": "h"}
 
 
@@ -62,6 +63,10 @@ _UNIT_WORDS = {
     "h": "h",
     "degc": "degC", "°c": "degC", "c": "degC",
 }
+
+
+TIME_UNIT_WORDS = frozenset({"s", "ms", "us", "ns", "min", "h"})
+"""Units (after :data:`_UNIT_WORDS`) that make a column a time column."""
 
 
 @dataclass(frozen=True)
@@ -121,4 +126,9 @@ def map_columns(header: list[str]) -> list[Column]:
         if channel is not None:
             taken.add(channel)
         cols.append(Column(text, name, channel, unit))
+    if "t" not in taken:  # a column whose header states a time unit is the time
+        for k, c in enumerate(cols):
+            if c.channel is None and c.unit in TIME_UNIT_WORDS:
+                cols[k] = Column(c.text, c.name, "t", c.unit)
+                break
     return cols

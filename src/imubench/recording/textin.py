@@ -412,9 +412,16 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                 f"{unit_name.split(' (')[0]}, not a rate an IMU records at; check "
                 "--time-unit s|ms|us|ns or give --rate HZ")
     else:
-        rate = rate if rate is not None else options.default_rate_hz
+        if rate is None and raw.header is None:
+            rate = options.default_rate_hz  # a plain series: tau in samples
         if rate is None:
-            raise RecordingError(f"{where}: no time column and no rate; give --rate HZ")
+            others = [c.text.strip() for k, c in enumerate(cols)
+                      if k not in where_col.values()]
+            raise RecordingError(
+                f"{where}: no time column and no rate; give --rate HZ"
+                + (f", or name the time column with --columns t=NAME (columns not "
+                   f"read: {', '.join(others)})" if others and raw.header is not None
+                   else ""))
         n = len(table)
         tb = Timebase(rate, np.arange(n, dtype=np.int64), np.ones(n, bool),
                       "given" if options.rate_hz is not None or meta_rate is not None
