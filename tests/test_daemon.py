@@ -131,3 +131,12 @@ def test_daemon_stops_on_duration_and_resumes_state(tmp_path: Path) -> None:
         assert proc.returncode == 0, proc.stdout + proc.stderr
         assert expected in proc.stdout
     assert "stopped after 104 samples" in proc.stdout
+    assert "resumed Allan state" in proc.stdout and "(104 samples, saved " in proc.stdout
+    # the two runs are two gap-free runs of the engine, not one continuous one: a resumed
+    # state was joined to the new run as if no time had passed between them
+    from imubench.stats.streaming import StreamingAllan
+
+    eng = StreamingAllan.load_state((tmp_path / "state.npz").read_bytes())
+    lengths, counts = eng.runs(0)
+    assert list(lengths) == [105] and list(counts) == [2]  # 104 samples = 105 phase points
+    assert eng.n_samples > 2 * 104

@@ -3,7 +3,8 @@
 
 The engine lives in the consumer's own thread (the pipeline's), so its updates never
 run on the daemon's event loop. Other threads ask for a snapshot with
-:meth:`AllanConsumer.request_snapshot`; the consumer's thread answers between two
+:meth:`AllanConsumer.request_snapshot` (or its saved state with
+:meth:`AllanConsumer.request_state`); the consumer's thread answers between two
 updates (at most one update late), so nobody touches the engine while it updates.
 
 Holes in the stream go to the engine as gap samples (NaN rows / masked raw counts), in
@@ -54,13 +55,16 @@ class AllanConsumer(Consumer):
         self.engine: StreamingAllan | None = None
         self.use_raw = False
         self._last_index: int | None = None
-        self._requests: queue.SimpleQueue[concurrent.futures.Future[Snapshot]] = (
-            queue.SimpleQueue()
-        )
+        self._requests: queue.SimpleQueue[
+            tuple[concurrent.futures.Future[Any], Callable[[StreamingAllan], Any]]
+        ] = queue.SimpleQueue()
         self._finished = False
         self._lock = threading.Lock()
         self.temperature_c: float | None = None
         """The die temperature of the latest sample that has one, degC."""
+        self.leading_gap_rows = 0
+        """Gap rows put before the first sample (an engine resumed from a saved state: the
+        time between the runs, so that no estimate joins them as if continuous)."""
 
     def prepare(self, info: SourceInfo) -> None:
         warm_up()
@@ -75,34 +79,47 @@ class AllanConsumer(Consumer):
     def request_snapshot(self) -> concurrent.futures.Future[Snapshot]:
         """A future snapshot of the engine, answered by the consumer's thread (at once
         when the stream has finished)."""
-        fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
+        return self._request(self._snapshot)
+
+    def request_state(self) -> concurrent.futures.Future[bytes]:
+        """A future of the engine's saved state (:meth:`StreamingAllan.save_state`),
+        made in the consumer's thread like a snapshot."""
+        return self._request(lambda engine: engine.save_state())
+
+    def _snapshot(self, engine: StreamingAllan) -> Snapshot:
+        rate = self.measured_rate() if self.measured_rate is not None else None
+        if rate is not None:
+            engine.set_rate(rate)
+        return engine.snapshot()
+
+    def _request(self, what: Callable[[StreamingAllan], Any]
+                 ) -> concurrent.futures.Future[Any]:
+        fut: concurrent.futures.Future[Any] = concurrent.futures.Future()
         with self._lock:
             finished = self._finished
             if not finished:
-                self._requests.put(fut)
+                self._requests.put((fut, what))
         if finished:
-            self._answer(fut)
+            self._answer(fut, what)
         return fut
 
-    def _answer(self, fut: concurrent.futures.Future[Snapshot]) -> None:
+    def _answer(self, fut: concurrent.futures.Future[Any],
+                what: Callable[[StreamingAllan], Any]) -> None:
         if not fut.set_running_or_notify_cancel():
             return
         try:
             assert self.engine is not None
-            rate = self.measured_rate() if self.measured_rate is not None else None
-            if rate is not None:
-                self.engine.set_rate(rate)
-            fut.set_result(self.engine.snapshot())
+            fut.set_result(what(self.engine))
         except BaseException as exc:
             fut.set_exception(exc)
 
     def _serve(self) -> None:
         while True:
             try:
-                fut = self._requests.get_nowait()
+                fut, what = self._requests.get_nowait()
             except queue.Empty:
                 return
-            self._answer(fut)
+            self._answer(fut, what)
 
     # -- Consumer -----------------------------------------------------------------------
     def _gap_rows(self, n: int) -> None:
@@ -129,6 +146,9 @@ class AllanConsumer(Consumer):
             self.temperature_c = float(measured[-1])
         src = batch.raw if self.use_raw else batch.values
         assert src is not None
+        if self._last_index is None and self.leading_gap_rows:
+            self._gap_rows(self.leading_gap_rows)
+            self.leading_gap_rows = 0
         breaks = (np.nonzero(np.diff(idx) > 1)[0] + 1).tolist()
         for lo, hi in zip([0, *breaks], [*breaks, len(idx)], strict=True):
             expected = int(idx[lo]) if self._last_index is None else self._last_index + 1

@@ -329,9 +329,16 @@ class AllanConfig(_Section):
     )
     state_path: str | None = Field(
         None,
-        description="Save the engine state here on exit and resume from it on start "
-        "(unit: path); empty for none; `{sensor}` is replaced by the sensor name (needed "
-        "with several `[[sensors]]`)",
+        description="Save the engine state here on exit and every `state_every_s`, and "
+        "resume from it on start, with the time between the runs kept as a gap (unit: "
+        "path); empty for none; `{sensor}` is replaced by the sensor name (needed with "
+        "several `[[sensors]]`)",
+    )
+    state_every_s: float = Field(
+        300.0, ge=0,
+        description="Also save the state this often while running, so that a restart "
+        "after a crash or the watchdog resumes from at most this far back (unit: s); 0 "
+        "saves on exit only",
     )
 
     @field_validator("stats", mode="before")

@@ -40,6 +40,7 @@ import time
 from typing import Any, TextIO
 
 from imubench.config import Config
+from imubench.errors import ImubenchError
 from imubench.pipeline import NOT_PROCESSED
 from imubench.sensorrun import SensorRun, utc_stamp
 from imubench.service import ServiceNotifier
@@ -51,6 +52,8 @@ STOP_GRACE_S = 1.5
 behind then is cut short (:meth:`imubench.pipeline.Pipeline.cut_short`)."""
 CUT_JOIN_S = 60.0
 """Longest wait, once cut short, for a consumer to finish the batch in hand, s."""
+STATE_SAVE_S = 30.0
+"""Longest wait for the engine state to be made and written, s."""
 PREPARE_JOIN_S = 1.0
 """Longest wait, after a stop request, for the sensor being prepared to finish, s."""
 SNAPSHOT_LEAD = 0.25
@@ -100,6 +103,8 @@ class Daemon:
         interval = self.cfg.mqtt.publish_interval_s
         lead = SNAPSHOT_LEAD * interval
         next_t = time.monotonic() + interval
+        every = self.cfg.allan.state_every_s
+        next_save = time.monotonic() + every
         while not self.stop_requested.is_set():
             if await self._sleep_until(next_t - lead):
                 return
@@ -115,6 +120,12 @@ class Daemon:
             if snap is None:
                 continue
             await publisher.publish_allan(self._payload(unit, snap), unit.name)
+            if every > 0 and now >= next_save:
+                next_save = now + every
+                try:
+                    await unit.save_state()
+                except (OSError, ImubenchError) as exc:
+                    log.warning("%s: could not save the engine state: %s", unit.name, exc)
 
     def _payload(self, unit: SensorRun, snap: Any) -> dict[str, Any]:
         """The snapshot payload with the broker link's health (``health.mqtt``); the
@@ -401,7 +412,8 @@ class Daemon:
             with contextlib.suppress(Exception):
                 snap = await asyncio.wait_for(unit.snapshot(), 1.0)
                 await publisher.publish_allan(self._payload(unit, snap), unit.name)
-            unit.save_state()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(unit.save_state(), STATE_SAVE_S)
         await publisher.close(timeout_s=1.0)
         if broker is not None:
             await broker.stop()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import logging
+import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,6 +27,10 @@ from imubench.pipeline import Consumer, Pipeline
 from imubench.recorder import Recorder
 from imubench.sources.base import SourceInfo
 from imubench.sources.registry import open_source
+
+RESUME_GAP_FACTORS = 4
+"""Gap rows between a resumed state and the new run: at most this many times the longest
+averaging factor (:meth:`SensorRun._resume`)."""
 
 if TYPE_CHECKING:  # imported off the event loop, after the status is online (numba)
     from imubench.allan_consumer import AllanConsumer, Snapshot
@@ -76,6 +81,8 @@ class SensorRun:
                 make_dirs=True,  # log.path may name directories per station / day
             )
         self.engine_consumer: AllanConsumer | None = None
+        self.resumed_samples = 0
+        """Samples the engine took over from ``allan.state_path`` at the start."""
         self.pipeline: Pipeline | None = None
         self.published = 0
         self.skipped_slots = 0
@@ -122,10 +129,11 @@ class SensorRun:
         state = a.state_file(self.name)
         if state is not None and state.exists():
             try:
+                saved_at = state.stat().st_mtime
                 eng = StreamingAllan.load_state(state.read_bytes())
                 if (abs(eng.nominal_rate_hz - info.odr_hz) < 1e-9
                         and list(eng.stats) == list(a.stats)):
-                    self.say(f"resumed Allan state from {state} ({eng.n_samples} samples)")
+                    self._resume(eng, state, saved_at)
                     return eng
                 self.say(f"ignoring {state}: it was made with other settings")
             except (ImubenchError, OSError, ValueError, KeyError) as exc:
@@ -133,16 +141,47 @@ class SensorRun:
         return StreamingAllan(info.odr_hz, taus=a.tau_spec, stats=list(a.stats),
                               max_tau_s=a.max_tau_s, memory=a.memory, scale=scale)
 
-    def save_state(self) -> None:
-        """Write the engine state to ``allan.state_path`` (atomically), when configured."""
+    def _resume(self, eng: StreamingAllan, state: Path, saved_at: float) -> None:
+        """Take ``eng`` (loaded from ``state``, written at ``saved_at``, Unix s) as this
+        run's engine: the time since it was saved becomes gap rows before the first
+        sample, at most :data:`RESUME_GAP_FACTORS` x the longest averaging factor (no
+        estimate spans that many samples, so a longer gap gives the same results), and the
+        samples it holds are counted in :attr:`resumed_samples`."""
+        assert self.engine_consumer is not None
+        pause_s = max(0.0, time.time() - saved_at)
+        rows = min(round(pause_s * eng.nominal_rate_hz), RESUME_GAP_FACTORS * eng.max_m + 4)
+        self.engine_consumer.leading_gap_rows = max(rows, 1)
+        lengths, counts = eng.runs(0)
+        self.resumed_samples = int(np.sum((lengths - 1) * counts))
+        saved = dt.datetime.fromtimestamp(saved_at, dt.UTC).isoformat(timespec="seconds")
+        self.say(f"resumed Allan state from {state} ({self.resumed_samples} samples, saved "
+                 f"{saved}, {pause_s:.0f} s ago): the runs are kept apart by a gap; samples "
+                 "taken after that save and before this start are not in it")
+
+    async def save_state(self) -> None:
+        """Write the engine state to ``allan.state_path`` (atomically), when configured;
+        the state is made in the engine's thread (:meth:`AllanConsumer.request_state`)."""
         state = self.cfg.allan.state_file(self.name)
         ec = self.engine_consumer
         if state is None or ec is None or ec.engine is None or not ec.n_samples:
             return
-        state.parent.mkdir(parents=True, exist_ok=True)
-        tmp = state.with_suffix(state.suffix + ".tmp")
-        tmp.write_bytes(ec.engine.save_state())
-        tmp.replace(state)
+        blob = await asyncio.wrap_future(ec.request_state())
+
+        def write() -> None:
+            state.parent.mkdir(parents=True, exist_ok=True)
+            tmp = state.with_suffix(state.suffix + ".tmp")
+            tmp.write_bytes(blob)
+            tmp.replace(state)
+
+        await asyncio.to_thread(write)
+
+    @property
+    def samples(self) -> int:
+        """Samples the engine holds: those resumed from the saved state and those
+        delivered to it in this run (lost ones are not samples)."""
+        p = self.pipeline
+        acc = p.accounts().get("engine") if p is not None else None
+        return self.resumed_samples + (acc.delivered if acc is not None else 0)
 
     # -- payloads ------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:
@@ -198,7 +237,8 @@ class SensorRun:
             "time": dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds"),
             "station": self.cfg.mqtt.station, "sensor": self.name,
             "chip": info.chip if info else None, "odr_hz": info.odr_hz if info else None,
-            "samples": self.engine.n_samples if self.engine is not None else 0,
+            "samples": self.samples,
+            "resumed_samples": self.resumed_samples,
             "lost_samples": engine_account.lost if engine_account is not None else 0,
             "statistic": stats[0], "memory": self.cfg.allan.memory,
             "channels": per_stat[stats[0]],
@@ -234,7 +274,7 @@ class SensorRun:
             acc = p.accounts().get("engine")
             lost = acc.lost if acc is not None else 0
             lines.append(f"{self.name}: {p.info.chip} {p.info.odr_hz:g} Hz  samples "
-                         f"{self.engine.n_samples if self.engine is not None else 0}  lost "
+                         f"{self.samples}  lost "
                          f"{lost}  gaps {tel.gaps}  recording "
                          f"{self.recorder.state if self.recorder is not None else 'off'}")
         if snap is None:
