@@ -8,7 +8,11 @@ The times are the messages' ``header.stamp`` (the sensor's clock; the bag's rece
 times carry the transport's jitter), the values ``angular_velocity`` in rad/s and
 ``linear_acceleration`` in m/s^2 (REP 103), converted to dps and g. With several Imu
 topics, ``--topic`` picks one (refused otherwise, listing them). Rate and indices:
-:mod:`imubench.recording.timebase`.
+:mod:`imubench.recording.timebase`, on the messages sorted by their stamps (a bag holds
+them in the order they were received). A covariance whose element 0 is -1 says the
+sensor gives no such estimate (sensor_msgs/Imu): those values are not read as zeros. A
+topic whose messages name several ``header.frame_id`` carries several IMUs and is
+refused. ``--columns t=-`` with ``--rate`` reads the messages in order, without stamps.
 """
 
 from __future__ import annotations
@@ -25,9 +29,14 @@ import numpy as np
 
 from imubench.batch import Batch
 from imubench.errors import RecordingError
-from imubench.recording.options import ACCEL_UNITS_G, GYRO_UNITS_DPS, InputOptions
+from imubench.recording.options import (
+    ACCEL_UNITS_G,
+    GYRO_UNITS_DPS,
+    NO_TIME_COLUMN,
+    InputOptions,
+)
 from imubench.recording.textin import TextRead
-from imubench.recording.timebase import timebase_from_times
+from imubench.recording.timebase import Timebase, timebase_from_times
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 log = logging.getLogger("imubench.recording")
@@ -76,16 +85,32 @@ def _pick_topic(topics: list[str], options: InputOptions, where: str) -> str:
     return topics[0]
 
 
-def _rows_from(messages: Any) -> list[tuple[float, ...]]:
+NO_ESTIMATE = -1.0
+"""Element 0 of an Imu covariance that says the sensor gives no such estimate."""
+
+
+def _rows_from(messages: Any) -> tuple[list[tuple[float, ...]], set[str]]:
+    """(stamp, gx..az) per message, NaN for a sensor whose covariance says it gives no
+    estimate; and the frame ids seen."""
     rows: list[tuple[float, ...]] = []
+    frames: set[str] = set()
+    nan = float("nan")
     for m in messages:
         s = m.header.stamp
+        frames.add(str(m.header.frame_id))
         w, a = m.angular_velocity, m.linear_acceleration
-        rows.append((s.sec + s.nanosec * 1e-9, w.x, w.y, w.z, a.x, a.y, a.z))
-    return rows
+        gyro = ((nan,) * 3 if m.angular_velocity_covariance[0] == NO_ESTIMATE
+                else (w.x, w.y, w.z))
+        acc = ((nan,) * 3 if m.linear_acceleration_covariance[0] == NO_ESTIMATE
+               else (a.x, a.y, a.z))
+        rows.append((s.sec + s.nanosec * 1e-9, *gyro, *acc))
+    return rows, frames
 
 
-def _read_bag(path: Path, options: InputOptions, where: str) -> tuple[str, list[Any]]:
+Rows = tuple[list[tuple[float, ...]], set[str]]
+
+
+def _read_bag(path: Path, options: InputOptions, where: str) -> tuple[str, Rows]:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
@@ -104,7 +129,7 @@ def _read_bag(path: Path, options: InputOptions, where: str) -> tuple[str, list[
         raise RecordingError(f"{where}: cannot read the ROS 2 bag: {exc}") from None
 
 
-def _read_mcap(path: Path, options: InputOptions, where: str) -> tuple[str, list[Any]]:
+def _read_mcap(path: Path, options: InputOptions, where: str) -> tuple[str, Rows]:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
@@ -130,22 +155,51 @@ def read_ros(path: str | Path, options: InputOptions) -> TextRead:
     path = Path(path)
     where = str(path)
     fmt = "ROS 2 bag" if is_ros2_bag(path) else "MCAP"
-    topic, rows = (_read_bag if fmt == "ROS 2 bag" else _read_mcap)(path, options, where)
+    topic, (rows, frames) = (_read_bag if fmt == "ROS 2 bag" else _read_mcap)(
+        path, options, where)
     if not rows:
         raise RecordingError(f"{where}: topic {topic} holds no messages")
+    if len(frames) > 1:
+        shown = ", ".join(repr(f) for f in sorted(frames)[:5])
+        raise RecordingError(
+            f"{where}: topic {topic} carries {len(frames)} frame ids ({shown}): several "
+            "IMUs on one topic, whose samples would be read as one stream; record each "
+            "IMU on its own topic")
     table = np.asarray(rows, dtype=np.float64)
+    in_order = options.columns.get("t") == NO_TIME_COLUMN
+    if not in_order:  # a bag holds messages as received: the stamps give their order
+        table = table[np.argsort(table[:, 0], kind="stable")]
     gyro = options.gyro_unit or "rad/s"
     accel = options.accel_unit or "m/s2"
     values = np.column_stack([table[:, 1:4] * GYRO_UNITS_DPS[gyro],
                               table[:, 4:7] * ACCEL_UNITS_G[accel]])
-    tb = timebase_from_times(table[:, 0], where, options.rate_hz)
+    absent = [name for name, cols in (("gyro", values[:, :3]), ("accelerometer", values[:, 3:]))
+              if np.isnan(cols).all()]
+    if len(absent) == 2:
+        raise RecordingError(f"{where}: every message of topic {topic} says (covariance "
+                             "element 0 = -1) that it has neither angular velocity nor "
+                             "linear acceleration")
+    if in_order:
+        if options.rate_hz is None:
+            raise RecordingError(f"{where}: --columns t=- reads the messages in order and "
+                                 "needs --rate HZ")
+        n = len(table)
+        tb = Timebase(options.rate_hz, np.arange(n, dtype=np.int64), np.ones(n, bool),
+                      "--rate, messages in order")
+    else:
+        tb = timebase_from_times(table[:, 0], where, options.rate_hz)
     keep = tb.keep
+    channels = [c for k, c in enumerate(("gx", "gy", "gz", "ax", "ay", "az"))
+                if not np.isnan(values[:, k]).all()]
     meta: dict[str, Any] = {"odr_hz": float(tb.rate_hz), "source_format": fmt,
-                            "topic": topic, "channels": ["gx", "gy", "gz", "ax", "ay", "az"]}
-    how = "--rate" if options.rate_hz is not None else tb.how
+                            "topic": topic, "channels": channels}
+    how = "--rate" if options.rate_hz is not None and not in_order else tb.how
     note = (f"{where}: read as {fmt}: topic {topic}, {len(rows)} messages; rate "
-            f"{tb.rate_hz:.6g} Hz ({how}, header.stamp); units gyro {gyro}, accel {accel}")
-    batch = Batch(index=tb.index, t_s=table[keep, 0] - table[0, 0], values=values[keep],
+            f"{tb.rate_hz:.6g} Hz ({how}{'' if in_order else ', header.stamp'}); units gyro "
+            f"{gyro}, accel {accel}"
+            + (f"; no {' and no '.join(absent)} estimate (covariance element 0 = -1): "
+               "not read" if absent else ""))
+    batch = Batch(index=tb.index, t_s=table[keep, 0], values=values[keep],
                   temp_c=np.full(int(keep.sum()), np.nan))
-    bad = [int(i) + 1 for i in np.nonzero(~keep)[0]]  # message numbers out of time order
+    bad = [int(i) + 1 for i in np.nonzero(~keep)[0]]  # messages (in stamp order) dropped
     return TextRead(meta, batch, [], bad, [note], True, "message")

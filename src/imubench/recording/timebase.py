@@ -78,9 +78,10 @@ SHARED_STAMPS = 0.005
 rounded coarser than the sample period (rows that share a stamp cannot be told apart by
 it), not as the odd repeated line."""
 PAUSE_STEPS = 1000
-"""A step longer than this many median spacings ends the stamps the period is searched
-on: the search grid is as fine as one period over the stamps' span, so a pause of an
-hour among the first stamps made it 26 s and a wrong digit in a day number hung it."""
+"""A step longer than this many median spacings splits the stamps the period is searched
+on, which are the longest stretch between such steps: the search grid is as fine as one
+period over the stamps' span, so a pause of an hour among the first stamps made it 26 s
+and a wrong digit in a day number hung it."""
 COARSE_ROWS = 2000
 """Stamps of the coarse search of the period (its peak then ~1/2000 wide, searched at 20
 points per width); the fine search uses all the first rows near it."""
@@ -152,11 +153,12 @@ def _median_step(t: np.ndarray, where: str) -> float:
     epoch seconds cut to 9 significant digits, so that no rate can be read from them)."""
     step = increasing_step(t)
     if step is None:
-        raise RecordingError(f"{where}: the time column never increases; give --rate HZ")
+        raise RecordingError(f"{where}: the time column never increases; give --rate HZ "
+                             "and --columns t=- to read the rows in order")
     if float(np.median(np.diff(t[np.isfinite(t)]))) <= 0:
         raise RecordingError(
             f"{where}: most time stamps repeat the one before (median step 0; written with "
-            f"too few digits?); give --rate HZ")
+            f"too few digits?); give --rate HZ and --columns t=- to read the rows in order")
     return step
 
 
@@ -251,9 +253,12 @@ def _first_line(t_s: np.ndarray, m: int, where: str) -> tuple[float, float, str]
         return _median_step(t_s, where), float(np.median(t_s[np.isfinite(t_s)][:5])), ""
     median = step
     pause = np.nonzero(np.diff(u) > PAUSE_STEPS * median)[0]
-    if pause.size and pause[0] >= 2:  # the stamps before the first long pause
-        u, rows = u[:pause[0] + 1], rows[:pause[0] + 1]
-    step, note = _rounded_period(t[:rows[-1] + 1], u, median, where)
+    if pause.size:  # the longest stretch of stamps between long pauses
+        bounds = np.concatenate(([0], pause + 1, [u.size]))
+        k = int(np.argmax(np.diff(bounds)))
+        rows = rows[bounds[k]:bounds[k + 1]]
+        u = t[rows] - t[rows][0]
+    step, note = _rounded_period(t[rows[0]:rows[-1] + 1], u, median, where)
     for part in (u[:COARSE_ROWS], u):
         periods = max(part[-1] / step, 1.0)  # the peak is ~1 / periods wide (relative)
         span = PERIOD_SEARCH if part is not u or part.size <= COARSE_ROWS else 4.0 / periods
@@ -304,7 +309,7 @@ def _rounded_period(t: np.ndarray, u: np.ndarray, median: float, where: str
         return median, ""
     if np.count_nonzero(steps == 0) > SHARED_STAMPS * len(steps):
         raise RecordingError(
-            f"{where}: the time stamps are rounded to {r:.6g} s, as "
+            f"{where}: the time stamps are rounded to {r:.4g} s, as "
             f"coarse as the sample period ({float(tf[-1] - tf[0]) / len(steps):.6g} s on "
             "average): rows share a stamp and cannot be told apart by it; give --rate HZ "
             "and --columns t=- to read the rows in order without the time column")
@@ -315,7 +320,7 @@ def _rounded_period(t: np.ndarray, u: np.ndarray, median: float, where: str
     period, coherence = _most_in_phase(u[:COARSE_ROWS], grid)
     if coherence < PHASE_NOISE / np.sqrt(min(u.size, COARSE_ROWS)):
         return median, ""
-    return period, (f"the stamps are rounded to {r:.6g} s, as coarse as the "
+    return period, (f"the stamps are rounded to {r:.4g} s, as coarse as the "
                     "sample period: the rate is read from their mean spacing; holes are not "
                     "seen at that resolution, and samples dropped in a regular pattern "
                     "would read as a lower rate (give --rate HZ if so)")
