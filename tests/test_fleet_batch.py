@@ -161,3 +161,15 @@ def test_batch_option_errors(recs: Path, args: list[str], message: str,
     monkeypatch.chdir(recs)
     assert main(args) == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_file_named_like_a_glob_is_that_file(tmp_path: Path) -> None:
+    """``run_[1].csv`` was taken as a pattern and ``run_1.csv`` analysed instead."""
+    from imubench.batchrun.runner import expand_inputs, has_glob
+
+    (tmp_path / "run_[1].csv").write_text("t,gx\n")
+    (tmp_path / "run_1.csv").write_text("t,gx\n")
+    assert not has_glob(str(tmp_path / "run_[1].csv"))
+    assert expand_inputs(tmp_path / "run_[1].csv") == [tmp_path / "run_[1].csv"]
+    assert has_glob(str(tmp_path / "run_[12].csv"))
+    assert expand_inputs(str(tmp_path / "run_[12].csv")) == [tmp_path / "run_1.csv"]

@@ -54,7 +54,9 @@ def add_batch_options(p: argparse.ArgumentParser) -> None:
 
 
 def has_glob(text: str) -> bool:
-    return any(c in _GLOB_CHARS for c in text)
+    """Whether INPUT is a glob: it holds a glob character and is not itself an existing
+    file or folder (``run_[1].csv`` is that file, not a pattern matching ``run_1.csv``)."""
+    return any(c in _GLOB_CHARS for c in text) and not Path(text).exists()
 
 
 def is_batch(spec: Path, args: argparse.Namespace) -> bool:
