@@ -47,6 +47,7 @@ def no_created(toml: str) -> str:
     return re.sub(r'^created = ".*"$', "", toml, flags=re.M)
 
 
+@pytest.mark.slow  # 20 s; the LocalCluster path runs by default in the gap batch test
 def test_fit_batch_matches_one_file_runs_sequential_and_on_two_workers(recs: Path) -> None:
     seq = cli("fit", "recs", *FIT, "--out-dir", "seq", "--progress", "on", cwd=recs)
     assert seq.returncode == 0, seq.stderr

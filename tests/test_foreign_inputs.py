@@ -165,7 +165,8 @@ def _command_on_corpus(command: str, names: tuple[str, ...] | list[str], tmp: Pa
         assert errors[0].startswith(f"imubench {command}: error: {path}") and fix in errors[0]
 
 
-@pytest.mark.parametrize("command", [*CHEAP_COMMANDS, "report"])
+@pytest.mark.parametrize("command", [*CHEAP_COMMANDS,
+                                     pytest.param("report", marks=pytest.mark.slow)])
 def test_every_command_reads_every_corpus_file_or_names_it_and_the_fix(
         command: str, tmp_path: Path) -> None:
     names = REPORT_SAMPLE if command == "report" else sorted(READ)
