@@ -32,8 +32,11 @@ def test_backlog_overflow_is_reported_not_silent(
         deliver_across_faults(broker, [("kill", 2.0)], backlog_snapshots=5, settle_s=0.5)
     )
     assert count.dropped > 5  # ~20 produced while down, 5 kept
+    # a full backlog never drops the snapshot in flight at the kill (it may be at the
+    # broker: it was counted dropped and received, unaccounted -1, once in ~5 runs here);
+    # sent again after the reconnection it may arrive twice (QoS 1 is at least once)
     assert count.unaccounted == 0, count
-    assert count.duplicated == 0, count
+    assert count.duplicated <= 1, count
 
 
 def test_hang_longer_than_keepalive_is_detected_and_reconnected(

@@ -221,6 +221,9 @@ class MqttPublisher:
         self._timeout_s = timeout_s
         self._ack_timeout_s = float(keepalive_s) if ack_timeout_s is None else ack_timeout_s
         self._buffer: deque[tuple[str, bytes]] = deque()  # (sensor, JSON)
+        self._in_flight: tuple[str, bytes] | None = None
+        """The snapshot being published (it may already be at the broker): a full backlog
+        drops the next oldest instead, or it would be counted dropped and received."""
         self._buffer_max = backlog_snapshots * len(sensors)
         self._seq = dict.fromkeys(sensors, 0)
         self.dropped_by_sensor = dict.fromkeys(sensors, 0)
@@ -275,7 +278,12 @@ class MqttPublisher:
     def _trim_backlog(self) -> None:
         dropped = 0
         while len(self._buffer) > self._buffer_max:
-            name, _ = self._buffer.popleft()
+            if self._in_flight is not None and self._buffer[0] is self._in_flight:
+                head = self._buffer.popleft()
+                name, _ = self._buffer.popleft()
+                self._buffer.appendleft(head)
+            else:
+                name, _ = self._buffer.popleft()
             self.dropped_by_sensor[name] += 1
             self._status_dirty.add(name)
             dropped += 1
@@ -454,8 +462,12 @@ class MqttPublisher:
                     # Leaves the backlog only once acknowledged: a snapshot whose PUBACK
                     # never came is sent again after reconnection.
                     head = self._buffer[0]
-                    await client.publish(self.allan_topics[head[0]], head[1], qos=self.qos,
-                                         timeout=self._ack_timeout_s)
+                    self._in_flight = head
+                    try:
+                        await client.publish(self.allan_topics[head[0]], head[1],
+                                             qos=self.qos, timeout=self._ack_timeout_s)
+                    finally:
+                        self._in_flight = None
                     if self._buffer and self._buffer[0] is head:  # not trimmed meanwhile
                         self._buffer.popleft()
                     self.published_snapshots += 1
