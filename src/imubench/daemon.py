@@ -122,10 +122,17 @@ class Daemon:
             await publisher.publish_allan(self._payload(unit, snap), unit.name)
             if every > 0 and now >= next_save:
                 next_save = now + every
-                try:
-                    await unit.save_state()
-                except (OSError, ImubenchError) as exc:
-                    log.warning("%s: could not save the engine state: %s", unit.name, exc)
+                await self._save_state(unit)
+
+    @staticmethod
+    async def _save_state(unit: SensorRun) -> None:
+        """``unit``'s engine state to ``allan.state_path``, a failure logged, not raised
+        (the acquisition goes on; the next save tries again)."""
+        try:
+            await asyncio.wait_for(unit.save_state(), STATE_SAVE_S)
+        except (OSError, ImubenchError, TimeoutError) as exc:
+            log.warning("%s: could not save the engine state: %s", unit.name,
+                        str(exc) or "no answer from the engine in time")
 
     def _payload(self, unit: SensorRun, snap: Any) -> dict[str, Any]:
         """The snapshot payload with the broker link's health (``health.mqtt``); the
@@ -412,8 +419,7 @@ class Daemon:
             with contextlib.suppress(Exception):
                 snap = await asyncio.wait_for(unit.snapshot(), 1.0)
                 await publisher.publish_allan(self._payload(unit, snap), unit.name)
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(unit.save_state(), STATE_SAVE_S)
+            await self._save_state(unit)
         await publisher.close(timeout_s=1.0)
         if broker is not None:
             await broker.stop()

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from imubench.batch import Batch
+from imubench.batch import CHANNELS, Batch
 from imubench.errors import RecordingError
 from imubench.recording.options import (
     ACCEL_UNITS_G,
@@ -89,7 +89,11 @@ NO_ESTIMATE = -1.0
 """Element 0 of an Imu covariance that says the sensor gives no such estimate."""
 
 
-def _rows_from(messages: Any) -> tuple[list[tuple[float, ...]], set[str]]:
+Rows = tuple[list[tuple[float, ...]], set[str]]
+"""(stamp, gx..az) per message, and the frame ids seen."""
+
+
+def _rows_from(messages: Any) -> Rows:
     """(stamp, gx..az) per message, NaN for a sensor whose covariance says it gives no
     estimate; and the frame ids seen."""
     rows: list[tuple[float, ...]] = []
@@ -106,8 +110,6 @@ def _rows_from(messages: Any) -> tuple[list[tuple[float, ...]], set[str]]:
         rows.append((s.sec + s.nanosec * 1e-9, *gyro, *acc))
     return rows, frames
 
-
-Rows = tuple[list[tuple[float, ...]], set[str]]
 
 
 def _read_bag(path: Path, options: InputOptions, where: str) -> tuple[str, Rows]:
@@ -173,8 +175,9 @@ def read_ros(path: str | Path, options: InputOptions) -> TextRead:
     accel = options.accel_unit or "m/s2"
     values = np.column_stack([table[:, 1:4] * GYRO_UNITS_DPS[gyro],
                               table[:, 4:7] * ACCEL_UNITS_G[accel]])
-    absent = [name for name, cols in (("gyro", values[:, :3]), ("accelerometer", values[:, 3:]))
-              if np.isnan(cols).all()]
+    present: np.ndarray = np.asarray(~np.isnan(values).all(axis=0))
+    absent = [name for name, has in (("gyro", present[:3].any()),
+                                     ("accelerometer", present[3:].any())) if not has]
     if len(absent) == 2:
         raise RecordingError(f"{where}: every message of topic {topic} says (covariance "
                              "element 0 = -1) that it has neither angular velocity nor "
@@ -183,14 +186,11 @@ def read_ros(path: str | Path, options: InputOptions) -> TextRead:
         if options.rate_hz is None:
             raise RecordingError(f"{where}: --columns t=- reads the messages in order and "
                                  "needs --rate HZ")
-        n = len(table)
-        tb = Timebase(options.rate_hz, np.arange(n, dtype=np.int64), np.ones(n, bool),
-                      "--rate, messages in order")
+        tb = Timebase.in_order(options.rate_hz, len(table), "--rate, messages in order")
     else:
         tb = timebase_from_times(table[:, 0], where, options.rate_hz)
     keep = tb.keep
-    channels = [c for k, c in enumerate(("gx", "gy", "gz", "ax", "ay", "az"))
-                if not np.isnan(values[:, k]).all()]
+    channels = [c for c, has in zip(CHANNELS, present, strict=True) if has]
     meta: dict[str, Any] = {"odr_hz": float(tb.rate_hz), "source_format": fmt,
                             "topic": topic, "channels": channels}
     how = "--rate" if options.rate_hz is not None and not in_order else tb.how

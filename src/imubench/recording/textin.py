@@ -422,10 +422,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                 + (f", or name the time column with --columns t=NAME (columns not "
                    f"read: {', '.join(others)})" if others and raw.header is not None
                    else ""))
-        n = len(table)
-        tb = Timebase(rate, np.arange(n, dtype=np.int64), np.ones(n, bool),
-                      "given" if options.rate_hz is not None or meta_rate is not None
-                      else "assumed (tau in samples)")
+        tb = Timebase.in_order(rate, len(table),
+                               "given" if options.rate_hz is not None or meta_rate is not None
+                               else "assumed (tau in samples)")
     keep = tb.keep
     bad = sorted(raw.bad_lines + [raw.row_lines[i] for i in np.nonzero(~keep)[0]])
     if t_s is None:

@@ -98,6 +98,12 @@ class Timebase:
     """bool mask over the input rows: False for rows dropped as damaged."""
     how: str
 
+    @classmethod
+    def in_order(cls, rate_hz: float, n: int, how: str) -> Timebase:
+        """``n`` rows, one sample each in the order given, at ``rate_hz`` (no time
+        column, or ``--columns t=-``)."""
+        return cls(rate_hz, np.arange(n, dtype=np.int64), np.ones(n, bool), how)
+
 
 def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
     """(unit, seconds per unit) of a time column: days when the values are Modified
