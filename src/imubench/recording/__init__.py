@@ -374,14 +374,9 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
 def _start_from_stamps(t_s: np.ndarray) -> str | None:
     """The UTC start of a recording whose time stamps are Unix seconds (2001-2099), as
     ISO 8601; None when they count from anything else (a start that is not known)."""
-    import datetime as _dt
+    from imubench.recording.timebase import start_utc
 
-    from imubench.recording.timebase import EPOCH_S
-
-    if not len(t_s) or not EPOCH_S[0] <= float(t_s[0]) <= EPOCH_S[1]:
-        return None
-    start = _dt.datetime.fromtimestamp(float(t_s[0]), _dt.UTC)
-    return start.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return start_utc(float(t_s[0])) if len(t_s) else None
 
 
 def _calibrated(rec: Recording, path: str | Path) -> Recording:

@@ -58,11 +58,19 @@ OWN_NAMES = frozenset({"t", "index", "temp", *CHANNELS})
 _UNIT_WORDS = {
     "rad s^-1": "rad/s", "rad/s": "rad/s", "rad s-1": "rad/s", "rads": "rad/s",
     "deg/s": "dps", "dps": "dps", "deg s^-1": "dps", "°/s": "dps", "mdps": "mdps",
+    "deg/h": "deg/h", "deg/hr": "deg/h", "°/h": "deg/h", "dph": "deg/h", "deg h^-1": "deg/h",
+    "m/s²": "m/s2", "ug": "ug", "µg": "ug",
     "m s^-2": "m/s2", "m/s^2": "m/s2", "m/s2": "m/s2", "m s-2": "m/s2", "g": "g", "mg": "mg",
     "s": "s", "sec": "s", "ms": "ms", "us": "us", "µs": "us", "ns": "ns", "min": "min",
     "h": "h",
     "degc": "degC", "°c": "degC", "c": "degC",
 }
+
+
+def unit_word(text: str) -> str:
+    """A unit as written (``[°/s]``'s ``°/s``, ``deg/hr``) in the spelling of the unit
+    tables (``dps``, ``deg/h``); an unknown unit is returned as written."""
+    return _UNIT_WORDS.get(text.strip().lower(), text.strip())
 
 
 TIME_UNIT_WORDS = frozenset({"s", "ms", "us", "ns", "min", "h"})
@@ -85,7 +93,7 @@ def normalise(text: str) -> tuple[str, str | None]:
     unit = None
     m = re.search(r"[\[(]([^\])]*)[\])]\s*$", s)
     if m:
-        unit = _UNIT_WORDS.get(m.group(1).strip().lower(), m.group(1).strip())
+        unit = unit_word(m.group(1))
         s = s[: m.start()]
     s = s.strip().lstrip("#%").strip().lower()
     s = re.sub(r"[.\-\s]+", "_", s)

@@ -5,8 +5,15 @@ exports, Stable32 / allantools one- and two-column files (``.gz`` for all).
   spaces, from the header (or first data) line.
 * Header: the first line that is not a comment, or a ``#`` line whose fields are column
   names (EuRoC writes ``#timestamp [ns],...``). ``# key: value`` lines before it are
-  metadata (imubench writes ``# odr_hz: 104``), ``# gap at_index=N lost=M reason=TEXT``
-  lines anywhere are declared gaps. Columns: :mod:`imubench.recording.columns`.
+  metadata (imubench writes ``# odr_hz: 104``; the rate and unit keys other tools write
+  are read too, :mod:`imubench.recording.textmeta`), ``# gap at_index=N lost=M
+  reason=TEXT`` lines anywhere are declared gaps. Columns:
+  :mod:`imubench.recording.columns`.
+* Encoding: UTF-8 (with or without a byte-order mark), UTF-16 with its mark, else
+  Windows-1252, said in the notes.
+* Numbers: Fortran's ``1.5D-03`` exponents are read; a headerless file of one column with
+  decimal commas (``0,0123``: two comma-separated fields whose second is digits only) is
+  read as one column, said in the notes.
 * No header (all numbers): one column is the values; two columns are (time tag, value),
   as Stable32 and allantools write them; more need ``--columns`` by number. The values
   are channel ``gx``, or the channel a ``# channel: "ax"`` line names (imubench's
@@ -43,10 +50,18 @@ from imubench.recording.options import (
     TIME_UNITS_S,
     InputOptions,
 )
+from imubench.recording.textmeta import (
+    SNIFF_BYTES,
+    stated_rate,
+    stated_unit,
+    text_encoding,
+)
 from imubench.recording.timebase import (
+    MJD_OF_UNIX_EPOCH,
     SECONDS_PER_DAY,
     Timebase,
     increasing_step,
+    start_utc,
     time_unit_from_spacing,
     timebase_from_index,
     timebase_from_times,
@@ -79,14 +94,23 @@ class TextRead:
     (:func:`imubench.recording.measured_rate`)."""
 
 
-def open_text(path: Path) -> IO[str]:
-    """The file as text (gzip when it ends in ``.gz``); undecodable bytes become U+FFFD
-    so a damaged byte costs its line, not the file. A UTF-8 byte-order mark (Excel,
-    Windows loggers) is dropped: read as text, it stuck to the first column's name and hid
-    that column (a ``timestamp`` first: "no time column"; a ``gyro_x`` first: gx missing)."""
+def file_encoding(path: Path) -> str:
+    """The text encoding of the file (:func:`imubench.recording.textmeta.text_encoding`
+    on its first bytes, decompressed for ``.gz``)."""
+    gz = path.name.lower().endswith(".gz")
+    with gzip.open(path, "rb") if gz else open(path, "rb") as fh:
+        return text_encoding(fh.read(SNIFF_BYTES))
+
+
+def open_text(path: Path, encoding: str) -> IO[str]:
+    """The file as text in ``encoding`` (gzip when it ends in ``.gz``); undecodable bytes
+    become U+FFFD so a damaged byte costs its line, not the file. A UTF-8 byte-order mark
+    (Excel, Windows loggers) is dropped (``utf-8-sig``): read as text, it stuck to the
+    first column's name and hid that column (a ``timestamp`` first: "no time column"; a
+    ``gyro_x`` first: gx missing)."""
     if path.name.lower().endswith(".gz"):
-        return gzip.open(path, "rt", encoding="utf-8-sig", errors="replace", newline="")
-    return open(path, encoding="utf-8-sig", errors="replace", newline="")
+        return gzip.open(path, "rt", encoding=encoding, errors="replace", newline="")
+    return open(path, encoding=encoding, errors="replace", newline="")
 
 
 def _delimiter(line: str) -> str | None:
@@ -118,13 +142,18 @@ def _is_number(text: str) -> bool:
     try:
         float(text)
     except ValueError:
-        return False
+        return bool(FORTRAN_NUMBER.match(text))
     return True
 
 
 def _looks_like_header(fields: list[str]) -> bool:
     return len(fields) >= 2 and sum(not _is_number(f) for f in fields) >= len(fields) / 2
 
+
+FORTRAN_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[dD][-+]?\d+$")
+"""A number with Fortran's double-precision exponent (``1.5D-03``)."""
+DIGITS = re.compile(r"^\d+$")
+"""The part after a decimal comma, read as a second field (``0,0123`` -> ``0``, ``0123``)."""
 
 ISO_TIME = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(\.\d+)?Z?$")
 """A date and time as loggers and pandas write them (ISO 8601, UTC when no zone)."""
@@ -140,9 +169,12 @@ def _number(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        if not ISO_TIME.match(text):
+        if FORTRAN_NUMBER.match(text):
+            value = float(text.replace("D", "E").replace("d", "e"))
+        elif ISO_TIME.match(text):
+            return float(np.datetime64(text.rstrip("Z"), "ns").astype(np.int64)) * 1e-9
+        else:
             raise
-        return float(np.datetime64(text.rstrip("Z"), "ns").astype(np.int64)) * 1e-9
     if not math.isfinite(value):
         raise ValueError(text)
     return value
@@ -173,6 +205,14 @@ class _Raw:
     width: int = 0
     comment_header: bool = False
     """The header came from a ``#`` line (EuRoC): dropped if the data do not fit it."""
+    digits_after_comma: bool = True
+    """Every comma-separated data row so far has two fields, the second digits only (a
+    decimal comma's fraction: ``0,0123``)."""
+    leading_zero_after_comma: bool = False
+    """One of them starts with 0 (``0123``), which no integer column writes."""
+    decimal_comma: bool = False
+    """The file was read with every comma as a decimal point (one column)."""
+    encoding: str = "utf-8-sig"
 
     def add(self, row: list[float], lineno: int) -> None:
         """Append a data row read from line ``lineno``."""
@@ -193,13 +233,17 @@ class _Raw:
         return self.blocks[0] if self.blocks else np.zeros((0, self.width))
 
 
-def _scan(path: Path) -> _Raw:
-    raw = _Raw()
+def _scan(path: Path, decimal_comma: bool = False) -> _Raw:
+    raw = _Raw(decimal_comma=decimal_comma)
     try:
-        fh = open_text(path)
+        raw.encoding = file_encoding(path)
+        fh = open_text(path, raw.encoding)
         with fh:
             for lineno, line in enumerate(fh, 1):
-                _take_line(raw, line.strip(), lineno, path)
+                line = line.strip()
+                if decimal_comma and not line.startswith(("#", "%")):
+                    line = line.replace(",", ".")
+                _take_line(raw, line, lineno, path)
     except EOFError as exc:  # gzip: the stream ends early (a writer that crashed)
         if not raw.n_rows:
             raise RecordingError(f"{path}: cannot read: {exc}") from None
@@ -260,6 +304,10 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
     if len(fields) != raw.width:
         raw.bad_lines.append(lineno)
         return
+    if raw.digits_after_comma:
+        raw.digits_after_comma = (raw.header is None and raw.delim == "," and raw.width == 2
+                                  and bool(DIGITS.match(fields[1])))
+        raw.leading_zero_after_comma |= raw.digits_after_comma and fields[1][0] == "0"
     row = []
     for j, f in enumerate(fields):
         try:
@@ -291,6 +339,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     path = Path(path)
     where = str(path)
     raw = _scan(path)
+    if _decimal_commas(raw):
+        raw = _scan(path, decimal_comma=True)
     n_data = raw.n_rows + len([b for b in raw.bad_lines if b > 0])
     whole_bad = sum(1 for js in raw.row_fail.values() if len(js) == raw.width)
     if not raw.n_rows:
@@ -304,6 +354,10 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                              "not a recording")
     table = raw.table()
     notes: list[str] = []
+    if raw.encoding not in ("utf-8-sig", "utf-8"):
+        notes.append(f"{where}: not UTF-8 text; read as {raw.encoding.upper()}")
+    if raw.decimal_comma:
+        notes.append(f"{where}: one column with decimal commas (0,0123 is 0.0123)")
     if raw.header is not None:
         cols = map_columns(raw.header)
         fmt = ("ROS sensor_msgs/Imu export" if is_ros_export(raw.header)
@@ -365,10 +419,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
             overridden.append(f"column {col.text.strip()!r} says {col.unit}, read as {given} "
                               "(--units)")
         if raw.header is None and given is None:
-            stated = raw.meta.get("unit")  # imubench's Stable32 export states it
-            units_of = GYRO_UNITS_DPS if ch.startswith("g") else ACCEL_UNITS_G
-            if isinstance(stated, str) and stated in units_of:
-                factor, unit = units_of[stated], stated
+            stated = stated_unit(raw.meta, ch, where)  # imubench's Stable32 export says
+            if stated is not None:
+                factor, unit = stated
             else:
                 assumed.append(ch)
         values[:, i] = table[:, where_col[ch]] * factor
@@ -380,7 +433,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     meta = dict(raw.meta)
     t_raw = table[:, where_col["t"]] if "t" in where_col else None
     index_col = table[:, where_col["index"]] if "index" in where_col else None
-    meta_rate = _meta_rate(meta, where)
+    stated = stated_rate(meta, where)
+    meta_rate = stated[0] if stated is not None else None
     rate = options.rate_hz if options.rate_hz is not None else meta_rate
     time_note = ""
     t_s = None
@@ -391,6 +445,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         unit_name, scale = _time_unit(cols[where_col["t"]], options, ros, t_raw, rate, where)
         t_s = t_raw * scale
         time_note = f"t in {unit_name}"
+        if unit_name.startswith("days (MJD") and len(t_raw):  # dated: keep its start
+            meta.setdefault("start_utc",
+                            start_utc((float(t_raw[0]) - MJD_OF_UNIX_EPOCH) * SECONDS_PER_DAY))
         if "the header says" in unit_name:
             overridden.append(f"t {unit_name}")
     if raw.header is None and raw.width == 2 and options.rate_hz is not None:
@@ -411,6 +468,10 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                 f"{where}: the time column gives {tb.rate_hz:.4g} Hz with t in "
                 f"{unit_name.split(' (')[0]}, not a rate an IMU records at; check "
                 "--time-unit s|ms|us|ns or give --rate HZ")
+        if rate is None and unit_name == "s (header)" and tb.rate_hz < SLOW_IN_SECONDS_HZ:
+            notes.append(f"{where}: t in s (header) gives {tb.rate_hz:.4g} Hz, slow for an "
+                         f"IMU; if the column holds ms ({tb.rate_hz * 1e3:.4g} Hz), give "
+                         "--time-unit ms")
     else:
         if rate is None and raw.header is None:
             rate = options.default_rate_hz  # a plain series: tau in samples
@@ -430,7 +491,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if t_s is None:
         t_s = tb.index / tb.rate_hz
     how = ("--rate" if options.rate_hz is not None
-           else "# odr_hz" if meta_rate is not None else tb.how)
+           else f"# {stated[1]}" if stated is not None else tb.how)
     meta["odr_hz"] = float(tb.rate_hz)
     meta.setdefault("channels", [c for c in CHANNELS if c in where_col])
     meta.setdefault("source_format", fmt)
@@ -446,11 +507,12 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if overridden:
         notes.append(f"{where}: the options override the header: " + "; ".join(overridden))
     batch = Batch(index=tb.index, t_s=t_s[keep], values=values[keep], temp_c=temp[keep])
-    inferred = bool(overridden) or not (
+    inferred = len(notes) > 1 or not (  # more than "read as": something to know
         (fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
         or (raw.width == 1 and raw.header is None))  # allan's plain series
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred,
-                    rate_stated=how == "# odr_hz" and "t" in where_col)
+                    rate_stated=options.rate_hz is None and stated is not None
+                    and "t" in where_col)
 
 
 def _check_given_rate(t_s: np.ndarray, given: Timebase, where: str) -> None:
@@ -474,17 +536,14 @@ def _check_given_rate(t_s: np.ndarray, given: Timebase, where: str) -> None:
             "own rate")
 
 
-def _meta_rate(meta: dict[str, Any], where: str) -> float | None:
-    if "odr_hz" not in meta:
-        return None
-    try:
-        rate = float(meta["odr_hz"])
-    except (TypeError, ValueError):
-        raise RecordingError(f"{where}: metadata odr_hz {meta['odr_hz']!r} is not a "
-                             "number") from None
-    if not (math.isfinite(rate) and rate > 0):
-        raise RecordingError(f"{where}: metadata odr_hz {rate} must be a positive number")
-    return rate
+def _decimal_commas(raw: _Raw) -> bool:
+    """The headerless two-column comma file is one column with decimal commas: every
+    second field is digits only and either one starts with 0 (``0,0123``) or the first
+    fields never increase as time tags do (``12,5`` ``12,7`` ``11,9``)."""
+    if not (raw.header is None and raw.n_rows and raw.digits_after_comma):
+        return False
+    first = raw.table()[:, 0]
+    return raw.leading_zero_after_comma or bool(np.any(np.diff(first) <= 0))
 
 
 def _channel_unit(ch: str, col: Column, options: InputOptions, si_format: bool,
@@ -542,6 +601,11 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
 TIME_RATE_HZ = (1e-3, 1e6)
 """Rates (Hz) a time column may give: outside, its unit (often a ``--time-unit`` that
 contradicts the file) is wrong, and the file is refused rather than read at that rate."""
+
+
+SLOW_IN_SECONDS_HZ = 1.0
+"""A time column in seconds by its header that gives less than this rate is said to be
+slow for an IMU (a ``time_s`` column holding milliseconds reads 100 Hz as 0.1 Hz)."""
 
 
 TEMP_UNITS: dict[str, tuple[float, float]] = {

@@ -58,6 +58,19 @@ it) are absolute, and their magnitude gives the unit (s, ms, us, ns)."""
 MJD_RANGE = (40_000.0, 100_000.0)
 """Modified Julian Dates (days) of 1968-2132: a time tag column in this range is MJD."""
 SECONDS_PER_DAY = 86_400.0
+MJD_OF_UNIX_EPOCH = 40_587.0
+"""The Modified Julian Date of 1970-01-01 00:00 UTC."""
+
+
+def start_utc(unix_s: float) -> str | None:
+    """ISO 8601 UTC of a Unix time in seconds of 2001-2099 (:data:`EPOCH_S`); None for a
+    time that counts from anything else (a start that is not known)."""
+    import datetime as _dt
+
+    if not EPOCH_S[0] <= unix_s <= EPOCH_S[1]:
+        return None
+    return _dt.datetime.fromtimestamp(unix_s, _dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
 FIRST_FIT_ROWS = 4000
 """Rows indexed by the first line (:func:`_first_line`) before the first refinement."""
 GROWTH = 1.5
