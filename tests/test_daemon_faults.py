@@ -105,6 +105,21 @@ def test_replay_through_the_daemon_keeps_every_sample(tmp_path: Path, minutes: i
     assert delivered == len(a) and lost == a.lost_samples and produced == delivered + lost
 
 
+def test_a_device_lost_for_good_ends_with_status_2_and_every_sample_accounted(
+        tmp_path: Path) -> None:
+    """A SensorTile unplugged and not back within ``reconnect_timeout_s``: the daemon
+    exited 2 naming the port but never printed its account of the samples it had."""
+    cfg = config(tmp_path, "sensortile-sim://?unplug_every_s=1.5&replug_after_s=100000"
+                 "&reconnect_timeout_s=0.5&max_unplugs=1")
+    proc = run_daemon(cfg, timeout_s=60)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "did not come back within 0.5 s" in proc.stderr
+    produced, delivered, lost = engine_counts(proc.stdout)
+    rec = load_recording(tmp_path / "rec" / "bench1_imu0.imbr")
+    assert produced > 0 and produced == delivered + lost
+    assert len(rec) + rec.lost_samples == produced
+
+
 def test_daemon_records_each_fault_gap_once_with_the_driver_reason(tmp_path: Path) -> None:
     """Acceptance 2: chip resets and a FIFO overrun in an ``imubench run`` recording."""
     cfg = config(tmp_path, "sim://lsm6dsl?odr_hz=104&clock=virtual&reset_every_s=10"

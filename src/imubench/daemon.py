@@ -318,13 +318,13 @@ class Daemon:
             p = unit.pipeline
             if p is not None:
                 error = error or p.error or next(iter(p.consumer_errors().values()), None)
+        if started:  # the account of every sample, also when a source failed
+            for unit in self.sensors:
+                self.say(unit.summary())
         if error is not None:
             raise error
         if not started:
             self.say("stopped before the acquisition started")
-            return 0
-        for unit in self.sensors:
-            self.say(unit.summary())
         return 0
 
     async def _start_pipelines(self) -> bool:
