@@ -258,3 +258,16 @@ def test_live_recording_refuses_hdf5(tmp_path: Path, command: list[str],
     err = capsys.readouterr().err
     assert f"{out}: a live recording must be .imbr" in err and "imubench convert" in err
     assert not out.exists()
+
+
+def test_acquire_errors_name_the_uri_as_written(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """The error named the URI with ``&duration_s=1`` that ``--duration-s`` adds, which
+    the user never wrote."""
+    from imubench.cli import main
+
+    assert main(["acquire", "sim://lsm6dsl?odr=104", "--duration-s", "1",
+                 "--out", str(tmp_path / "x.imbr")]) == 2
+    err = capsys.readouterr().err
+    assert "source URI 'sim://lsm6dsl?odr=104': unknown parameter(s) odr" in err
+    assert "duration_s=1" not in err

@@ -114,8 +114,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
-    stats = record_uri(add_duration(args.source, args.duration_s), args.out, args.stats_json,
-                       args.duration_s, args.calibration)
+    uri = add_duration(args.source, args.duration_s)
+    try:
+        stats = record_uri(uri, args.out, args.stats_json, args.duration_s, args.calibration)
+    except SourceError as exc:  # name the URI the user wrote, not the one with duration_s
+        raise SourceError(str(exc).replace(uri, args.source)) from None
     print(
         f"{args.out}: {stats['samples']} samples, {stats['gaps']} gaps, "
         f"{stats['lost_samples']} lost, {stats['overruns']} overruns, "
