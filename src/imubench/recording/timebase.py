@@ -326,13 +326,13 @@ def _rounded_period(t: np.ndarray, u: np.ndarray, median: float, where: str
     r = _resolution(steps, median) if len(steps) >= 3 and np.all(steps >= 0) else None
     if r is None:
         return median, ""
+    mean = float(tf[-1] - tf[0]) / len(steps)
     if np.count_nonzero(steps == 0) > SHARED_STAMPS * len(steps):
         raise RecordingError(
             f"{where}: the time stamps are rounded to {r:.4g} s, as "
-            f"coarse as the sample period ({float(tf[-1] - tf[0]) / len(steps):.6g} s on "
-            "average): rows share a stamp and cannot be told apart by it; give --rate HZ "
-            "and --columns t=- to read the rows in order without the time column")
-    mean = float(tf[-1] - tf[0]) / len(steps)
+            f"coarse as the sample period ({mean:.6g} s on average): rows share a stamp and "
+            "cannot be told apart by it; give --rate HZ and --columns t=- to read the rows "
+            "in order without the time column")
     if mean <= median * (1.0 + PERIOD_SEARCH):
         return median, ""
     grid = mean * (1.0 + np.linspace(-PERIOD_SEARCH, PERIOD_SEARCH, 201))
