@@ -134,3 +134,33 @@ def test_a_modified_julian_date_column_dates_the_recording(tmp_path: Path) -> No
     rec = load_recording(p, PLAIN)
     assert rec.rate_hz == pytest.approx(1.0, rel=1e-4)
     assert rec.metadata["start_utc"] == "2023-02-25T12:00:00.000000Z"
+
+
+@pytest.mark.parametrize(("where", "jump_s"), [(-1, 1e6), (-2, 86_400_000.0), (0, -1e6),
+                                               (1, -5e5)])
+def test_a_stray_stamp_at_an_end_costs_its_row_not_a_giant_hole(
+        tmp_path: Path, where: int, jump_s: float) -> None:
+    """A last stamp with a wrong digit (1e6 s on) made a 3000-row file a 1e8-sample hole:
+    5 GB and 21 s in ``allan``, every tau up to 1.7e5 s computed on nothing."""
+    x = _values(3000)
+    t = 1.7e9 + np.arange(3000) / 100
+    if where >= 0:
+        t[: where + 1] += jump_s  # the first row(s) too early
+    else:
+        t[where:] += jump_s  # the last row(s) too late
+    p = tmp_path / "stray.csv"
+    p.write_text("timestamp,gyro_x [dps]\n" + "".join(f"{a:.2f},{v:.6f}\n"
+                                                      for a, v in zip(t, x, strict=True)))
+    rec = load_recording(p)
+    n_stray = abs(where) if where < 0 else where + 1
+    assert len(rec) == 3000 - n_stray and rec.lost_samples == 0
+    assert rec.damage is not None and "stray at an end" in rec.damage
+
+
+def test_a_recording_that_resumes_after_a_pause_keeps_both_runs(tmp_path: Path) -> None:
+    """A real pause (five times the run before it) is a hole, not a stray end."""
+    t = np.concatenate([np.arange(1000), 6000 + np.arange(1000)]) / 100
+    p = tmp_path / "pause.csv"
+    p.write_text("t,gyro_x [dps]\n" + "".join(f"{a:.2f},0.01\n" for a in t))
+    rec = load_recording(p)
+    assert len(rec) == 2000 and rec.lost_samples == 5000

@@ -247,8 +247,8 @@ def _load(path: Path, kind: str, opts: InputOptions) -> tuple[Recording, str, bo
         where = str(path)
         if read.bad_lines:
             first = read.bad_lines[0]
-            damage = (f"{len(read.bad_lines)} {read.item}(s) skipped (unreadable or out of "
-                      f"time order), first "
+            damage = (f"{len(read.bad_lines)} {read.item}(s) skipped (unreadable, out of "
+                      f"time order or stray at an end), first "
                       + ("at the end of a damaged compressed stream" if first < 0
                          else f"{read.item.split()[-1]} {first}"))
             where = f"{path}:{first}" if first > 0 else where

@@ -80,7 +80,8 @@ class TextRead:
     batch: Batch
     gaps: list[Gap]
     bad_lines: list[int] = field(default_factory=list)
-    """Line numbers of data lines skipped (unreadable or out of time order)."""
+    """Line numbers of data lines skipped (unreadable, out of time order, or a
+    stray stamp at an end: :func:`imubench.recording.timebase.stray_ends`)."""
     notes: list[str] = field(default_factory=list)
     """How the file was read, for the user (format, columns, rate, units)."""
     inferred: bool = False

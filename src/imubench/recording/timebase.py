@@ -208,6 +208,37 @@ def increasing_rows(index: np.ndarray) -> np.ndarray:
     return keep
 
 
+STRAY_ROWS = 3
+"""At most this many rows at either end of a recording may be stray (:func:`stray_ends`)."""
+STRAY_FACTOR = 10.0
+"""A hole this many times longer than the rest of the recording makes the rows beyond it
+stray."""
+
+
+def stray_ends(index: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """``keep`` less at most :data:`STRAY_ROWS` rows at either end separated from the rest
+    by a hole more than :data:`STRAY_FACTOR` times the rest's span: a last stamp with a
+    wrong digit (an MJD 1000 days on, a Unix time 1e6 s on) is no sample after a pause
+    hundreds of times the record; read as one, the record became a 1e8-sample hole
+    (5 GB, 21 s for 3000 rows) and every tau up to it was computed on nothing."""
+    rows = np.nonzero(keep)[0]
+    if rows.size <= 4 * STRAY_ROWS:
+        return keep
+    idx = index[rows]
+    out = keep.copy()
+    for k in range(STRAY_ROWS, 0, -1):  # the most rows first: a pair after the hole
+        rest = idx[-k - 1] - idx[0] + 1
+        if idx[-k] - idx[-k - 1] > STRAY_FACTOR * rest:
+            out[rows[-k:]] = False
+            break
+    for k in range(STRAY_ROWS, 0, -1):
+        rest = idx[-1] - idx[k] + 1
+        if idx[k] - idx[k - 1] > STRAY_FACTOR * rest:
+            out[rows[:k]] = False
+            break
+    return out
+
+
 def _indices(t_s: np.ndarray, t0: float, step_s: float) -> tuple[np.ndarray, np.ndarray]:
     """``round((t - t0) / step)`` as int64, and a mask of the rows whose stamp is within
     2^62 sample periods (a damaged stamp beyond is a row to drop, not an index)."""
@@ -222,6 +253,7 @@ def _kept(index: np.ndarray, ok: np.ndarray, where: str) -> np.ndarray:
     keep = np.zeros(len(index), dtype=bool)
     rows = np.nonzero(ok)[0]
     keep[rows[increasing_rows(index[rows])]] = True
+    keep = stray_ends(index, keep)
     if not keep.any():
         raise RecordingError(f"{where}: no row has a usable time stamp; give --rate HZ")
     return keep
@@ -505,6 +537,7 @@ def timebase_from_index(index: np.ndarray, t_s: np.ndarray | None, where: str,
                 "without it) to index the rows by their time stamps")
     if t_s is not None:
         keep = _consistent_with_times(index, t_s, keep, where, lines)
+    keep = stray_ends(index, keep)
     kept = index[keep]
     if rate_hz is not None:
         return Timebase(rate_hz, kept, keep, "given")
