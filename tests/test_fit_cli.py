@@ -319,3 +319,23 @@ def test_fit_refuses_an_output_it_cannot_write_before_fitting(
         err = capsys.readouterr().err
         assert words in err and ("does not exist" in err or "is a folder" in err)
     assert not (tmp_path / "m.toml").exists()
+
+
+def test_fit_says_how_much_of_the_recording_is_missing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A record with 10 % of it in two holes was fitted without a word about them."""
+    rng = np.random.default_rng(4)
+    n = 20_000
+    keep = np.ones(n, dtype=bool)
+    keep[5000:6900] = False
+    keep[12000:12100] = False
+    p = tmp_path / "holes.csv"
+    p.write_text("t,gx\n" + "".join(f"{i / 100:.2f},{v:.5f}\n"
+                                    for i, v in enumerate(rng.normal(0, 0.05, n)) if keep[i]))
+    out = tmp_path / "fit.json"
+    assert main(["fit", str(p), "--channels", "gx", "--json", str(out),
+                 "-o", str(tmp_path / "m.toml")]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert "18000 samples, 2 hole(s) (2000 samples, 10 % missing" in head
+    doc = json.loads(out.read_text())
+    assert (doc["samples"], doc["lost_samples"], doc["holes"]) == (18000, 2000, 2)

@@ -222,7 +222,6 @@ def fit_rows(rec: Path, result: Any) -> Iterable[dict[str, Any]]:
 
 
 def run_fit_batch(args: argparse.Namespace) -> int:
-    from imubench.noisefit.recording_fit import RecordingFit
 
     out_dir = _check_options(args, (("output", "-o"), ("json", "--json"),
                                     ("kalibr", "--kalibr")))
@@ -236,8 +235,7 @@ def run_fit_batch(args: argparse.Namespace) -> int:
         if not done:
             continue
         first = o.results[done[0]]
-        merged = RecordingFit(first.source, first.rate_hz, first.chip, first.method,
-                              {ch: o.results[ch].fits[ch] for ch in done})
+        merged = dataclasses.replace(first, fits={ch: o.results[ch].fits[ch] for ch in done})
         stem = report_stem(o.recording)
         (out_dir / f"{stem}.toml").write_text(merged.noise_model().to_toml(),
                                               encoding="utf-8")

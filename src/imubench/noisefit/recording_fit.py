@@ -50,6 +50,22 @@ class RecordingFit:
     fits: dict[str, ChannelFit]
     units_assumed: tuple[str, ...] = ()
     """Channels whose unit nothing in the recording stated (read as dps / g)."""
+    samples: int = 0
+    """Samples the recording holds (0: not known, a fit made without the recording)."""
+    lost_samples: int = 0
+    """Samples missing in its holes (the Allan curves are computed across them)."""
+    holes: int = 0
+    """Holes between recorded samples."""
+
+    def coverage(self) -> str:
+        """``54950 samples, 2 holes (6050 samples, 9.9 % missing)``, or ``""``."""
+        if not self.samples:
+            return ""
+        if not self.lost_samples:
+            return f"{self.samples} samples, no holes"
+        share = 100.0 * self.lost_samples / (self.samples + self.lost_samples)
+        return (f"{self.samples} samples, {self.holes} hole(s) ({self.lost_samples} "
+                f"samples, {share:.3g} % missing; the curves are computed across them)")
 
     def noise_model(self) -> NoiseModel:
         """A model file's content: fitted channels, others quiet; provenance in [meta]."""
@@ -97,6 +113,9 @@ class RecordingFit:
         return {
             "recording": str(self.source),
             "rate_hz": self.rate_hz,
+            "samples": self.samples,
+            "lost_samples": self.lost_samples,
+            "holes": self.holes,
             "chip": self.chip,
             "method": self.method,
             "channels": {
@@ -166,7 +185,12 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
             on_channel(k + 1, len(chans))
     chip = rec.metadata.get("chip")
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits,
-                        tuple(rec.metadata.get("units_assumed", ())))
+                        tuple(rec.metadata.get("units_assumed", ())), *_coverage(rec))
+
+
+def _coverage(rec: Recording) -> tuple[int, int, int]:
+    """(samples held, samples lost in holes, holes) of ``rec``."""
+    return len(rec), rec.lost_samples, int(np.count_nonzero(np.diff(rec.index) > 1))
 
 
 MODEL_FILE_METHOD: str = "model file"
@@ -216,7 +240,7 @@ def model_file_fit(model: NoiseModel, rec: Recording, source: str, *,
             for ch in chans}
     chip = rec.metadata.get("chip")  # the recording's: a model's chip is not its sensor
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, MODEL_FILE_METHOD,
-                        fits)
+                        fits, (), *_coverage(rec))
 
 
 __all__ = ["MODEL_FILE_METHOD", "RecordingFit", "channel_from_model", "fit_loaded",

@@ -133,7 +133,8 @@ def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "au
         n_samples = max(int(np.size(v)) for v in data.values())
         curves = {ch: oadev_curve(data[ch], result.rate_hz) for ch in result.fits}
         info = _info(result, n_samples, model,
-                     [] if model is None else misfit_notes(result.fits, curves))
+                     ([result.coverage()] if result.lost_samples else [])
+                     + ([] if model is None else misfit_notes(result.fits, curves)))
         files: list[Path] = []
         pages: list[Path] = []
         readouts: dict[str, dict[str, Readout]] = {}
