@@ -220,8 +220,10 @@ def test_disk_full_keeps_acquiring_and_resumes_in_a_new_segment(tmp_path: Path) 
     try:
         filler = disk / "filler"
         filler.write_bytes(b"\0" * (512 * 1024 - 96 * 1024))
+        # the disk fills ~2 s into the run and the recorder retries every 5 s (its
+        # retry_s): 10 s leave the new segment ~3 s of data and the unlink ~4 s of slack
         cfg = config(tmp_path, "sim://lsm6dsl?odr_hz=1660&clock=wall&counting=1",
-                     extra="[run]\nduration_s = 14\n")
+                     extra="[run]\nduration_s = 10\n")
         cfg.write_text(cfg.read_text().replace(f"{tmp_path}/rec/", f"{disk}/"))
         proc = start(cfg)
         out = wait_line(proc, "not recording", 30)
@@ -242,7 +244,7 @@ def test_disk_full_keeps_acquiring_and_resumes_in_a_new_segment(tmp_path: Path) 
         reasons = {g.reason for r in recs for g in r.gaps}
         assert "disk full: not recorded" in reasons
         produced = int(re.search(r"stopped after (\d+) samples produced", out)[1])  # type: ignore[index]
-        assert produced == 1660 * 14
+        assert produced == 1660 * 10
         assert total + lost == produced, (produced, total, lost)
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
