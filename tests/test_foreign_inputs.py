@@ -287,9 +287,9 @@ def write_mcap(path: Path, t_s: np.ndarray, values: np.ndarray) -> None:
         shutil.copyfile(next((Path(tmp) / "b").glob("*.mcap")), path)
 
 
-SAME_SECONDS = 300
-"""Length of the recording written in every format (a few minutes: enough taus for fit
-and gap, a few seconds per command)."""
+SAME_SECONDS = 120
+"""Length of the recording written in every format (two minutes: enough taus for fit
+and gap; each format's reader, the MCAP one most, takes time in proportion)."""
 
 
 def same_recording_in_every_format(tmp: Path) -> dict[str, tuple[Path, list[str]]]:
