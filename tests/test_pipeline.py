@@ -89,8 +89,11 @@ def test_replay_with_slow_consumers_is_paced_and_drops_nothing(tmp_path: Path) -
 
 
 def test_realtime_source_loses_only_in_the_slow_consumer_and_says_so() -> None:
-    src = open_source("sim://lsm6dsl?odr_hz=3330&clock=wall&duration_s=4&counting=1")
-    slow = Collect("slow", delay_s=0.3)  # 256 samples per 0.3 s: slower than the source
+    src = open_source("sim://lsm6dsl?odr_hz=3330&clock=wall&duration_s=3&counting=1")
+    # 256 samples per 0.2 s at most: it takes <= 16 x 256 of the 9990 while the source
+    # runs, so it falls more than the ring behind whatever the load; its backlog at the
+    # end (<= 16 chunks) drains in ~3 s
+    slow = Collect("slow", delay_s=0.2)
     fast = Collect("fast", counting=True)
     pipeline = Pipeline(src, [slow, fast], capacity_s=0.2, max_chunk=256)  # 4096 samples
     run(pipeline)
