@@ -35,10 +35,11 @@ def recs(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """recs/ with two native recordings and one CSV (120 s at 104 Hz, virtual time)."""
     root = tmp_path_factory.mktemp("batch")
     (root / "recs").mkdir()
-    for name, seed in (("a.imbr", 1), ("b.imbr", 2), ("c.csv", 3)):
-        p = cli("sim", "--chip", "lsm6dsl", "--odr-hz", "104", "--duration-s", "120",
-                "--model", str(MODEL), "--seed", str(seed), "--out", f"recs/{name}", cwd=root)
-        assert p.returncode == 0, p.stderr
+    for name, seed in (("a.imbr", 1), ("b.imbr", 2), ("c.csv", 3)):  # (in this process:
+        # the batch commands under test run as subprocesses)
+        assert main(["sim", "--chip", "lsm6dsl", "--odr-hz", "104", "--duration-s", "120",
+                     "--model", str(MODEL), "--seed", str(seed),
+                     "--out", str(root / "recs" / name)]) == 0
     (root / "recs" / "notes.txt").write_text("not a recording\n")
     return root
 
