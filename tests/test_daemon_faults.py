@@ -105,6 +105,43 @@ def test_replay_through_the_daemon_keeps_every_sample(tmp_path: Path, minutes: i
     assert delivered == len(a) and lost == a.lost_samples and produced == delivered + lost
 
 
+def test_the_engine_state_saved_while_running_survives_a_sigkill(tmp_path: Path) -> None:
+    """``allan.state_every_s``: a daemon killed with SIGKILL (no clean exit, no final
+    save) leaves the state of at most that long ago, and the next start resumes it."""
+    from imubench.stats.streaming import StreamingAllan
+
+    state = tmp_path / "state.npz"
+
+    def saved_samples() -> int:
+        """Samples in the saved state's gap-free runs (n + 1 phase points each)."""
+        try:
+            lengths, counts = StreamingAllan.load_state(state.read_bytes()).runs(0)
+        except (OSError, ValueError):
+            return 0
+        return int(np.sum((lengths - 1) * counts))
+
+    cfg = config(tmp_path, "sim://lsm6dsl?odr_hz=104&seed=3")
+    cfg.write_text(cfg.read_text().replace(
+        "max_tau_s = 100\n", f'max_tau_s = 100\nstate_path = "{state}"\nstate_every_s = 1\n'))
+    proc = start(cfg)
+    try:
+        wait_line(proc, "publishing", 60)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and saved_samples() <= 2 * 104:
+            time.sleep(0.2)
+    finally:
+        proc.kill()
+        proc.wait(10)
+    held = saved_samples()
+    assert held > 2 * 104, "no state saved while running"
+    cfg.write_text(cfg.read_text().replace("{sensor}.imbr", "{sensor}_2.imbr")
+                   + "[run]\nduration_s = 1.0\n")
+    again = run_daemon(cfg, timeout_s=60)
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert "resumed Allan state from" in again.stdout
+    assert f"({held} samples, saved " in again.stdout
+
+
 def test_a_device_lost_for_good_ends_with_status_2_and_every_sample_accounted(
         tmp_path: Path) -> None:
     """A SensorTile unplugged and not back within ``reconnect_timeout_s``: the daemon

@@ -76,9 +76,11 @@ class Daemon:
         self._publisher: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.service = ServiceNotifier()
+        """sd_notify to systemd (a no-op outside a ``Type=notify`` unit)."""
         self.abandoned: threading.Thread | None = None
         """The preparing thread, when a stop came and it did not finish in time."""
-        """sd_notify to systemd (a no-op outside a ``Type=notify`` unit)."""
+        self._state_saves: set[asyncio.Task[None]] = set()
+        """Periodic engine-state saves in flight (awaited before the final one)."""
 
     # -- helpers --------------------------------------------------------------------
     def say(self, text: str) -> None:
@@ -99,12 +101,14 @@ class Daemon:
         computes it a little ahead of each tick (``SNAPSHOT_LEAD``) and the loop sends it
         on the tick, so the cadence does not depend on how long a snapshot takes; a tick
         missed while the machine was busy is skipped (``snapshots_skipped``), never sent
-        late in a burst."""
+        late in a burst. The periodic state save runs beside the loop (one at a time), so a
+        slow disk never delays a snapshot."""
         interval = self.cfg.mqtt.publish_interval_s
         lead = SNAPSHOT_LEAD * interval
         next_t = time.monotonic() + interval
         every = self.cfg.allan.state_every_s
         next_save = time.monotonic() + every
+        saving: asyncio.Task[None] | None = None
         while not self.stop_requested.is_set():
             if await self._sleep_until(next_t - lead):
                 return
@@ -120,9 +124,11 @@ class Daemon:
             if snap is None:
                 continue
             await publisher.publish_allan(self._payload(unit, snap), unit.name)
-            if every > 0 and now >= next_save:
+            if every > 0 and now >= next_save and (saving is None or saving.done()):
                 next_save = now + every
-                await self._save_state(unit)
+                saving = asyncio.create_task(self._save_state(unit))
+                self._state_saves.add(saving)
+                saving.add_done_callback(self._state_saves.discard)
 
     @staticmethod
     async def _save_state(unit: SensorRun) -> None:
@@ -412,6 +418,7 @@ class Daemon:
                 self.service.watchdog()
 
     async def _finish(self, publisher: Any, broker: Any) -> None:
+        await asyncio.gather(*self._state_saves, return_exceptions=True)
         for unit in self.sensors:
             ec = unit.engine_consumer
             if ec is None or not ec.n_samples or ec.engine is None:
