@@ -339,3 +339,19 @@ def test_fit_says_how_much_of_the_recording_is_missing(
     assert "18000 samples, 2 hole(s) (2000 samples, 10 % missing" in head
     doc = json.loads(out.read_text())
     assert (doc["samples"], doc["lost_samples"], doc["holes"]) == (18000, 2000, 2)
+
+
+def test_datasheet_units_of_an_absent_term_are_null_with_the_upper_limit() -> None:
+    """A dropped flicker was written as bias instability 0.0 deg/h, which reads as
+    measured; it is null, with the fit's upper 95 % limit beside it."""
+    from imubench.noisefit import fit_channel
+    from imubench.noisefit.recording_fit import fit_datasheet_units
+
+    rng = np.random.default_rng(6)
+    f = fit_channel(rng.normal(0.0, 0.04, 60_000), 100.0, channel="gx")
+    assert "flicker" not in f.present and "white" in f.present
+    ds = fit_datasheet_units("gx", f)
+    assert ds["bias_instability_deg_per_h"] is None and ds["rrw_deg_per_h_per_sqrt_h"] is None
+    _, (_, hi) = f.coefficient("flicker")
+    assert ds["bias_instability_deg_per_h_upper_95"] == pytest.approx(hi * 3600.0)
+    assert ds["arw_deg_per_sqrt_h"] == pytest.approx(0.004 * 60, rel=0.03)

@@ -393,15 +393,15 @@ def test_kalibr_values_hand_computed() -> None:
 
 
 def test_kalibr_folds_a_slow_markov_term_into_the_density() -> None:
-    """Kalibr has no Gauss-Markov term: one of tau_c 1.4 s (Samsung S5 gyros) enters the
+    """Kalibr has no Gauss-Markov term: one too slow to count in N (tau_c 30 s) enters the
     noise density as sigma sqrt(2 tau_c), the bound of its spectrum, instead of being
-    dropped (which wrote a density 4x below the measured ADEV at 1 s)."""
+    dropped (which wrote a density below the measured ADEV)."""
     params = {"gx": {"white": 0.004, "random_walk": 1e-4, "markov_sigma": 0.04,
-                     "markov_tau": 1.4},
+                     "markov_tau": 30.0},
               "gy": {"white": 0.005, "random_walk": 2e-5},
               "az": {"white": 8e-5, "random_walk": 2e-6}}
     k = kalibr_imu(params, 10.0)
-    n = math.hypot(0.004, 0.04 * math.sqrt(2 * 1.4))
+    n = math.hypot(0.004, 0.04 * math.sqrt(2 * 30.0))
     assert k["gyroscope_noise_density"] == pytest.approx(n * math.pi / 180)
     assert k["markov_folded"] == {"gyroscope_noise_density": ["gx"]}
     assert "holds the Gauss-Markov term of gx" in kalibr_yaml(k)
@@ -594,14 +594,16 @@ def test_a_resonance_is_fitted_where_the_sine_has_no_line(reference_dir) -> None
 
 def test_white_equivalent_density_hand_computed() -> None:
     """N = sqrt(white^2 + output_white^2 + 2 sigma^2 tau_c) for a Markov term with
-    tau_c <= 0.1 s (IEEE 952 C.6: its AVAR tends to 2 sigma^2 tau_c / tau)."""
+    tau_c <= 10 s (IEEE 952 C.6: its AVAR tends to 2 sigma^2 tau_c / tau)."""
     from imubench.noisefit.units import white_equivalent
 
     assert white_equivalent({"white": 0.03, "output_white": 0.04}) == pytest.approx(0.05)
     fast = {"white": 0.03, "markov_sigma": 0.1, "markov_tau": 0.05}
     assert white_equivalent(fast) == pytest.approx(math.sqrt(0.0009 + 2 * 0.01 * 0.05))
-    slow = {"white": 0.03, "markov_sigma": 0.1, "markov_tau": 5.0}
+    slow = {"white": 0.03, "markov_sigma": 0.1, "markov_tau": 50.0}
     assert white_equivalent(slow) == pytest.approx(0.03)
+    filtered = {"markov_sigma": 0.036, "markov_tau": 1.4}  # a phone's low-passed gyro
+    assert white_equivalent(filtered) == pytest.approx(0.036 * math.sqrt(2.8))
     assert datasheet_units("gx", {"white": 0.03, "output_white": 0.04})[
         "arw_deg_per_sqrt_h"] == pytest.approx(3.0)
     # a Markov term at tau_c = 0.05 s really is white at tau >= 1 s: its exact AVAR

@@ -84,7 +84,7 @@ def format_summary(result: RecordingFit) -> str:
             lo, hi = ci if ci is not None else (float("nan"), float("nan"))
             lines.append(f"    white-equivalent density N={n:.4g} {param_units(ch)['white']} "
                          f"[{lo:.3g}, {hi:.3g}] (white, output_white and a Markov term with "
-                         "tau_c <= 0.1 s together: the datasheet noise density)")
+                         "tau_c <= 10 s together: the datasheet noise density)")
         if f.reasons:
             lines.append("    " + short_reasons(f.reasons))
         lines.extend(f"    note: {note}" for note in f.notes)

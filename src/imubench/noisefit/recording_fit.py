@@ -28,9 +28,9 @@ from imubench.noisefit.units import (
     KALIBR_UNITS,
     WHITE_EQUIVALENT,
     datasheet_comparison,
-    datasheet_units,
     kalibr_imu,
     param_units,
+    quantities,
 )
 
 log = logging.getLogger(__name__)
@@ -119,7 +119,7 @@ class RecordingFit:
             "chip": self.chip,
             "method": self.method,
             "channels": {
-                ch: {**f.to_dict(), "datasheet_units": datasheet_units(ch, f.params),
+                ch: {**f.to_dict(), "datasheet_units": fit_datasheet_units(ch, f),
                      "units": {**param_units(ch), "tau_s": "s",
                                "avar": f"{UNITS[ch]}^2", "edf": "1"}}
                 for ch, f in self.fits.items()
@@ -128,6 +128,20 @@ class RecordingFit:
             "kalibr_units": dict(KALIBR_UNITS),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
         }
+
+
+def fit_datasheet_units(channel: str, fit: ChannelFit) -> dict[str, float | None]:
+    """The fit's N, B, K in datasheet units (:func:`~imubench.noisefit.units.quantities`):
+    a term the fit judged absent is ``None`` with its upper 95 % limit under
+    ``KEY_upper_95`` (a 0.0 read as measured: ADIS16405 gx, 1 h, bias instability "0.0
+    deg/h" beside a clear Allan floor at 40 deg/h, the flicker term's limit 27 deg/h)."""
+    out: dict[str, float | None] = {}
+    for q in quantities(channel):
+        value, ci = fit.coefficient(q.term)
+        out[q.key] = value * q.factor if value > 0 else None
+        if value <= 0 and ci is not None and ci[1] > 0:
+            out[f"{q.key}_upper_95"] = ci[1] * q.factor
+    return out
 
 
 def parse_channels(text: str | Sequence[str] | None, available: Iterable[str]) -> list[str]:
