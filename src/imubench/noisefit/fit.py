@@ -939,12 +939,6 @@ def _intervals(st: Structure, sol: _Solution, pts: Points) -> dict[str, tuple[fl
                 hi = key_value(own, s_end.theta[j] + Z95 * se)
                 old = ci[AMPLITUDE_KEY[own]]
                 ci[AMPLITUDE_KEY[own]] = (min(old[0], lo), max(old[1], hi))
-    if "resonance" in _extensions_in(st) and _resonance_edge(st, pts):
-        # a width at the search's edge: the height and width are not identified (the
-        # ADIS16405 gz peak was printed as 0.1715 [0.137, 0.173] dps^2/Hz, 1.6x the
-        # spectrum's, while the reason said "read them from the spectrum")
-        for key in (AMPLITUDE_KEY["resonance"], _SETTING_KEY["resonance"]):
-            ci[key] = (math.nan, math.nan)
     return ci
 
 
@@ -1270,6 +1264,13 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
                          f"{', '.join(shaped) or 'the filtered terms'} hold at the fitted "
                          f"{st.bandwidth_hz:.3g} Hz only, and a small change of the record "
                          "can move them beyond (the white-equivalent N is robust)")
+    if AMPLITUDE_KEY["resonance"] in present and _resonance_edge(st, pts):
+        # a width at the search's edge: the height and width are not identified, so no
+        # interval is stated for them (the ADIS16405 gz peak was printed as 0.1715 [0.137,
+        # 0.173] dps^2/Hz, 1.6x the spectrum's, while the reason said "read them from the
+        # spectrum"); the selection above used the conditional intervals
+        for key in (AMPLITUDE_KEY["resonance"], _SETTING_KEY["resonance"]):
+            ci[key] = (math.nan, math.nan)
     return ChannelFit(channel, float(rate_hz), "wls", params, ci, tuple(present), pts.tau_s,
                       pts.avar, pts.edf, bias, sol.chi2, dof, tuple(notes), reasons,
                       {k: float(v) for k, v in drops.items()})
