@@ -40,3 +40,25 @@ def test_mtig_reference_record_is_flagged(reference_dir) -> None:
     y = np.asarray(d[key], dtype=float).ravel()
     text = outlier_warning("gx", y)
     assert text is not None, impulsive_share(y)
+
+
+def test_held_samples_are_named_not_called_outliers() -> None:
+    """A record that repeats its output (the Samsung S5: 28 % of samples, runs of median
+    10) read as 5.4-6 % impulsive outliers with the white level "up to 2.75x" too high."""
+    rng = np.random.default_rng(8)
+    x = np.cumsum(rng.standard_normal(N)) * 0.01 + 0.05 * rng.standard_normal(N)
+    held = x.copy()
+    k = 0
+    while k < N:  # hold the output for 8-12 samples now and then
+        if rng.random() < 0.03:
+            n = int(rng.integers(8, 13))
+            held[k:k + n] = held[k]
+            k += n
+        else:
+            k += 1
+    text = outlier_warning("gy", held)
+    assert text is not None and text.startswith("gy: held samples:")
+    assert "impulsive" not in text
+    assert outlier_warning("gy", x) is None
+    coarse = np.round(0.4 * rng.standard_normal(N) / 0.5) * 0.5  # zeros, but short runs
+    assert outlier_warning("gx", coarse) is None
