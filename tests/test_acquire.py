@@ -118,6 +118,19 @@ def test_crystal_error_keeps_index_exact_across_resets(bus: str) -> None:
     assert steps.min() > 0.85 / 107.9 and steps.max() < 1.15 / 107.9
 
 
+@pytest.mark.parametrize("ppm", [-105_000, -300_000, 110_000])
+def test_a_clock_more_than_10_percent_off_is_measured_not_taken_as_nominal(ppm: int) -> None:
+    """A part 10.5 % slow was reported at exactly its nominal 104 Hz (estimates beyond
+    10 % were dropped silently), so the jig's ODR error read 0 % and passed it."""
+    src = open_source(f"sim://lsm6dsl?odr_hz=104&crystal_ppm={ppm}&clock=virtual"
+                      "&duration_s=20&seed=1")
+    with src:
+        batches = list(src)
+    want = 104 * (1 + ppm * 1e-6)
+    assert src.measured_odr_hz == pytest.approx(want, rel=1e-4)
+    assert sum(len(b.index) for b in batches) + src.counters["lost_samples"] == 104 * 20
+
+
 @pytest.mark.parametrize("suffix", [".imbr", ".csv"])
 def test_a_recording_of_a_fast_clock_is_read_at_its_measured_rate(
         tmp_path: Path, suffix: str) -> None:

@@ -57,6 +57,14 @@ MAX_BURST_BYTES = 4092
 HOST_JITTER_S = 0.002
 """Host timing error allowed when the words a FIFO dropped are estimated from the host
 clock (between two status reads), s."""
+CLOCK_TOLERANCE = 0.5
+"""A tick period measured within this share of the nominal 25 us is the chip's clock (an
+oscillator 10.5 % slow was refused by the earlier 10 %, and its ODR reported as exactly
+nominal: the jig's ``fifo.odr_error`` read 0 % and passed a part outside its +-10 %);
+a part further off is broken beyond what its timestamps can be trusted for."""
+DRIFT_JUMP = 0.02
+"""Once the period is measured, a reading that implies a period this far from it is a
+counter reset under the reading (the next poll sees the reset), not the clock."""
 SLEW_PER_SAMPLE = 0.1
 """Most a sample's time stamp departs from the clock model's, per sample, while a change
 of that model (the tick period's estimate, a host read time) is taken in: a tenth of the
@@ -513,13 +521,15 @@ class FifoStream:
         # the epoch's tick count is congruent to the raw 24-bit counter (both start at 0)
         ticks = prev_ticks + ((raw - int(prev_ticks) % TICKS_WRAP) % TICKS_WRAP)
         span_t = t_read - self._epoch_t_ref
-        if span_t <= 0 or ticks <= 0 or abs(span_t / (ticks * TICK_S) - 1.0) > 0.1:
+        measured = self._tick_s_est != TICK_S
+        ref, tol = (self._tick_s_est, DRIFT_JUMP) if measured else (TICK_S, CLOCK_TOLERANCE)
+        if span_t <= 0 or ticks <= 0 or abs(span_t / (ticks * ref) - 1.0) > tol:
             return  # counter reset under us (a chip reset the next poll will see)
         self._drift_cur = (span_t, float(ticks))
         tot_t, tot_k = self._drift_sum[0] + span_t, self._drift_sum[1] + ticks
         if tot_k * TICK_S >= 0.5:
             est = tot_t / tot_k
-            if abs(est / TICK_S - 1.0) < 0.1:
+            if abs(est / TICK_S - 1.0) < CLOCK_TOLERANCE:
                 self._tick_s_est = est
 
     @property
