@@ -321,3 +321,19 @@ def test_manual_fixture_driven_by_an_operator_on_a_pty(tmp_path: Path) -> None:
     assert "temperature_sensor.offset" in names and "identity.who_am_i" in names
     t = next(m for m in res["measurements"] if m["name"] == "temperature_sensor.offset")
     assert t["verdict"] == "PASS" and abs(t["value"]) < 0.01  # die 25 degC, operator said 25
+
+
+def test_a_rate_step_beyond_full_scale_is_named_not_measured(tmp_path: Path) -> None:
+    """400 dps on a 250 dps gyro clips: the means of clipped samples read a healthy
+    board's sensitivity as -26.7 % (FAIL) and a 3.5 % error as 2.5 % (PASS)."""
+    station = write_station(tmp_path, "clip", select_tests="sensitivity",
+                            capture=FAST.format(static_s=30.0).replace(
+                                "rates_dps = [100.0, 200.0]", "rates_dps = [100.0, 400.0]"))
+    report = tmp_path / "reports"
+    proc = jig(station, report, "--serial", "SN-CLIP")
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
+    _, res = result_of(report, "SN-CLIP")
+    assert not any(m["name"].startswith("gyro_sensitivity") for m in res["measurements"])
+    assert "the output was clipped at its full scale (gx" in proc.stdout
+    why = res["broken_reasons"]["suite/test_5_gyro.py::test_sensitivity[x]"]
+    assert why.startswith("imubench.calibration.errors.CalibrationError: rate +400 dps")

@@ -48,8 +48,10 @@ def run(args: argparse.Namespace) -> int:
     for m in bad:
         print(f"{m['verdict']}: {m['name']} = {m['value']} {m['unit']} (CI {m['ci_low']} .."
               f" {m['ci_high']}, limits {m['low']} .. {m['high']})")
+    reasons = result.get("broken_reasons", {})
     for nodeid in result["broken_tests"]:
-        print(f"FAIL: test {nodeid} failed without a measurement (see the report)")
+        why = reasons.get(nodeid) or "see the report"
+        print(f"FAIL: test {nodeid} failed without a measurement: {why}")
     print(f"{result['serial']}: {result['verdict']} ({len(result['measurements'])}"
           f" measurements); report {res.run_dir / 'report.html'}")
     if res.published_topic:

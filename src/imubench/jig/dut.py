@@ -66,6 +66,8 @@ class Capture:
         t0_s: source time of the first sample, s.
         gaps: the holes inside the capture with their reasons.
         lsb: (6,) output resolution per channel (dps, g), 0 where unknown.
+        clipped: (6,) samples per channel at the output's limits (raw -32768 or 32767:
+            the input was beyond the full scale; 0 where raw counts are not known).
     """
 
     label: str
@@ -76,6 +78,7 @@ class Capture:
     t0_s: float
     gaps: tuple[Gap, ...]
     lsb: np.ndarray
+    clipped: np.ndarray
 
     def __len__(self) -> int:
         return len(self.values)
@@ -260,14 +263,21 @@ def _dense(label: str, odr: float, first: int, n: int, parts: list[Batch],
            gaps: tuple[Gap, ...], lsb: np.ndarray) -> Capture:
     values = np.full((n, len(CHANNELS)), np.nan)
     temp = np.full(n, np.nan)
+    clipped = np.zeros(len(CHANNELS), dtype=np.int64)
     t0 = float("nan")
     for b in parts:
         pos = b.index - first
         values[pos] = b.values
         temp[pos] = b.temp_c
+        if b.raw is not None:
+            clipped += np.count_nonzero((b.raw == INT16_MIN) | (b.raw == INT16_MAX), axis=0)
         if not np.isfinite(t0):
             t0 = float(b.t_s[0])
-    return Capture(label, odr, first, values, temp, t0, gaps, lsb)
+    return Capture(label, odr, first, values, temp, t0, gaps, lsb, clipped)
+
+
+INT16_MIN, INT16_MAX = -32768, 32767
+"""The output registers' limits: a sample there was clipped at the full scale."""
 
 
 __all__ = ["Capture", "Dut", "resolve_uri_paths"]

@@ -128,6 +128,10 @@ def pytest_runtest_makereport(
         message = ""
         if isinstance(rep.longrepr, tuple):
             message = str(rep.longrepr[2])
+        elif call.excinfo is not None and rep.failed and not isinstance(rep.longrepr, str):
+            # the exception's own words ("CalibrationError: rate +400 dps about x: the
+            # output was clipped ..."), not the traceback's last line (file:line: Type)
+            message = call.excinfo.exconly()[:2000]
         elif rep.longrepr is not None:
             message = str(rep.longrepr).strip().splitlines()[-1][:2000]
         item.config.stash.setdefault(OUTCOMES_KEY, []).append(

@@ -7,7 +7,11 @@ restarts) still finds it; the next run replaces it. Payload::
     {"verdict": "PASS|FAIL|INCONCLUSIVE", "serial": ..., "station": ..., "sensor": ...,
      "run_id": ..., "time": ISO-8601 UTC, "exit_status": 0|1|3,
      "measurements": [{"name", "value", "unit", "low", "high", "ci_low", "ci_high",
-                       "verdict"}, ...]}
+                       "verdict"}, ...],
+     "broken_tests": [{"test": nodeid, "reason": text}, ...]}
+
+``broken_tests`` are the tests that failed without a measurement (a FAIL with every
+measurement PASS is one of them, with its reason).
 
 NaN becomes null (JSON). The broker is the station's ``mqtt.broker``
 (``mqtt://host:port`` or ``mqtts://``), through aiomqtt like the daemon's publisher
@@ -46,6 +50,8 @@ def payload(result: dict[str, Any]) -> dict[str, Any]:
         "time": result["finished_utc"],
         "exit_status": result["exit_status"],
         "measurements": [{k: m[k] for k in PAYLOAD_KEYS} for m in result["measurements"]],
+        "broken_tests": [{"test": t, "reason": result.get("broken_reasons", {}).get(t, "")}
+                         for t in result["broken_tests"]],
     }
 
 

@@ -70,11 +70,22 @@ def build_result(raw: dict[str, Any], *, serial: str, station: str, sensor: str,
         "measurements": measurements,
         "tests": tests,
         "broken_tests": [t["nodeid"] for t in broken],
+        "broken_reasons": {t["nodeid"]: first_line(t.get("message", "")) for t in broken},
         "calibration": art.get("calibration_file"),
         "telemetry": raw.get("telemetry"),
         "junit": "junit.xml",
         "report": "report.html",
     }
+
+
+def first_line(message: str) -> str:
+    """The line of a test's failure message that says why (pytest puts the exception's
+    ``Type: text`` last in its short form), at most 300 characters."""
+    lines = [ln.strip() for ln in str(message).splitlines() if ln.strip()]
+    if not lines:
+        return ""
+    why = next((ln for ln in reversed(lines) if "Error:" in ln), lines[-1])
+    return why[:300]
 
 
 # ------------------------------------------------------------------------- plots
