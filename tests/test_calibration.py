@@ -171,3 +171,38 @@ def test_capture_mean_interval_covers_on_white_noise() -> None:
     assert m.stderr == pytest.approx(0.01 / math.sqrt(12.0))
     with pytest.raises(CalibrationError, match="at least 16"):
         capture_mean(np.full(10, 1.0), 104.0, 0.01, "few")
+
+
+def test_a_calibration_is_refused_on_another_chip_or_range_and_warns_outside_its_sweep(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """An LSM6DSL 2 g / 250 dps calibration was applied silently to an LSM6DSM and to a
+    16 g / 2000 dps recording; one swept over 20-30 degC made the values at -40 degC
+    worse than raw, without a word."""
+    from imubench.cli import main
+    from imubench.recording import convert
+
+    cal = Calibration({**PROV, "chip": "lsm6dsl"},
+                      gyro=_sensor("dps", full_scale=250.0, temp_range_c=(20.0, 30.0),
+                                   temp_coeff1=np.array([0.01, 0.0, 0.0])),
+                      accel=_sensor("g", full_scale=2.0))
+    path = cal.save(tmp_path / "cal.toml").path
+    assert path is not None
+    back = Calibration.load(path)
+    assert back.gyro is not None and back.gyro.temp_range_c == (20.0, 30.0)
+    assert back.gyro.full_scale == 250.0
+    for name, args in (("dsm", ["--chip", "lsm6dsm"]),
+                       ("fs", ["--chip", "lsm6dsl", "--fs-dps", "2000"]),
+                       ("cold", ["--chip", "lsm6dsl", "--temperature", "-40"])):
+        rec = tmp_path / f"{name}.imbr"
+        assert main(["sim", *args, "--duration-s", "2", "--out", str(rec)]) == 0
+        out = tmp_path / f"{name}_cal.csv"
+        if name == "cold":
+            with caplog.at_level("WARNING"):
+                convert(rec, out, calibration=path)
+            assert "outside the 20.0 to 30.0 degC the [gyro] temperature terms" in caplog.text
+        else:
+            with pytest.raises(CalibrationError, match=r"lsm6dsm|full scale 250 dps"):
+                convert(rec, out, calibration=path)
+            assert not out.exists()
+    assert main(["acquire", "sim://lsm6dsm?odr_hz=104", "--duration-s", "1", "--out",
+                 str(tmp_path / "a.imbr"), "--calibration", str(path)]) == 2

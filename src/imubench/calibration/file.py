@@ -17,7 +17,16 @@ One file per board::
     temp_method = "..."               # how the temperature terms were found ("" = none)
     temp_coeff1 = [..]                # unit/degC
     temp_coeff2 = [..]                # unit/degC^2
+    full_scale = 2.0                  # unit: the full scale it was made at (optional)
+    temp_range_c = [lo, hi]           # die temperatures the temperature terms saw
     [accel.residuals]     # free-form: residual tables of the fits (lists of numbers)
+
+Applied to data (:meth:`Calibration.check_data`): a recording or source of another chip
+(``provenance.chip``) or another full scale is refused (offset, gains and nonlinearity
+belong to the range they were measured at), and data whose die temperature leaves
+``temp_range_c`` by more than :data:`TEMP_MARGIN_C` get a warning: the temperature terms
+are extrapolated there (a quadratic fitted over +-5 degC made the output at -40 and
+85 degC worse than the raw one).
 
 Model and correction (:mod:`imubench.calibration.sensor`,
 :mod:`imubench.calibration.temperature`): a sensor reading ``y`` at die temperature ``T``
@@ -50,6 +59,8 @@ VERSION = 1
 SENSORS: dict[str, tuple[str, slice]] = {"gyro": ("dps", slice(0, 3)), "accel": ("g", slice(3, 6))}
 """Sensor table name -> (unit, columns of Batch.values)."""
 PROVENANCE_KEYS = ("serial", "date_utc", "station", "chip", "software", "source_uri", "run_id")
+TEMP_MARGIN_C = 5.0
+"""Die temperatures this far outside a calibration's ``temp_range_c`` get a warning."""
 REQUIRED_PROVENANCE = ("serial", "date_utc", "station")
 
 
@@ -67,6 +78,11 @@ class SensorCalibration:
     temp_coeff1: np.ndarray = field(default_factory=lambda: np.zeros(3))
     temp_coeff2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     residuals: Mapping[str, Any] = field(default_factory=dict)
+    full_scale: float = 0.0
+    """The full scale (unit) the calibration was made at; 0 = not stated."""
+    temp_range_c: tuple[float, float] | None = None
+    """The die temperatures (degC) the temperature terms were fitted over; None = not
+    stated."""
 
     @property
     def has_temperature(self) -> bool:
@@ -100,6 +116,9 @@ class SensorCalibration:
             "temp_coeff1": [float(v) for v in self.temp_coeff1],
             "temp_coeff2": [float(v) for v in self.temp_coeff2],
             "residuals": _plain(self.residuals),
+            **({"full_scale": float(self.full_scale)} if self.full_scale else {}),
+            **({"temp_range_c": [float(v) for v in self.temp_range_c]}
+               if self.temp_range_c is not None else {}),
         }
 
 
@@ -147,6 +166,42 @@ class Calibration:
                 continue
             values[:, cols] = sc.correct(values[:, cols], batch.temp_c)
         return dataclasses.replace(batch, values=values)
+
+    def check_data(self, chip: str | None, full_scale: Mapping[str, float | None],
+                   temp_c: np.ndarray | None, where: str) -> list[str]:
+        """Refuse data this calibration does not belong to (CalibrationError naming both):
+        another chip than ``provenance.chip``, another full scale (``full_scale``:
+        ``{"gyro": dps, "accel": g}`` of the data, None where unknown). Returns warnings
+        for die temperatures ``temp_c`` outside ``temp_range_c`` by more than
+        :data:`TEMP_MARGIN_C` (the temperature terms extrapolate there)."""
+        own = self.provenance.get("chip")
+        if own and chip and own.lower() != chip.lower():
+            raise CalibrationError(f"{self._where()} was made for an {own}; {where} is from "
+                                   f"an {chip}")
+        warnings: list[str] = []
+        for name in SENSORS:
+            sc = getattr(self, name)
+            if sc is None:
+                continue
+            fs = full_scale.get(name)
+            if sc.full_scale and fs and not math.isclose(fs, sc.full_scale, rel_tol=1e-6):
+                raise CalibrationError(
+                    f"{self._where()}: [{name}] was made at full scale {sc.full_scale:g} "
+                    f"{sc.unit}; {where} is at {fs:g} {sc.unit} (offset and gains belong "
+                    "to the range they were measured at)")
+            if sc.has_temperature and sc.temp_range_c is not None and temp_c is not None:
+                finite = np.asarray(temp_c, dtype=np.float64)
+                finite = finite[np.isfinite(finite)]
+                if finite.size:
+                    lo, hi = float(finite.min()), float(finite.max())
+                    if lo < sc.temp_range_c[0] - TEMP_MARGIN_C or (
+                            hi > sc.temp_range_c[1] + TEMP_MARGIN_C):
+                        warnings.append(
+                            f"{where}: die temperature {lo:.1f} to {hi:.1f} degC, outside the "
+                            f"{sc.temp_range_c[0]:.1f} to {sc.temp_range_c[1]:.1f} degC the "
+                            f"[{name}] temperature terms of {self._where()} were fitted over: "
+                            "they are extrapolated there and may make the values worse")
+        return warnings
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready statement for a recording header: ``applied`` (True), ``path``,
@@ -253,8 +308,13 @@ def _vector(t: Mapping[str, Any], key: str, where: str, shape: tuple[int, ...],
 def _sensor(t: Any, where: str, unit: str) -> SensorCalibration:
     if not isinstance(t, Mapping):
         raise CalibrationError(f"{where} must be a table")
+    span = None
+    if "temp_range_c" in t:
+        lo, hi = _vector(t, "temp_range_c", where, (2,))
+        span = (float(lo), float(hi))
     allowed = {"unit", "method", "temp_ref_c", "offset", "matrix", "nonlinearity",
-               "temp_method", "temp_coeff1", "temp_coeff2", "residuals"}
+               "temp_method", "temp_coeff1", "temp_coeff2", "residuals", "full_scale",
+               "temp_range_c"}
     extra = sorted(set(t) - allowed)
     if extra:
         raise CalibrationError(f"{where}: unknown keys {extra}; allowed: {sorted(allowed)}")
@@ -274,6 +334,8 @@ def _sensor(t: Any, where: str, unit: str) -> SensorCalibration:
         temp_coeff1=_vector(t, "temp_coeff1", where, (3,), 0.0),
         temp_coeff2=_vector(t, "temp_coeff2", where, (3,), 0.0),
         residuals=dict(t.get("residuals", {})),
+        full_scale=float(_vector(t, "full_scale", where, (), 0.0)),
+        temp_range_c=span,
     )
 
 

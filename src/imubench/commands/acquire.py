@@ -84,7 +84,11 @@ def record_uri(uri: str, out: Path, stats_json: Path | None,
     ``calibration`` applied) and write the counters to ``stats_json`` (if given); returns
     the counters (see :func:`record`)."""
     cal = None if calibration is None else Calibration.load(calibration)
-    stats = record(open_source(uri), out, duration_s, cal)
+    src = open_source(uri)
+    if cal is not None:  # another chip or range: refused before anything is recorded
+        cal.check_data(src.info.chip, {"gyro": src.info.fs_dps, "accel": src.info.fs_g},
+                       None, f"source {uri}")
+    stats = record(src, out, duration_s, cal)
     if stats_json is not None:
         write_json(stats, str(stats_json))
     return stats

@@ -94,7 +94,11 @@ def temperature_fits(sweep: list[TemperaturePoint], cols: slice, temp_ref_c: flo
 
 
 def sensor_calibration(unit: str, fit: SensorFit, method: str, temp_ref_c: float,
-                       sweep: SweepData | None, temp_method: str) -> SensorCalibration:
+                       sweep: SweepData | None, temp_method: str,
+                       full_scale: float | None = None) -> SensorCalibration:
+    """One sensor's table of the calibration file; ``full_scale`` (unit) is the range it
+    was made at, and the sweep's die temperatures bound where its temperature terms
+    hold (``temp_range_c``)."""
     residuals: dict[str, object] = {
         "fit_inputs": fit.inputs.tolist(),
         "fit_residuals": fit.residuals.tolist(),
@@ -110,11 +114,14 @@ def sensor_calibration(unit: str, fit: SensorFit, method: str, temp_ref_c: float
         residuals["sweep_temps_c"] = sweep.temps_c.tolist()
         for name, f in sweep.fits.items():
             residuals[f"sweep_{name}"] = f.residuals(sweep.temps_c, sweep.offsets).tolist()
+    span = (None if sweep is None
+            else (float(np.min(sweep.temps_c)), float(np.max(sweep.temps_c))))
     return SensorCalibration(unit=unit, method=method, temp_ref_c=temp_ref_c,
                              offset=fit.offset, matrix=fit.matrix,
                              nonlinearity=fit.nonlinearity,
                              temp_method=temp_method if sweep is not None else "",
-                             temp_coeff1=c1, temp_coeff2=c2, residuals=residuals)
+                             temp_coeff1=c1, temp_coeff2=c2, residuals=residuals,
+                             full_scale=full_scale or 0.0, temp_range_c=span)
 
 
 def provenance(serial: str, station: str, chip: str, uri: str, run_id: str) -> dict[str, str]:
@@ -155,9 +162,10 @@ def fit_board(proc: Procedures, cal: CalibrationSection, *, sweep: bool = True) 
 
 
 def build_calibration(fits: BoardFits, cal: CalibrationSection,
-                      prov: dict[str, str]) -> Calibration:
+                      prov: dict[str, str], fs_dps: float | None = None,
+                      fs_g: float | None = None) -> Calibration:
     """The calibration file's content from the fits (``cal.temperature_method`` chooses
-    the temperature fit)."""
+    the temperature fit), made at the full scales ``fs_dps`` and ``fs_g``."""
     method = cal.temperature_method
     tail = " + quadratic" if cal.nonlinearity else ""
     sw = fits.sweep
@@ -165,10 +173,10 @@ def build_calibration(fits: BoardFits, cal: CalibrationSection,
         prov,
         gyro=sensor_calibration("dps", fits.gyro, "rate-table least squares (offset, scale,"
                                 f" cross-axis{tail})", fits.temp_ref_c,
-                                None if sw is None else sw["gyro"], method),
+                                None if sw is None else sw["gyro"], method, fs_dps),
         accel=sensor_calibration("g", fits.accel, "six-position least squares (offset, gain,"
                                  f" cross-axis{tail})", fits.temp_ref_c,
-                                 None if sw is None else sw["accel"], method),
+                                 None if sw is None else sw["accel"], method, fs_g),
     )
 
 

@@ -392,6 +392,11 @@ def _calibrated(rec: Recording, path: str | Path) -> Recording:
                              f"{already.get('path')!r} was applied already; drop "
                              "--calibration")
     cal = Calibration.load(path)
+    meta = rec.metadata
+    for warning in cal.check_data(
+            meta.get("chip"), {"gyro": meta.get("fs_dps"), "accel": meta.get("fs_g")},
+            rec.temp_c, str(rec.path)):
+        log.warning("%s", warning)
     values = cal.apply(rec.batch()).values
     meta = {**rec.metadata, "calibration": cal.describe()}
     return dataclasses.replace(rec, values=values, metadata=meta)

@@ -22,7 +22,9 @@ def test_calibration_file(jig: JigSession) -> None:
     fits = jig.cached("board_fits", lambda: fit_board(jig.procedures, cal_cfg))
     prov = provenance(jig.serial, jig.station.station.name, jig.dut.info.chip, jig.uri,
                       jig.run_id)
-    saved = build_calibration(fits, cal_cfg, prov).save(jig.out_dir / CALIBRATION_FILE)
+    info = jig.dut.info
+    saved = build_calibration(fits, cal_cfg, prov, info.fs_dps, info.fs_g).save(
+        jig.out_dir / CALIBRATION_FILE)
     jig.artifacts["calibration_file"] = CALIBRATION_FILE
     assert saved.path is not None
     back = Calibration.load(saved.path)
