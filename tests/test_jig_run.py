@@ -337,3 +337,27 @@ def test_a_rate_step_beyond_full_scale_is_named_not_measured(tmp_path: Path) -> 
     assert "the output was clipped at its full scale (gx" in proc.stdout
     why = res["broken_reasons"]["suite/test_5_gyro.py::test_sensitivity[x]"]
     assert why.startswith("imubench.calibration.errors.CalibrationError: rate +400 dps")
+
+
+def test_an_interrupted_run_leaves_no_junit_that_reads_as_a_result(tmp_path: Path) -> None:
+    """SIGTERM mid-suite left junit.xml with "37 tests, 0 failures, 0 errors" of 47: a
+    line system reading it saw a green board."""
+    import signal
+
+    station = write_station(tmp_path, "stop", capture=FAST.format(static_s=2000.0))
+    report = tmp_path / "reports"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "imubench.cli", "jig", "run", "--station", str(station),
+         "--report", str(report), "--serial", "SN-STOP"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not list(report.glob("SN-STOP/*/pytest.ini")):
+        time.sleep(0.1)
+    time.sleep(2.0)  # inside the suite: the 2000 s static capture takes longer
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 143, out[-3000:]
+    run_dir = next((report / "SN-STOP").iterdir())
+    assert not (run_dir / "junit.xml").exists()
+    assert (run_dir / "junit.incomplete.xml").exists()
+    assert not (run_dir / "result.json").exists()

@@ -40,6 +40,18 @@ class JigRun:
     publish_error: str | None
 
 
+INCOMPLETE_JUNIT = "junit.incomplete.xml"
+"""The JUnit XML of a run that did not finish: renamed so that a line system reading
+``junit.xml`` never takes it for a result (an interrupted run's file said 37 tests, no
+failure and no error, of a suite of 47)."""
+
+
+def _set_aside_junit(run_dir: Path) -> None:
+    junit = run_dir / "junit.xml"
+    if junit.exists():
+        junit.replace(run_dir / INCOMPLETE_JUNIT)
+
+
 def _now() -> str:
     return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
 
@@ -99,11 +111,16 @@ def run_jig(station_path: str | Path, report_dir: str | Path, *, dut: str | None
     sys.dont_write_bytecode = True  # no __pycache__ inside the installed suite
     try:
         rc = int(pytest.main(args))
+    except BaseException:  # SIGINT / SIGTERM (KeyboardInterrupt) or a crash
+        _set_aside_junit(run_dir)
+        raise
     finally:
         sys.dont_write_bytecode = dont_write
     if rc in PYTEST_USAGE_CODES:
+        _set_aside_junit(run_dir)
         raise JigError(f"pytest stopped ({PYTEST_USAGE_CODES[rc]}, exit {rc}); the run"
-                       f" directory {run_dir} holds what was written")
+                       f" directory {run_dir} holds what was written ({INCOMPLETE_JUNIT}:"
+                       " the tests that ran before the stop)")
     raw_path = run_dir / MEASUREMENTS_FILE
     if not raw_path.exists():
         raise JigError(f"{raw_path}: the jig plugin wrote no measurements")
