@@ -284,3 +284,19 @@ def test_acquire_errors_name_the_uri_as_written(tmp_path: Path,
     err = capsys.readouterr().err
     assert "source URI 'sim://lsm6dsl?odr=104': unknown parameter(s) odr" in err
     assert "duration_s=1" not in err
+
+
+def test_a_device_that_stops_answering_is_given_up_after_io_timeout_s() -> None:
+    """A bus stuck for good was retried for ever: a jig whose board was unplugged hung
+    without a word. With ``io_timeout_s`` the source names the silence; without it, it
+    still retries (a daemon rides out a long glitch)."""
+    src = open_source("sim://lsm6dsl?odr_hz=104&clock=virtual&stuck_bus_at_s=2"
+                      "&stuck_bus_for_s=1e9&io_timeout_s=3")
+    with pytest.raises(SourceError, match=r"has not answered for 3\.\d s"), src:
+        for _ in src:
+            pass
+    patient = open_source("sim://lsm6dsl?odr_hz=104&clock=virtual&stuck_bus_at_s=2"
+                          "&stuck_bus_for_s=20&duration_s=30")
+    with patient:
+        n = sum(len(b.index) for b in patient)
+    assert n + patient.counters["lost_samples"] == 104 * 30

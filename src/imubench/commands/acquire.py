@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote
 
 from imubench.calibration import Calibration, recording_header
 from imubench.commands import summary_stream, write_json
@@ -27,7 +26,7 @@ from imubench.pipeline import Pipeline
 from imubench.progress import progress
 from imubench.recorder import Recorder
 from imubench.sources.base import Source
-from imubench.sources.registry import SourceURI, backend_for, open_source
+from imubench.sources.registry import open_source, with_default_param
 
 WAIT_SLICE_S = 0.2
 
@@ -36,11 +35,7 @@ def add_duration(uri: str, duration_s: float) -> str:
     """``uri`` with ``duration_s=`` set, for backends that declare it (a finite
     simulated stream knows its length ahead: exact end accounting, flicker noise exact
     over the whole run); other URIs are returned unchanged (the pipeline ends them)."""
-    parsed = SourceURI.parse(uri)
-    if "duration_s" in parsed.params or not backend_for(parsed).has_param("duration_s"):
-        return uri
-    value = quote(f"{duration_s:g}", safe="")  # 1e+06: a bare '+' would read as a space
-    return uri + ("&" if "?" in uri else "?") + f"duration_s={value}"
+    return with_default_param(uri, "duration_s", duration_s)
 
 
 def record(src: Source, out: Path, duration_s: float | None = None,

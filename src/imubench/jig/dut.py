@@ -27,7 +27,7 @@ from imubench.jig.errors import JigError
 from imubench.jig.station import DefectsSection
 from imubench.sources.base import Source, SourceInfo
 from imubench.sources.chip import ChipSource, SimHandles
-from imubench.sources.registry import SourceURI, open_source
+from imubench.sources.registry import SourceURI, open_source, with_default_param
 
 PATH_PARAMS = ("model",)
 """URI parameters holding a file path, resolved against the station file's directory (a
@@ -96,6 +96,12 @@ class Capture:
         return self.values[:, CHANNELS.index(name)]
 
 
+DUT_IO_TIMEOUT_S = 10.0
+"""A board that answers no transaction for this long (source time) has gone: its tests fail
+naming it, where a board unplugged mid-run hung the jig without a word (the URI's own
+``io_timeout_s`` wins)."""
+
+
 class Dut:
     """The board under test behind a source URI (module docstring).
 
@@ -106,7 +112,8 @@ class Dut:
 
     def __init__(self, uri: str, defects: DefectsSection | None = None) -> None:
         self.uri = uri
-        self.source: Source = open_source(uri)
+        self.source: Source = open_source(with_default_param(uri, "io_timeout_s",
+                                                             DUT_IO_TIMEOUT_S))
         self.info: SourceInfo = self.source.info
         chip = self.source if isinstance(self.source, ChipSource) else None
         self.registers: LSM6DS | None = chip.dev if chip is not None else None

@@ -66,6 +66,8 @@ COMMON_PARAMS: tuple[Param, ...] = (
     Param("fs_g", float, 2.0, "accelerometer full scale, g"),
     Param("addr", int, 0x6A, "7-bit I2C address (0x6a or 0x6b)"),
     Param("duration_s", float, None, "make the stream finite after this many seconds, s"),
+    Param("io_timeout_s", float, None,
+          "give up when the device has not answered for this long, s (default: retry)"),
     Param("watermark_s", float, None, "data let into the FIFO between polls, s"),
     Param("timestamp", bool, True, "stream the chip's timestamp in the FIFO"),
     Param("on_overbudget", str, "refuse", "an ODR the bus cannot carry: refuse or degrade",
@@ -151,6 +153,7 @@ class ChipSource(Source):
         on_close: Callable[[], None] | None = None,
         max_fill: float = 0.4,
         sim: SimHandles | None = None,
+        io_timeout_s: float | None = None,
     ) -> None:
         super().__init__()
         self.dev = dev
@@ -179,6 +182,9 @@ class ChipSource(Source):
         self._t0_host: float | None = None
         self._start_host: float | None = None
         self._done = False
+        self.io_timeout_s = io_timeout_s
+        """Give up (SourceError) when the device has not answered for this long, s."""
+        self._io_failing_since: float | None = None
         self._sleep_first_s = 0.0
         self._pending: list[Gap] = []
         config = {
@@ -268,7 +274,9 @@ class ChipSource(Source):
                 return None
             try:
                 chunk, level = self.stream.poll()
-            except DriverIOError:
+                self._io_failing_since = None
+            except DriverIOError as exc:
+                self._give_up_after_timeout(exc)
                 self._sync_counters()
                 self._sleep(backoff)
                 backoff = min(2 * backoff, IO_BACKOFF_MAX_S)
@@ -288,6 +296,18 @@ class ChipSource(Source):
             gaps, self._pending = tuple(self._pending), []
             return Batch.empty(with_raw=True, gaps=gaps)
         return None
+
+    def _give_up_after_timeout(self, exc: DriverIOError) -> None:
+        """SourceError once the device has failed every transaction for
+        :attr:`io_timeout_s` (a board unplugged from the jig hung it with no message)."""
+        now = self.dev.monotonic()
+        if self._io_failing_since is None:
+            self._io_failing_since = now
+        elif self.io_timeout_s is not None and now - self._io_failing_since > self.io_timeout_s:
+            raise SourceError(
+                f"source {self.info.uri!r}: the device has not answered for "
+                f"{now - self._io_failing_since:.1f} s ({exc}); check the wiring and the "
+                "power, or raise io_timeout_s") from None
 
     def _to_batch(self, chunk: StreamChunk) -> Batch | None:
         index = chunk.index
@@ -444,6 +464,7 @@ def build_sim(uri: SourceURI, opts: ChipOptions) -> ChipSource:
         watermark_s=watermark_s,
         on_overbudget=opts.on_overbudget,
         duration_s=opts.duration_s,
+        io_timeout_s=opts.values["io_timeout_s"],
         paced=clock_mode == "wall",
         extra_config={
             "seed": v["seed"],
@@ -481,6 +502,7 @@ def build_i2c(uri: SourceURI, opts: ChipOptions) -> ChipSource:
         watermark_s=opts.watermark_s or 0.1,
         on_overbudget=opts.on_overbudget,
         duration_s=opts.duration_s,
+        io_timeout_s=opts.values["io_timeout_s"],
         paced=True,
         extra_config={"adapter": path},
         on_close=bus.close,

@@ -23,7 +23,7 @@ import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
-from urllib.parse import parse_qsl, unquote, urlsplit
+from urllib.parse import parse_qsl, quote, unquote, urlsplit
 
 from imubench.errors import SourceError
 from imubench.sources.base import Source
@@ -194,6 +194,16 @@ def check_source_uri(text: str) -> SourceURI:
     uri = SourceURI.parse(text)
     backend_for(uri).options(uri)
     return uri
+
+
+def with_default_param(uri: str, name: str, value: float) -> str:
+    """``uri`` with ``name=value`` added when its backend declares that parameter and the
+    URI does not set it; otherwise ``uri`` unchanged."""
+    parsed = SourceURI.parse(uri)
+    if name in parsed.params or not backend_for(parsed).has_param(name):
+        return uri
+    text = quote(f"{value:g}", safe="")  # 1e+06: a bare '+' would read as a space
+    return uri + ("&" if "?" in uri else "?") + f"{name}={text}"
 
 
 def open_source(uri: str) -> Source:
