@@ -300,3 +300,19 @@ def test_a_device_that_stops_answering_is_given_up_after_io_timeout_s() -> None:
     with patient:
         n = sum(len(b.index) for b in patient)
     assert n + patient.counters["lost_samples"] == 104 * 30
+
+
+def test_the_die_temperature_is_stamped_at_each_samples_time_during_a_ramp() -> None:
+    """One temperature reading per FIFO poll (taken after its newest sample) was given to
+    every sample of the poll: during a 0.5 degC/s ramp the samples read +0.7 degC on
+    average, in steps of one poll (a jig reviewer's calibrated gyro sat 0.014 dps off)."""
+    src = open_source("sim://lsm6dsl?odr_hz=104&clock=virtual&duration_s=100&seed=2"
+                      "&temperature=ramp%3A-20%3A0.5%3A70")
+    with src:
+        batches = list(src)
+    t = np.concatenate([b.t_s for b in batches])
+    temp = np.concatenate([b.temp_c for b in batches])
+    ramp = (t > 5) & (t < 90)
+    slope, start = np.polyfit(t[ramp], temp[ramp], 1)
+    assert slope == pytest.approx(0.5, rel=1e-3) and start == pytest.approx(-20.0, abs=0.05)
+    assert np.max(np.abs(temp[ramp] - (start + slope * t[ramp]))) < 0.05

@@ -31,6 +31,7 @@ in batches of about ``watermark_s`` of data; :meth:`close` interrupts a wait at 
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -185,6 +186,8 @@ class ChipSource(Source):
         self.io_timeout_s = io_timeout_s
         """Give up (SourceError) when the device has not answered for this long, s."""
         self._io_failing_since: float | None = None
+        self._last_temp: tuple[float, float] | None = None
+        """(host time of the newest sample, die temperature) of the previous poll."""
         self._sleep_first_s = 0.0
         self._pending: list[Gap] = []
         config = {
@@ -297,6 +300,18 @@ class ChipSource(Source):
             return Batch.empty(with_raw=True, gaps=gaps)
         return None
 
+    def _temperatures(self, t_s: np.ndarray, temp_c: float) -> np.ndarray:
+        """The die temperature of each sample of a poll: the one reading of the poll
+        (taken after its newest sample) and the previous poll's, interpolated over the
+        samples' times. One reading for the whole poll stamped its older samples up to a
+        poll late (+0.7 degC on average during a 0.5 degC/s ramp, a 0.02 dps/degC board
+        corrected 0.014 dps off)."""
+        prev, self._last_temp = self._last_temp, (float(t_s[-1]), temp_c)
+        if prev is None or not t_s[-1] > prev[0] or not math.isfinite(prev[1]):
+            return np.full(len(t_s), temp_c)
+        frac = np.clip((t_s - prev[0]) / (t_s[-1] - prev[0]), 0.0, 1.0)
+        return prev[1] + (temp_c - prev[1]) * frac
+
     def _give_up_after_timeout(self, exc: DriverIOError) -> None:
         """SourceError once the device has failed every transaction for
         :attr:`io_timeout_s` (a board unplugged from the jig hung it with no message)."""
@@ -338,7 +353,7 @@ class ChipSource(Source):
             index=index,
             t_s=chunk.t_s[keep] - self._t0_host,
             values=raw * self._sensitivity,
-            temp_c=np.full(len(index), chunk.temp_c),
+            temp_c=self._temperatures(chunk.t_s, chunk.temp_c)[keep],
             raw=raw.astype(np.int16, copy=False),
             gaps=mine,
         )
