@@ -361,3 +361,20 @@ def test_an_interrupted_run_leaves_no_junit_that_reads_as_a_result(tmp_path: Pat
     assert not (run_dir / "junit.xml").exists()
     assert (run_dir / "junit.incomplete.xml").exists()
     assert not (run_dir / "result.json").exists()
+
+
+def test_a_capture_too_short_for_a_mean_is_inconclusive_not_fail(tmp_path: Path) -> None:
+    """position_s = 0.1 (10 samples, 16 needed): ten tests "failed without a
+    measurement" and the board was FAIL for a station setting."""
+    station = write_station(tmp_path, "tiny", select_tests="zero_g_offset",
+                            capture=FAST.format(static_s=30.0).replace(
+                                "position_s = 2.0", "position_s = 0.1"))
+    report = tmp_path / "reports"
+    proc = jig(station, report, "--serial", "SN-TINY")
+    assert proc.returncode == 3, proc.stdout[-3000:] + proc.stderr[-3000:]
+    _, res = result_of(report, "SN-TINY")
+    assert res["verdict"] == "INCONCLUSIVE" and not res["broken_tests"]
+    why = res["inconclusive_tests"]["suite/test_4_accelerometer.py::test_zero_g_offset[x]"]
+    assert "10 samples; a capture mean needs at least 16" in why
+    assert "INCONCLUSIVE: test suite/test_4_accelerometer.py::test_zero_g_offset[x]" in (
+        proc.stdout)

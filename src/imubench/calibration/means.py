@@ -37,6 +37,11 @@ MIN_SAMPLES = 16
 """Fewest finite samples a capture mean is computed from."""
 
 
+class TooFewSamplesError(CalibrationError):
+    """A capture holds too few samples for a mean: the capture's length (a station
+    setting) or the data lost decide it, not the board; the jig reports INCONCLUSIVE."""
+
+
 @dataclass(frozen=True)
 class MeanEstimate:
     """Mean of one capture channel.
@@ -70,7 +75,7 @@ def capture_mean(y: np.ndarray, rate_hz: float, lsb: float, what: str) -> MeanEs
     finite = np.isfinite(y)
     n = int(finite.sum())
     if n < MIN_SAMPLES:
-        raise CalibrationError(
+        raise TooFewSamplesError(
             f"{what}: {n} samples; a capture mean needs at least {MIN_SAMPLES}"
         )
     mean = float(np.mean(y[finite]))
@@ -92,4 +97,4 @@ def capture_mean(y: np.ndarray, rate_hz: float, lsb: float, what: str) -> MeanEs
     return MeanEstimate(mean, stderr, edf, n, duration_s)
 
 
-__all__ = ["MIN_SAMPLES", "MeanEstimate", "capture_mean"]
+__all__ = ["MIN_SAMPLES", "MeanEstimate", "TooFewSamplesError", "capture_mean"]

@@ -52,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
     for nodeid in result["broken_tests"]:
         why = reasons.get(nodeid) or "see the report"
         print(f"FAIL: test {nodeid} failed without a measurement: {why}")
+    for nodeid, why in result.get("inconclusive_tests", {}).items():
+        print(f"INCONCLUSIVE: test {nodeid} measured nothing: {why}")
     print(f"{result['serial']}: {result['verdict']} ({len(result['measurements'])}"
           f" measurements); report {res.run_dir / 'report.html'}")
     if res.published_topic:

@@ -105,6 +105,12 @@ def measure(jig: JigSession, request: pytest.FixtureRequest) -> Measure:
     return record
 
 
+def _too_short(exc: BaseException) -> bool:
+    from imubench.calibration.means import TooFewSamplesError  # only when a test failed
+
+    return isinstance(exc, TooFewSamplesError)
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(
     item: pytest.Item, call: pytest.CallInfo[None]
@@ -124,6 +130,11 @@ def pytest_runtest_makereport(
             rep.outcome = "skipped"
             rep.longrepr = (str(item.path), item.location[1] or 0,
                             "INCONCLUSIVE: " + "; ".join(m.describe() for m in unsure))
+    if rep.failed and call.excinfo is not None and _too_short(call.excinfo.value):
+        # too short a capture: nothing was measured, which says nothing of the board
+        rep.outcome = "skipped"
+        rep.longrepr = (str(item.path), item.location[1] or 0,
+                        f"INCONCLUSIVE: {call.excinfo.value}")
     if rep.when == "call" or not rep.passed:
         message = ""
         if isinstance(rep.longrepr, tuple):

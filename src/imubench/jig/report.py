@@ -46,6 +46,11 @@ def build_result(raw: dict[str, Any], *, serial: str, station: str, sensor: str,
               and (t["nodeid"] not in measured_tests or t["when"] != "call")]
     if broken:
         verdicts.append(FAIL)
+    unsure = [t for t in tests if t["outcome"] == "skipped"
+              and str(t.get("message", "")).startswith("INCONCLUSIVE")
+              and t["nodeid"] not in measured_tests]
+    if unsure:
+        verdicts.append(INCONCLUSIVE)  # a test that could not measure (too short a capture)
     if not measurements and not broken:
         verdicts.append(INCONCLUSIVE)  # nothing was measured: nothing can pass
     verdict = overall(verdicts)
@@ -71,6 +76,8 @@ def build_result(raw: dict[str, Any], *, serial: str, station: str, sensor: str,
         "tests": tests,
         "broken_tests": [t["nodeid"] for t in broken],
         "broken_reasons": {t["nodeid"]: first_line(t.get("message", "")) for t in broken},
+        "inconclusive_tests": {t["nodeid"]: str(t["message"]).removeprefix("INCONCLUSIVE: ")
+                               for t in unsure},
         "calibration": art.get("calibration_file"),
         "telemetry": raw.get("telemetry"),
         "junit": "junit.xml",
