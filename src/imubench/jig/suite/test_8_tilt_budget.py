@@ -39,5 +39,7 @@ def test_tilt_budget(jig: JigSession) -> None:
     back = load_budget(path)
     wc = back.worst_case_g()
     assert np.allclose(wc, budget.worst_case_g())
-    # every calibration step removes error; the last column is the calibrated board
-    assert wc[-1] <= wc[0]
+    # the calibrated worst case is NOT asserted below the raw one: on a board whose raw
+    # errors are below the calibration's own 3-standard-error terms, calibrating adds
+    # more than it removes (a near-perfect accelerometer, 0.44 -> 0.82 mg, failed the
+    # board here); the budget shows both and the user decides
