@@ -5,6 +5,7 @@ numba kernels into their cache after an install, then runs.
 
     python3 dev.py run  [imubench run options]   # the daemon on the shipped quick start
     python3 dev.py test                          # ruff, mypy, then the whole test suite
+                                                 # in SUITE_WORKERS processes (xdist)
     python3 dev.py test [pytest options]         # pytest only, with those options
     python3 dev.py setup                         # create/refresh the environment and
                                                  # compile the kernels (NUMBA_CACHE_DIR)
@@ -25,6 +26,12 @@ ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
 STAMP = VENV / ".imubench-installed"
+
+
+SUITE_WORKERS = 2
+"""Processes (pytest-xdist) the whole suite runs in: most of its time is spent waiting on
+real-time daemons, brokers and subprocesses (one process: 10:19 at 44 % of a core; two:
+5:57, docs/benchmarks.md). ``python3 dev.py test ARGS`` runs pytest as given."""
 
 
 def _digest() -> str:
@@ -96,7 +103,8 @@ def main(argv: list[str]) -> int:
         ensure_chromium()
         if not rest and (status := lint()):
             return status
-        args = [str(BIN / "python"), "-m", "pytest", *rest]
+        workers = [] if rest else ["-n", str(SUITE_WORKERS)]
+        args = [str(BIN / "python"), "-m", "pytest", *workers, *rest]
     os.execv(args[0], args)
     return 0  # not reached
 
