@@ -323,16 +323,24 @@ def test_manual_fixture_driven_by_an_operator_on_a_pty(tmp_path: Path) -> None:
     assert t["verdict"] == "PASS" and abs(t["value"]) < 0.01  # die 25 degC, operator said 25
 
 
+def _run_with(tmp_path: Path, select: str, setting: str, value: str, status: int
+              ) -> tuple[subprocess.CompletedProcess[str], dict[str, Any]]:
+    """The tests ``select`` on a healthy board with one capture ``setting`` changed to
+    ``value``; (the finished process, its result.json) after checking its exit status."""
+    capture = FAST.format(static_s=30.0)
+    old = next(line for line in capture.splitlines() if line.startswith(f"{setting} ="))
+    station = write_station(tmp_path, "one", select_tests=select,
+                            capture=capture.replace(old, f"{setting} = {value}"))
+    report = tmp_path / "reports"
+    proc = jig(station, report, "--serial", "SN-ONE")
+    assert proc.returncode == status, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc, result_of(report, "SN-ONE")[1]
+
+
 def test_a_rate_step_beyond_full_scale_is_named_not_measured(tmp_path: Path) -> None:
     """400 dps on a 250 dps gyro clips: the means of clipped samples read a healthy
     board's sensitivity as -26.7 % (FAIL) and a 3.5 % error as 2.5 % (PASS)."""
-    station = write_station(tmp_path, "clip", select_tests="sensitivity",
-                            capture=FAST.format(static_s=30.0).replace(
-                                "rates_dps = [100.0, 200.0]", "rates_dps = [100.0, 400.0]"))
-    report = tmp_path / "reports"
-    proc = jig(station, report, "--serial", "SN-CLIP")
-    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
-    _, res = result_of(report, "SN-CLIP")
+    proc, res = _run_with(tmp_path, "sensitivity", "rates_dps", "[100.0, 400.0]", 1)
     assert not any(m["name"].startswith("gyro_sensitivity") for m in res["measurements"])
     assert "the output was clipped at its full scale (gx" in proc.stdout
     why = res["broken_reasons"]["suite/test_5_gyro.py::test_sensitivity[x]"]
@@ -366,13 +374,7 @@ def test_an_interrupted_run_leaves_no_junit_that_reads_as_a_result(tmp_path: Pat
 def test_a_capture_too_short_for_a_mean_is_inconclusive_not_fail(tmp_path: Path) -> None:
     """position_s = 0.1 (10 samples, 16 needed): ten tests "failed without a
     measurement" and the board was FAIL for a station setting."""
-    station = write_station(tmp_path, "tiny", select_tests="zero_g_offset",
-                            capture=FAST.format(static_s=30.0).replace(
-                                "position_s = 2.0", "position_s = 0.1"))
-    report = tmp_path / "reports"
-    proc = jig(station, report, "--serial", "SN-TINY")
-    assert proc.returncode == 3, proc.stdout[-3000:] + proc.stderr[-3000:]
-    _, res = result_of(report, "SN-TINY")
+    proc, res = _run_with(tmp_path, "zero_g_offset", "position_s", "0.1", 3)
     assert res["verdict"] == "INCONCLUSIVE" and not res["broken_tests"]
     why = res["inconclusive_tests"]["suite/test_4_accelerometer.py::test_zero_g_offset[x]"]
     assert "10 samples; a capture mean needs at least 16" in why
