@@ -461,3 +461,24 @@ def test_allan_z_follows_the_chi_squared_law_of_an_allan_variance() -> None:
             assert abs(z - norm.ppf(p)) < (0.2 if nu < 10 else 0.1), (nu, p, z)
     d_low = 0.5 * math.log(chi2.ppf(0.002, 20.0) / 20.0)
     assert abs(d_low / math.sqrt(1.0 / 40.0) - norm.ppf(0.002)) > 0.5  # what d / s gave
+
+
+def test_cli_says_how_much_of_the_recording_is_missing(tmp_path: Path) -> None:
+    """A record 10 % in holes was diagnosed without a word about them (the realisations
+    carry the same holes, so the numbers were right, but the user could not tell)."""
+    rng = np.random.default_rng(9)
+    n = 40_000
+    keep = np.ones(n, dtype=bool)
+    keep[10_000:14_000] = False
+    rec = tmp_path / "holes.csv"
+    rec.write_text("t,gx\n" + "".join(f"{i / 100:.2f},{v:.5f}\n"
+                                      for i, v in enumerate(rng.normal(0, 0.04, n)) if keep[i]))
+    model = tmp_path / "m.toml"
+    model.write_text(NoiseModel.single_term("gx", white=0.004).to_toml())
+    out = tmp_path / "gap.json"
+    r = run_cli(str(rec), "--model", str(model), "--channels", "gx", "--realisations", "3",
+                "--effects", "random_walk", "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "36000 samples, 1 hole(s) (4000 samples, 10 % missing" in r.stdout.splitlines()[0]
+    doc = json.loads(out.read_text())
+    assert (doc["samples"], doc["lost_samples"], doc["holes"]) == (36000, 4000, 1)

@@ -24,7 +24,7 @@ from imubench.gap.errors import GapError
 from imubench.gap.explain import explain_channel
 from imubench.gap.recording import default_jobs, pick_channels
 from imubench.progress import progress
-from imubench.recording import load_recording
+from imubench.recording import coverage_text, load_recording
 from imubench.recording.options import add_input_arguments, input_options
 
 
@@ -141,12 +141,16 @@ def run(args: argparse.Namespace) -> int:
                                         progress=lambda ch: bar.update(1),
                                         limits=args.limits, jobs=jobs)
     out["units"] = gap_units(list(out["channels"]))
+    out.update(samples=len(rec), lost_samples=rec.lost_samples, holes=rec.holes)
     if args.report is not None:
         from imubench.gap.report import write_report  # matplotlib only when asked
 
         out["report"] = str(write_report(args.report, out, diags, rec.rate_hz))
     write_json(out, args.json)
     summary = sys.stderr if args.json == "-" else sys.stdout  # stdout: the JSON's, if "-"
+    if rec.lost_samples:  # the realisations carry the same holes
+        print(f"# {args.real}: {coverage_text(len(rec), rec.lost_samples, rec.holes)}",
+              file=summary)
     for ch, c in out["channels"].items():
         print(f"{ch}: verdict {c['verdict']}, gap {c['gap_before']:.3f} -> "
               f"{c['gap_after']:.3f}", file=summary)

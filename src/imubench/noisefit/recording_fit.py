@@ -59,13 +59,10 @@ class RecordingFit:
 
     def coverage(self) -> str:
         """``54950 samples, 2 holes (6050 samples, 9.9 % missing)``, or ``""``."""
-        if not self.samples:
-            return ""
-        if not self.lost_samples:
-            return f"{self.samples} samples, no holes"
-        share = 100.0 * self.lost_samples / (self.samples + self.lost_samples)
-        return (f"{self.samples} samples, {self.holes} hole(s) ({self.lost_samples} "
-                f"samples, {share:.3g} % missing; the curves are computed across them)")
+        from imubench.recording import coverage_text
+
+        return coverage_text(self.samples, self.lost_samples, self.holes) if self.samples \
+            else ""
 
     def noise_model(self) -> NoiseModel:
         """A model file's content: fitted channels, others quiet; provenance in [meta]."""
@@ -204,7 +201,7 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
 
 def _coverage(rec: Recording) -> tuple[int, int, int]:
     """(samples held, samples lost in holes, holes) of ``rec``."""
-    return len(rec), rec.lost_samples, int(np.count_nonzero(np.diff(rec.index) > 1))
+    return len(rec), rec.lost_samples, rec.holes
 
 
 MODEL_FILE_METHOD: str = "model file"

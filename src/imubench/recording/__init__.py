@@ -139,6 +139,11 @@ class Recording:
         )
         return int(inside + outside)
 
+    @property
+    def holes(self) -> int:
+        """Holes between recorded samples."""
+        return int(np.count_nonzero(np.diff(self.index) > 1))
+
     def _dense(self, column: np.ndarray) -> np.ndarray:
         if not len(self.index):
             return np.zeros(0)
@@ -164,6 +169,16 @@ MEASURED_RATE_MIN_SPAN_S = 10.0
 """Shortest span of time stamps the sample rate is measured from, s."""
 MEASURED_RATE_TOLERANCE = 1e-4
 """Relative departure from the nominal ODR below which the nominal rate is kept."""
+
+
+def coverage_text(samples: int, lost_samples: int, holes: int) -> str:
+    """``54950 samples, 2 hole(s) (6050 samples, 9.9 % missing; the curves are computed
+    across them)``, or ``N samples, no holes``: what every analysis says of its input."""
+    if not lost_samples:
+        return f"{samples} samples, no holes"
+    share = 100.0 * lost_samples / (samples + lost_samples)
+    return (f"{samples} samples, {holes} hole(s) ({lost_samples} samples, {share:.3g} % "
+            "missing; the curves are computed across them)")
 
 
 def measured_rate(index: np.ndarray, t_s: np.ndarray, nominal_hz: float) -> float | None:
