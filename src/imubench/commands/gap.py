@@ -141,7 +141,6 @@ def run(args: argparse.Namespace) -> int:
                                         progress=lambda ch: bar.update(1),
                                         limits=args.limits, jobs=jobs)
     out["units"] = gap_units(list(out["channels"]))
-    out.update(samples=len(rec), lost_samples=rec.lost_samples, holes=rec.holes)
     if args.report is not None:
         from imubench.gap.report import write_report  # matplotlib only when asked
 

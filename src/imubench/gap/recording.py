@@ -106,6 +106,7 @@ def diagnose_recording(
     out: dict[str, Any] = {"schema": SCHEMA, "recording": str(rec.path),
                            "model": model.source, "rate_hz": rec.rate_hz,
                            "samples": len(rec.channel(chans[0])) if chans else 0,
+                           "lost_samples": rec.lost_samples, "holes": rec.holes,
                            "holdout_fraction": opt.holdout_fraction,
                            "realisations": opt.realisations, "seed": opt.seed,
                            "effects_tested": [e for e in EFFECTS if e in opt.effects],
