@@ -229,3 +229,27 @@ def test_recovery_few_seeds(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_recovery_24_seeds(tmp_path: Path) -> None:
     _check(list(range(1, 25)), tmp_path, per_parameter=True)
+
+
+def test_bias_wander_is_the_allan_variance_beyond_white() -> None:
+    """The variance a bias random walk adds to captures 5 s apart is its Allan variance
+    K^2 tau / 3 (IEEE 952 C.4); white noise adds none (it is in the means' own errors)."""
+    from imubench.jig.calibrate import ACCEL, bias_wander
+    from imubench.jig.dut import Capture
+    from imubench.jig.procedures import point
+
+    rate, n = 104.0, 104 * 600
+    rng = np.random.default_rng(11)
+    white = 1e-4 * rng.standard_normal((n, 6))
+    k = 2e-5  # g/sqrt(s)
+    walk = np.cumsum(k / np.sqrt(rate) * rng.standard_normal((n, 6)), axis=0)
+
+    def static(values: np.ndarray) -> object:
+        cap = Capture("static", rate, 0, values, np.full(n, 25.0), 0.0, (), np.zeros(6),
+                      np.zeros(6, dtype=np.int64))
+        return point("static", cap, np.zeros(3), np.zeros(3))
+
+    quiet = bias_wander(static(white), ACCEL, 5.0)  # type: ignore[arg-type]
+    assert np.all(quiet < 0.5 * 1e-8 / (5.0 * rate))  # half white's AVAR at 5 s at most
+    wander = bias_wander(static(white + walk), ACCEL, 5.0)  # type: ignore[arg-type]
+    np.testing.assert_allclose(wander, k**2 * 5.0 / 3.0, rtol=0.6)

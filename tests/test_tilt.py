@@ -194,7 +194,7 @@ def test_calibrated_board_within_its_budget_at_10_orientations(tmp_path: Path) -
     dut = Dut(f"sim://lsm6dsl?odr_hz=104&seed=7&clock=virtual&model={path}")
     fixture = SimFixture(dut.sim, 60.0)  # type: ignore[arg-type]
     cfg = CaptureSection.model_validate({"settle_s": 1.0, "position_s": 2.0})
-    _, fit = accel_fits(Procedures(dut, fixture, cfg).six_position())
+    _, fit = accel_fits(Procedures(dut, fixture, cfg))
     sc = SensorCalibration("g", "six-position", 25.0, fit.offset, fit.matrix, fit.nonlinearity)
     rng = np.random.default_rng(3)
     truth, raw = [], []

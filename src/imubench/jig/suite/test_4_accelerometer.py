@@ -29,7 +29,7 @@ def six(jig: JigSession) -> list[Point]:
 
 @pytest.fixture(scope="module")
 def fits(six: list[Point], jig: JigSession) -> tuple[SensorFit, SensorFit]:
-    linear, quad = jig.cached("accel_fits", lambda: accel_fits(six))
+    linear, quad = jig.cached("accel_fits", lambda: accel_fits(jig.procedures))
     jig.artifacts["six_position"] = {
         "faces": [p.label.split()[1] for p in six],
         "residuals_12_mg": 1e3 * linear.residuals,
