@@ -105,8 +105,8 @@ class SensorRun:
         source = open_source(self.spec.uri)
         info = source.info
         if self.calibration is not None:  # another chip or range: refused before it runs
-            self.calibration.check_data(info.chip, {"gyro": info.fs_dps, "accel": info.fs_g},
-                                        None, f"source {info.uri}")
+            self.calibration.check_data(info.chip, info.fs_dps, info.fs_g, None,
+                                        f"source {info.uri}")
         self.say(f"source {info.uri}: {info.chip} at {info.odr_hz:g} Hz")
         self.engine_consumer = AllanConsumer(self._make_engine,
                                              lambda: source.measured_odr_hz)

@@ -167,11 +167,11 @@ class Calibration:
             values[:, cols] = sc.correct(values[:, cols], batch.temp_c)
         return dataclasses.replace(batch, values=values)
 
-    def check_data(self, chip: str | None, full_scale: Mapping[str, float | None],
+    def check_data(self, chip: str | None, fs_dps: float | None, fs_g: float | None,
                    temp_c: np.ndarray | None, where: str) -> list[str]:
         """Refuse data this calibration does not belong to (CalibrationError naming both):
-        another chip than ``provenance.chip``, another full scale (``full_scale``:
-        ``{"gyro": dps, "accel": g}`` of the data, None where unknown). Returns warnings
+        another chip than ``provenance.chip``, another full scale (``fs_dps``, ``fs_g``
+        of the data, None where unknown). Returns warnings
         for die temperatures ``temp_c`` outside ``temp_range_c`` by more than
         :data:`TEMP_MARGIN_C` (the temperature terms extrapolate there)."""
         own = self.provenance.get("chip")
@@ -183,7 +183,7 @@ class Calibration:
             sc = getattr(self, name)
             if sc is None:
                 continue
-            fs = full_scale.get(name)
+            fs = fs_dps if name == "gyro" else fs_g
             if sc.full_scale and fs and not math.isclose(fs, sc.full_scale, rel_tol=1e-6):
                 raise CalibrationError(
                     f"{self._where()}: [{name}] was made at full scale {sc.full_scale:g} "

@@ -81,8 +81,7 @@ def record_uri(uri: str, out: Path, stats_json: Path | None,
     cal = None if calibration is None else Calibration.load(calibration)
     src = open_source(uri)
     if cal is not None:  # another chip or range: refused before anything is recorded
-        cal.check_data(src.info.chip, {"gyro": src.info.fs_dps, "accel": src.info.fs_g},
-                       None, f"source {uri}")
+        cal.check_data(src.info.chip, src.info.fs_dps, src.info.fs_g, None, f"source {uri}")
     stats = record(src, out, duration_s, cal)
     if stats_json is not None:
         write_json(stats, str(stats_json))

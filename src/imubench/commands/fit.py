@@ -66,8 +66,9 @@ def format_summary(result: RecordingFit) -> str:
     """Per channel: present terms with value and 95 % interval, why each term was kept or
     dropped (:func:`short_reasons`), and the fit's notes (e.g. a model-discrepancy floor:
     the model does not describe the curve within its estimates' scatter)."""
+    coverage = result.coverage()
     lines = [f"# {result.source}  rate={result.rate_hz:g} Hz  method={result.method}"
-             + (f"  {result.coverage()}" if result.coverage() else "")]
+             + (f"  {coverage}" if coverage else "")]
     for ch, f in result.fits.items():
         parts = []
         for key in f.present:

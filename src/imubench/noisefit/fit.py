@@ -267,8 +267,7 @@ class ChannelFit:
                        "edf": self.edf.tolist()},
             "notes": list(self.notes),
             "reasons": dict(self.reasons),
-            "chi2_drop": {k: (float(v) if math.isfinite(v) else None)
-                          for k, v in self.chi2_drop.items()},
+            "chi2_drop": {k: _finite(v) for k, v in self.chi2_drop.items()},
         }
 
 

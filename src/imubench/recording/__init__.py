@@ -408,9 +408,8 @@ def _calibrated(rec: Recording, path: str | Path) -> Recording:
                              "--calibration")
     cal = Calibration.load(path)
     meta = rec.metadata
-    for warning in cal.check_data(
-            meta.get("chip"), {"gyro": meta.get("fs_dps"), "accel": meta.get("fs_g")},
-            rec.temp_c, str(rec.path)):
+    for warning in cal.check_data(meta.get("chip"), meta.get("fs_dps"), meta.get("fs_g"),
+                                  rec.temp_c, str(rec.path)):
         log.warning("%s", warning)
     values = cal.apply(rec.batch()).values
     meta = {**rec.metadata, "calibration": cal.describe()}

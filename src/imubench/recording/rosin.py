@@ -111,7 +111,6 @@ def _rows_from(messages: Any) -> Rows:
     return rows, frames
 
 
-
 def _read_bag(path: Path, options: InputOptions, where: str) -> tuple[str, Rows]:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore

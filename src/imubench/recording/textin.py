@@ -355,7 +355,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                              "not a recording")
     table = raw.table()
     notes: list[str] = []
-    if raw.encoding not in ("utf-8-sig", "utf-8"):
+    if raw.encoding != "utf-8-sig":
         notes.append(f"{where}: not UTF-8 text; read as {raw.encoding.upper()}")
     if raw.decimal_comma:
         notes.append(f"{where}: one column with decimal commas (0,0123 is 0.0123)")
