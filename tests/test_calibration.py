@@ -206,3 +206,33 @@ def test_a_calibration_is_refused_on_another_chip_or_range_and_warns_outside_its
             assert not out.exists()
     assert main(["acquire", "sim://lsm6dsm?odr_hz=104", "--duration-s", "1", "--out",
                  str(tmp_path / "a.imbr"), "--calibration", str(path)]) == 2
+
+
+def test_a_live_acquisition_says_when_its_die_temperature_leaves_the_sweep(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``acquire`` and ``run`` were checked against a calibration's chip and range at the
+    start only: a board that warmed 30 degC past its sweep got extrapolated values
+    without a word."""
+    import json
+
+    from imubench.cli import main
+
+    cal = Calibration({**PROV, "chip": "lsm6dsl"},
+                      gyro=_sensor("dps", temp_range_c=(20.0, 30.0),
+                                   temp_coeff1=np.array([0.01, 0.0, 0.0])))
+    path = cal.save(tmp_path / "cal.toml").path
+    assert path is not None
+    stats = tmp_path / "stats.json"
+    uri = ("sim://lsm6dsl?odr_hz=104&watermark_s=0.1"
+           "&temperature=steps%3A0%3D25%2C1%3D60%2C2%3D25")
+    assert main(["acquire", uri, "--duration-s", "3", "--out", str(tmp_path / "a.imbr"),
+                 "--calibration", str(path), "--stats-json", str(stats)]) == 0
+    err = capsys.readouterr().err
+    assert "outside the 20.0 to 30.0 degC the [gyro] temperature terms" in err
+    assert "back within the [gyro] calibration's 20.0 to 30.0 degC" in err
+    from imubench.recording import load_recording
+
+    rec = load_recording(tmp_path / "a.imbr")
+    hot = int(np.sum(rec.temp_c > 35.0))
+    assert 0.8 * 104 < hot < 1.2 * 104
+    assert json.loads(stats.read_text())["calibration_extrapolated"] == hot

@@ -21,6 +21,7 @@ import numpy as np
 
 from imubench.batch import CHANNELS, UNITS
 from imubench.calibration import Calibration, recording_header
+from imubench.calibration.live import LiveCalibration
 from imubench.config import Config, SensorSpec
 from imubench.errors import ImubenchError
 from imubench.pipeline import Consumer, Pipeline
@@ -84,6 +85,8 @@ class SensorRun:
         self.resumed_samples = 0
         """Samples the engine took over from ``allan.state_path`` at the start."""
         self.pipeline: Pipeline | None = None
+        self.live_calibration: LiveCalibration | None = None
+        """The calibration as applied to the stream (watches the die temperature)."""
         self.published = 0
         self.skipped_slots = 0
         self.phase = "starting"
@@ -114,9 +117,11 @@ class SensorRun:
         if self.recorder is not None:
             consumers.insert(0, self.recorder)
         cal = self.calibration
+        self.live_calibration = (None if cal is None
+                                 else LiveCalibration(cal, f"source {info.uri}", self.say))
         self.pipeline = Pipeline(source, consumers, capacity_s=self.cfg.buffer.capacity_s,
                                  duration_s=self.cfg.run.duration_s,
-                                 transform=None if cal is None else cal.apply)
+                                 transform=self.live_calibration)
         self.pipeline.prepare()
 
     def _make_engine(self, info: SourceInfo, use_raw: bool) -> StreamingAllan:
@@ -208,6 +213,8 @@ class SensorRun:
                               else self.engine_consumer.temperature_c),
             "snapshots_skipped": self.skipped_slots,
         }
+        if self.live_calibration is not None:
+            out["calibration_extrapolated"] = self.live_calibration.samples_extrapolated
         if self.recorder is not None:
             segs = self.recorder.segments
             out["recording"] = {

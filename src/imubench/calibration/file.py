@@ -88,6 +88,17 @@ class SensorCalibration:
     def has_temperature(self) -> bool:
         return bool(np.any(self.temp_coeff1) or np.any(self.temp_coeff2))
 
+    def outside_sweep(self, temp_c: np.ndarray) -> np.ndarray:
+        """Bool mask: die temperatures (degC) beyond ``temp_range_c`` by more than
+        :data:`TEMP_MARGIN_C`, where the temperature terms are extrapolated. All False
+        without temperature terms or a stated range, and where ``temp_c`` is NaN."""
+        t = np.asarray(temp_c, dtype=np.float64)
+        if not self.has_temperature or self.temp_range_c is None:
+            return np.zeros(t.shape, dtype=bool)
+        lo, hi = self.temp_range_c
+        with np.errstate(invalid="ignore"):
+            return (t < lo - TEMP_MARGIN_C) | (t > hi + TEMP_MARGIN_C)
+
     def correct(self, y: np.ndarray, temp_c: np.ndarray | None) -> np.ndarray:
         """True input ``u`` (n, 3) from readings ``y`` (n, 3) at die temperatures
         ``temp_c`` (n,) (None or NaN only allowed without temperature terms)."""
@@ -189,19 +200,22 @@ class Calibration:
                     f"{self._where()}: [{name}] was made at full scale {sc.full_scale:g} "
                     f"{sc.unit}; {where} is at {fs:g} {sc.unit} (offset and gains belong "
                     "to the range they were measured at)")
-            if sc.has_temperature and sc.temp_range_c is not None and temp_c is not None:
-                finite = np.asarray(temp_c, dtype=np.float64)
-                finite = finite[np.isfinite(finite)]
-                if finite.size:
-                    lo, hi = float(finite.min()), float(finite.max())
-                    if lo < sc.temp_range_c[0] - TEMP_MARGIN_C or (
-                            hi > sc.temp_range_c[1] + TEMP_MARGIN_C):
-                        warnings.append(
-                            f"{where}: die temperature {lo:.1f} to {hi:.1f} degC, outside the "
-                            f"{sc.temp_range_c[0]:.1f} to {sc.temp_range_c[1]:.1f} degC the "
-                            f"[{name}] temperature terms of {self._where()} were fitted over: "
-                            "they are extrapolated there and may make the values worse")
+            if temp_c is not None and sc.temp_range_c is not None and np.any(
+                    sc.outside_sweep(temp_c)):
+                t = np.asarray(temp_c, dtype=np.float64)
+                warnings.append(self.extrapolation_warning(
+                    name, float(np.nanmin(t)), float(np.nanmax(t)), where))
         return warnings
+
+    def extrapolation_warning(self, name: str, lo_c: float, hi_c: float, where: str) -> str:
+        """The words for die temperatures ``lo_c`` to ``hi_c`` (degC) outside the sweep of
+        sensor ``name``'s temperature terms (see :meth:`SensorCalibration.outside_sweep`)."""
+        sc = getattr(self, name)
+        assert sc is not None and sc.temp_range_c is not None
+        return (f"{where}: die temperature {lo_c:.1f} to {hi_c:.1f} degC, outside the "
+                f"{sc.temp_range_c[0]:.1f} to {sc.temp_range_c[1]:.1f} degC the "
+                f"[{name}] temperature terms of {self._where()} were fitted over: "
+                "they are extrapolated there and may make the values worse")
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready statement for a recording header: ``applied`` (True), ``path``,

@@ -9,17 +9,21 @@ the source telemetry (``samples``, ``gaps``, ``lost_samples``, ``overruns``,
 ``reconnects``, ``measured_odr_hz`` (the ODR measured against the host clock: a crystal
 error shows here), ``elapsed_s``, ``expected_samples``, ``lost_by_reason``) plus
 ``duration_s`` (source seconds elapsed), ``produced`` and what the recording holds
-(``recorded``, ``recording_lost``). Ctrl-C stops the acquisition and keeps, closed and
+(``recorded``, ``recording_lost``); with ``--calibration``, ``calibration_extrapolated``:
+the samples whose die temperature lay outside the calibration's sweep (a warning says
+when it leaves and re-enters it). Ctrl-C stops the acquisition and keeps, closed and
 readable, everything recorded so far.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
 from imubench.calibration import Calibration, recording_header
+from imubench.calibration.live import LiveCalibration
 from imubench.commands import summary_stream, write_json
 from imubench.errors import SourceError
 from imubench.pipeline import Pipeline
@@ -44,8 +48,9 @@ def record(src: Source, out: Path, duration_s: float | None = None,
     ``calibration`` applied to the values (raw counts untouched, the header says which);
     return the stats (see the module docstring)."""
     recorder = Recorder(out, {"calibration": recording_header(calibration)})
-    pipeline = Pipeline(src, [recorder], duration_s=duration_s,
-                        transform=None if calibration is None else calibration.apply)
+    live = (None if calibration is None else LiveCalibration(
+        calibration, f"source {src.info.uri}", lambda text: print(text, file=sys.stderr)))
+    pipeline = Pipeline(src, [recorder], duration_s=duration_s, transform=live)
     pipeline.prepare()
     pipeline.start()
     try:
@@ -69,6 +74,8 @@ def record(src: Source, out: Path, duration_s: float | None = None,
     account = pipeline.accounts()["recorder"]
     stats["recorded"] = recorder.samples
     stats["recording_lost"] = account.lost + recorder.not_recorded
+    if live is not None:
+        stats["calibration_extrapolated"] = live.samples_extrapolated
     return stats
 
 
