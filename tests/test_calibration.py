@@ -236,3 +236,46 @@ def test_a_live_acquisition_says_when_its_die_temperature_leaves_the_sweep(
     hot = int(np.sum(rec.temp_c > 35.0))
     assert 0.8 * 104 < hot < 1.2 * 104
     assert json.loads(stats.read_text())["calibration_extrapolated"] == hot
+
+
+def test_the_temperature_polynomial_separates_a_drift_in_time_from_the_temperature() -> None:
+    """A sweep that climbs and falls (25 ... 85, 0 ... -40, 25 degC) over 80 min aliased
+    the bias's drift into the linear term; with the points' times a drift term takes it,
+    and its error, estimated from the residuals, carries their degrees of freedom."""
+    temps = np.array([25.0, 45.0, 65.0, 85.0, 0.0, -20.0, -40.0, 25.0])
+    times = np.arange(8) * 600.0
+    a, drift_per_h = 0.01, 0.02  # dps/degC, dps/h
+    rng = np.random.default_rng(3)
+    noise = rng.normal(0.0, 1e-4, (8, 3))
+    y = (a * (temps - 25.0) + drift_per_h * (times - times.mean()) / 3600.0)[:, None] + noise
+    sigma = np.full((8, 3), 1e-4)
+    plain = polynomial(temps, y, sigma, 25.0)
+    assert plain.stderr_dof is not None and plain.drift_per_h is None
+    assert plain.stderr_dof[0] == 5.0  # the drift left in the residuals: Birge-scaled
+    with_drift = polynomial(temps, y, sigma, 25.0, times_s=times)
+    assert with_drift.drift_per_h is not None and with_drift.stderr1 is not None
+    assert with_drift.drift_per_h[0] == pytest.approx(drift_per_h, rel=0.05)
+    assert abs(with_drift.coeff1[0] - a) < 3 * with_drift.stderr1[0]
+    assert abs(with_drift.coeff1[0] - a) < abs(plain.coeff1[0] - a) / 5.0
+    # against numpy's least squares on the same design
+    X = np.stack([np.ones(8), temps - 25.0, (temps - 25.0) ** 2,
+                  times / 3600.0 - times.mean() / 3600.0], axis=1)
+    ref, *_ = np.linalg.lstsq(X, y[:, 1], rcond=None)
+    assert with_drift.coeff1[1] == pytest.approx(ref[1], rel=1e-9)
+    # errors scaled by the Birge ratio carry the residuals' dof (8 points - 4 parameters)
+    loose = polynomial(temps, y, sigma / 10.0, 25.0, times_s=times)
+    assert loose.stderr_dof is not None and np.all(loose.stderr_dof == 4.0)
+    tight = polynomial(temps, y, sigma * 10.0, 25.0, times_s=times)
+    assert tight.stderr_dof is not None and np.all(np.isinf(tight.stderr_dof))
+
+
+def test_a_jig_interval_from_an_estimated_error_takes_students_t() -> None:
+    from scipy.stats import t as student_t
+
+    from imubench.jig.analysis import interval_from_stderr
+
+    normal = interval_from_stderr(1.0, 0.1, 0.95, "m")
+    assert normal.ci[1] - 1.0 == pytest.approx(0.1 * 1.959964, rel=1e-6)
+    four = interval_from_stderr(1.0, 0.1, 0.95, "m", dof=4.0)
+    assert four.ci[1] - 1.0 == pytest.approx(0.1 * float(student_t.ppf(0.975, 4)), rel=1e-12)
+    assert four.ci[1] - 1.0 == pytest.approx(0.2776, abs=1e-4)  # t(4) table value 2.776

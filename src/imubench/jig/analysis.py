@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import norm
+from scipy.stats import t as student_t
 
 from imubench import stats
 from imubench.batch import CHANNELS
@@ -143,9 +144,14 @@ def with_extra_uncertainty(v: Value, half_width_uniform: float, confidence: floa
                  v.method + f"; +-{half_width_uniform:g} uniform added")
 
 
-def interval_from_stderr(value: float, stderr: float, confidence: float, method: str) -> Value:
-    z = float(norm.ppf(0.5 + confidence / 2.0))
-    return Value(value, (value - z * stderr, value + z * stderr), method)
+def interval_from_stderr(value: float, stderr: float, confidence: float, method: str,
+                         dof: float = math.inf) -> Value:
+    """``value +- q stderr``: ``q`` the normal quantile, or Student's t quantile with
+    ``dof`` degrees of freedom where the standard error was estimated from ``dof``
+    residuals."""
+    q = float(norm.ppf(0.5 + confidence / 2.0) if math.isinf(dof)
+              else student_t.ppf(0.5 + confidence / 2.0, dof))
+    return Value(value, (value - q * stderr, value + q * stderr), method)
 
 
 __all__ = ["FLICKER_FLOOR", "SCALE", "TAU_ARW_S", "TAU_NOISE_DENSITY_S", "Value",

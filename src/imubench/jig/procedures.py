@@ -65,6 +65,12 @@ class TemperaturePoint:
     def die_temp_c(self) -> float:
         return 0.5 * (self.up.die_temp_c + self.down.die_temp_c)
 
+    @property
+    def time_s(self) -> float:
+        """Source time of the middle of the two captures, s."""
+        first, last = self.up.capture, self.down.capture
+        return 0.5 * (first.t0_s + last.t0_s + last.duration_s)
+
     def offsets(self, cols: slice) -> tuple[np.ndarray, np.ndarray]:
         """(3,) offsets and standard errors: the mean of the flipped pair (for the
         accelerometer, (A(+Z) + A(-Z)) / 2 removes gravity on every axis)."""

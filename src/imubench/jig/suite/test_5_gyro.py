@@ -22,8 +22,8 @@ AXES = ("x", "y", "z")
 
 @pytest.fixture(scope="module")
 def fit(jig: JigSession) -> SensorFit:
-    rates = jig.procedures.rate_table()
-    f = jig.cached("gyro_fit", lambda: gyro_fit(rates, jig.station.calibration.nonlinearity))
+    f = jig.cached("gyro_fit", lambda: gyro_fit(jig.procedures,
+                                                jig.station.calibration.nonlinearity))
     jig.artifacts["rate_table"] = {"inputs_dps": f.inputs, "residuals_dps": f.residuals,
                                    "stderr_dps": f.stderr}
     return f

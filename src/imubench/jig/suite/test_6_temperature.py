@@ -4,6 +4,7 @@ quadratic through the same points, the least-squares polynomial)."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -33,7 +34,7 @@ def sweep(jig: JigSession) -> list[TemperaturePoint]:
 def tfits(sweep: list[TemperaturePoint], jig: JigSession) -> dict[str, SweepData]:
     ref = jig.procedures.static().die_temp_c
     out = jig.cached("temperature_fits", lambda: {
-        name: temperature_fits(sweep, cols, ref, jig.station.capture)
+        name: temperature_fits(jig.procedures, cols)
         for name, cols in SENSOR_COLS.items()})
     art = {"set_points_c": [p.set_point_c for p in sweep],
            "chamber_c": [p.chamber_c for p in sweep],
@@ -57,11 +58,15 @@ def test_offset_temperature_coefficient(
     i = CHANNELS.index(ch) % 3
     f = tfits[sensor].fits["polynomial"]
     k, _ = SCALE[sensor]
-    assert f.stderr1 is not None
+    assert f.stderr1 is not None and f.stderr_dof is not None
+    dof = float(f.stderr_dof[i])
     v = analysis.interval_from_stderr(
         k * f.coeff1[i], k * f.stderr1[i], jig.confidence,
         f"linear term of the least-squares quadratic over {len(tfits[sensor].temps_c)}"
-        f" chamber points about {f.temp_ref_c:.2f} degC")
+        f" chamber points about {f.temp_ref_c:.2f} degC"
+        + ("" if f.drift_per_h is None else ", beside a drift linear in time")
+        + ("" if math.isinf(dof) else
+           f"; error from the residual scatter, Student t with {dof:.0f} dof"), dof)
     measure(f"temperature_coefficient.{ch}", v.value, v.ci, method=v.method)
 
 
