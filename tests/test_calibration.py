@@ -279,3 +279,44 @@ def test_a_jig_interval_from_an_estimated_error_takes_students_t() -> None:
     four = interval_from_stderr(1.0, 0.1, 0.95, "m", dof=4.0)
     assert four.ci[1] - 1.0 == pytest.approx(0.1 * float(student_t.ppf(0.975, 4)), rel=1e-12)
     assert four.ci[1] - 1.0 == pytest.approx(0.2776, abs=1e-4)  # t(4) table value 2.776
+
+
+def test_the_daemons_live_deviations_are_those_of_the_calibrated_values(
+        tmp_path: Path) -> None:
+    """``imubench run`` with ``calibration.file`` recorded calibrated values but fed the
+    live engine (MQTT) the raw counts: its deviations were the uncalibrated sensor's,
+    1.02x the recording's for a gyro gain of 1.02 (an outside reviewer)."""
+    import subprocess
+    import sys
+
+    from imubench import stats
+    from imubench.config import quickstart_file
+    from imubench.recording import load_recording
+    from imubench.stats.streaming import StreamingAllan
+    from tests.mqtt_fixtures import free_port
+
+    cal = Calibration({**PROV, "chip": "lsm6dsl"},
+                      gyro=_sensor("dps", matrix=np.diag([1.02, 0.97, 1.0])))
+    path = cal.save(tmp_path / "cal.toml").path
+    text = (quickstart_file().read_text()
+            .replace('memory = "bounded"',
+                     f'memory = "exact"\nstate_path = "{tmp_path}/state.npz"')
+            .replace("clock=wall", "clock=virtual").replace("port = 1883",
+                                                            f"port = {free_port()}")
+            .replace('path = "recordings/', f'path = "{tmp_path}/recordings/')
+            .replace('live_table = "auto"', 'live_table = "off"'))
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text + f'\n[calibration]\nfile = "{path}"\n[run]\nduration_s = 20.0\n')
+    proc = subprocess.run([sys.executable, "-m", "imubench.cli", "run", "--config", str(cfg)],
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rec = load_recording(next((tmp_path / "recordings").glob("*.imbr")))
+    eng = StreamingAllan.load_state((tmp_path / "state.npz").read_bytes())
+    live = eng.snapshot()
+    assert isinstance(live, list)
+    for k, ch in enumerate(("gx", "gy")):
+        ref = stats.oadev(rec.channel(ch), rec.rate_hz, data_type="freq", taus="octave")
+        got = live[k]["oadev"]
+        n = min(len(ref.dev), len(got.dev))
+        assert n >= 5
+        assert np.allclose(got.dev[:n], ref.dev[:n], rtol=1e-9)

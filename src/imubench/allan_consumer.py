@@ -40,15 +40,21 @@ Snapshot = Mapping[str, Any] | list[Mapping[str, Any]]
 class AllanConsumer(Consumer):
     """Feeds a :class:`StreamingAllan` (made by ``make_engine(info, use_raw)``).
 
-    ``use_raw`` is True when the batches carry raw counts with known sensitivities: the
-    engine then sums exact integers and scales them (``StreamingAllan(scale=...)``).
+    ``use_raw`` is True when the batches carry raw counts with known sensitivities and
+    no calibration changes their values (``calibrated``): the engine then sums exact
+    integers and scales them (``StreamingAllan(scale=...)``). A calibration corrects the
+    values only (raw counts stay what the chip said), so a calibrated stream feeds the
+    engine its values: the raw counts gave the live deviations of the uncalibrated
+    sensor, 1.02x the recording's for a gyro gain of 1.02 (an outside reviewer).
     """
 
     name = "engine"
 
     def __init__(self, make_engine: Callable[[SourceInfo, bool], StreamingAllan],
-                 measured_rate: Callable[[], float | None] | None = None) -> None:
+                 measured_rate: Callable[[], float | None] | None = None,
+                 calibrated: bool = False) -> None:
         self.make_engine = make_engine
+        self.calibrated = calibrated
         self.measured_rate = measured_rate
         """The source's ODR measured against the host clock (None until known): each
         snapshot reports its taus at it (:meth:`StreamingAllan.set_rate`)."""
@@ -68,7 +74,7 @@ class AllanConsumer(Consumer):
 
     def prepare(self, info: SourceInfo) -> None:
         warm_up()
-        self.use_raw = info.has_raw
+        self.use_raw = info.has_raw and not self.calibrated
         self.engine = self.make_engine(info, self.use_raw)
 
     @property

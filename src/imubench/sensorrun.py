@@ -112,7 +112,8 @@ class SensorRun:
                                         f"source {info.uri}")
         self.say(f"source {info.uri}: {info.chip} at {info.odr_hz:g} Hz")
         self.engine_consumer = AllanConsumer(self._make_engine,
-                                             lambda: source.measured_odr_hz)
+                                             lambda: source.measured_odr_hz,
+                                             calibrated=self.calibration is not None)
         consumers: list[Consumer] = [self.engine_consumer]
         if self.recorder is not None:
             consumers.insert(0, self.recorder)
