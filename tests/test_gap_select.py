@@ -845,6 +845,14 @@ def test_verdict_is_the_kept_effect_whose_removal_costs_most() -> None:
     sine = Candidate("sine", {"sine_amplitude": 0.01, "sine_freq": 2.0}, 3, unique_chi2=16.0)
     fl.unique_chi2 = 14.0
     assert _main_effect([sine, fl]) is fl
+    # an effect that only trims a huge refit of the base model is not the verdict (a
+    # blind 15 Hz low-pass: refit 1.3e6, a quantization term 15, verdict was quantization)
+    q = Candidate("quantization", {"quantization": 7e-6}, 1, unique_chi2=15.2)
+    big = Candidate("base_model", {"white": 4e-3, "bandwidth_hz": 15.2}, 3,
+                    unique_chi2=1.34e6)
+    assert _main_effect([big, q]) is None
+    q.unique_chi2 = 2000.0  # a real share of the gap: the effect stays the verdict
+    assert _main_effect([big, q]) is q
 
 
 def test_a_curvature_far_from_temp_ref_is_not_offered() -> None:
