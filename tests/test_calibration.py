@@ -320,3 +320,21 @@ def test_the_daemons_live_deviations_are_those_of_the_calibrated_values(
         n = min(len(ref.dev), len(got.dev))
         assert n >= 5
         assert np.allclose(got.dev[:n], ref.dev[:n], rtol=1e-9)
+
+
+def test_a_calibration_refuses_data_that_lack_one_of_its_sensors_axes(tmp_path: Path) -> None:
+    """``convert --calibration`` of a one-channel file wrote every value empty (the
+    correction mixes the three axes: one NaN made all three NaN) and exited 0."""
+    from imubench.cli import main
+    from imubench.recording import convert
+
+    cal = Calibration({**PROV, "chip": "lsm6dsl"}, gyro=_sensor("dps"))
+    path = cal.save(tmp_path / "cal.toml").path
+    assert path is not None
+    rec = tmp_path / "r.imbr"
+    assert main(["sim", "--chip", "lsm6dsl", "--duration-s", "2", "--out", str(rec)]) == 0
+    convert(rec, tmp_path / "gx.dat", channel="gx")
+    with pytest.raises(CalibrationError, match=r"\[gyro\] corrects gx, gy, gz together .* "
+                                               r"lack gy, gz"):
+        convert(tmp_path / "gx.dat", tmp_path / "cal.csv", calibration=path)
+    assert not (tmp_path / "cal.csv").exists()

@@ -766,3 +766,24 @@ def test_a_time_column_is_found_by_its_unit_or_named_in_the_refusal(tmp_path: Pa
     q.write_text("Uhr,gyro_x [dps]\n" + body)
     with pytest.raises(RecordingError, match=r"--columns t=NAME \(columns not read: Uhr\)"):
         load_recording(q, InputOptions(default_rate_hz=1.0))
+
+
+def test_a_convert_that_fails_midway_leaves_no_partial_file(tmp_path: Path) -> None:
+    """A convert that failed on a full disk left the samples written so far, which then
+    read as a complete shorter recording, and blocked a retry ("exists already")."""
+    from imubench.recording import CONVERT_BLOCK, convert
+
+    rec = tmp_path / "r.imbr"
+    seconds = str(2.5 * CONVERT_BLOCK / 104)
+    assert main(["sim", "--chip", "lsm6dsl", "--duration-s", seconds, "--out", str(rec)]) == 0
+
+    def fail(done: int, total: int) -> None:
+        if done < total:
+            raise OSError(28, "No space left on device")
+
+    for name in ("p.csv", "p.imbr", "p.csv.gz"):
+        with pytest.raises(RecordingError, match=f"{name}: No space left on device; nothing"):
+            convert(rec, tmp_path / name, on_progress=fail)
+        assert not (tmp_path / name).exists()
+    convert(rec, tmp_path / "p.csv")  # the retry works
+    assert len(load_recording(tmp_path / "p.csv")) == len(load_recording(rec))

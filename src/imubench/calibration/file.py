@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from imubench.batch import Batch
+from imubench.batch import CHANNELS, Batch
 from imubench.calibration.errors import CalibrationError
 from imubench.calibration.sensor import check_invertible, correct
 from imubench.tomlread import read_toml
@@ -175,6 +175,13 @@ class Calibration:
             sc = getattr(self, name)
             if sc is None or np.all(np.isnan(values[:, cols])):
                 continue
+            absent = [ch for ch, col in zip(CHANNELS[cols], values[:, cols].T, strict=True)
+                      if np.all(np.isnan(col))]
+            if absent:  # the matrix mixes the three axes: none can be corrected alone
+                raise CalibrationError(
+                    f"{self._where()}: [{name}] corrects {', '.join(CHANNELS[cols])} together "
+                    f"(its matrix mixes the axes) and the data lack {', '.join(absent)}; "
+                    "calibrate a recording that holds all three, then export the channel")
             values[:, cols] = sc.correct(values[:, cols], batch.temp_c)
         return dataclasses.replace(batch, values=values)
 

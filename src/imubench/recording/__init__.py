@@ -346,7 +346,26 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
     rec = load_recording(src, options)
     if calibration is not None:
         rec = _calibrated(rec, calibration)
-    if is_dat:
+    out = Path(dst)
+    existed = out.exists()
+    try:
+        return _write_converted(rec, src, out, kind, channel, on_progress)
+    except BaseException as exc:
+        # a half-written file would read as a shorter recording (no end record in a CSV)
+        # and block a retry ("exists already"): remove what this call created
+        if not existed and out.exists():
+            out.unlink()
+        if isinstance(exc, OSError):
+            raise RecordingError(f"{dst}: {exc.strerror or exc}; nothing was kept of the "
+                                 "partial output") from exc
+        raise
+
+
+def _write_converted(rec: Recording, src: str | Path, dst: Path, kind: str,
+                     channel: str | None,
+                     on_progress: Callable[[int, int], None] | None) -> Converted:
+    """The writing half of :func:`convert`."""
+    if kind == "dat":
         assert channel is not None
         log.info("%s", write_stable32(rec, channel, dst))
         if on_progress is not None:
