@@ -28,6 +28,7 @@ from imubench.pipeline import Consumer, Pipeline
 from imubench.recorder import Recorder
 from imubench.sources.base import SourceInfo
 from imubench.sources.registry import open_source
+from imubench.stats.result import dev_unit
 
 RESUME_GAP_FACTORS = 4
 """Gap rows between a resumed state and the new run: at most this many times the longest
@@ -239,7 +240,7 @@ class SensorRun:
                     per_stat[s][ch] = {
                         "tau_s": r.tau_s, "dev": r.dev, "n": r.n, "ci_low": r.ci_low,
                         "ci_high": r.ci_high, "alpha": r.alpha, "edf": r.edf,
-                        "units": UNITS[ch],
+                        "units": dev_unit(UNITS[ch], s),
                     }
         info = self.pipeline.info if self.pipeline is not None else None
         engine_account = (self.pipeline.accounts().get("engine")

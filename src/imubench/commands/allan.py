@@ -25,6 +25,7 @@ from imubench.errors import RecordingError, StatsError
 from imubench.progress import progress
 from imubench.recording.options import InputOptions, add_input_arguments, input_options
 from imubench.stats import STATISTICS, compute
+from imubench.stats.result import dev_unit
 from imubench.stats.taus import parse_taus
 
 
@@ -108,20 +109,6 @@ def load_channel(path: Path, column: str | None, options: InputOptions
 
 
 INPUT_UNIT = "input unit"
-
-
-TIME_DEVIATIONS = frozenset({"tdev", "ttotdev"})
-"""Statistics in phase units: TDEV = tau MDEV / sqrt(3) (SP 1065 eq. 17), TTOT alike."""
-
-
-def dev_unit(unit: str, stat: str = "oadev") -> str:
-    """The unit of ``stat``'s deviations of a series in ``unit``: that unit for every
-    statistic of rates (frequency data are rates in it; phase data are their integral,
-    whose differences over tau give the same unit), that unit times seconds for a time
-    deviation (TDEV, TTOT: deg for dps)."""
-    if stat not in TIME_DEVIATIONS:
-        return unit
-    return "deg" if unit == "dps" else f"{unit}*s"
 
 
 def with_units(doc: dict[str, Any], channel: str, unit: str, data_type: str

@@ -71,3 +71,17 @@ class StatResult:
             "gaps": lst(self.gaps),
             "notes": list(self.notes),
         }
+
+
+TIME_DEVIATIONS = frozenset({"tdev", "ttotdev"})
+"""Statistics in phase units: TDEV = tau MDEV / sqrt(3) (SP 1065 eq. 17), TTOT alike."""
+
+
+def dev_unit(unit: str, stat: str = "oadev") -> str:
+    """The unit of ``stat``'s deviations of a series in ``unit``: that unit for every
+    statistic of rates (frequency data are rates in it; phase data are their integral,
+    whose differences over tau give the same unit), that unit times seconds for a time
+    deviation (TDEV, TTOT: deg for dps)."""
+    if stat not in TIME_DEVIATIONS:
+        return unit
+    return "deg" if unit == "dps" else f"{unit}*s"
