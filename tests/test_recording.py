@@ -787,3 +787,38 @@ def test_a_convert_that_fails_midway_leaves_no_partial_file(tmp_path: Path) -> N
         assert not (tmp_path / name).exists()
     convert(rec, tmp_path / "p.csv")  # the retry works
     assert len(load_recording(tmp_path / "p.csv")) == len(load_recording(rec))
+
+
+def test_a_recording_without_its_end_record_is_read_with_a_warning(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """An .imbr from a killed writer (no end record) was read and converted without a
+    word; the converted copy kept no trace that it was cut."""
+    from imubench.recording import convert
+
+    rec = tmp_path / "r.imbr"
+    assert main(["sim", "--chip", "lsm6dsl", "--duration-s", "2", "--out", str(rec)]) == 0
+    whole = load_recording(rec)
+    assert whole.complete
+    data = rec.read_bytes()
+    cut = tmp_path / "cut.imbr"
+    cut.write_bytes(data[:-5])  # the end record, cut
+    with caplog.at_level("WARNING"):
+        got = load_recording(cut)
+    assert not got.complete and len(got) == len(whole)
+    assert "cut.imbr: no end record: the writer did not close this file" in caplog.text
+    convert(cut, tmp_path / "c.csv")
+    assert "source_incomplete" in load_recording(tmp_path / "c.csv").metadata
+    convert(rec, tmp_path / "w.csv")
+    assert "source_incomplete" not in load_recording(tmp_path / "w.csv").metadata
+
+
+def test_an_upper_case_gz_name_is_compressed(tmp_path: Path) -> None:
+    """``OUT.CSV.GZ`` was written as plain text under a gzip name (the writer compared
+    the suffix case-sensitively, the reader did not): no reader could open it."""
+    from imubench.recording import convert
+
+    rec = tmp_path / "r.imbr"
+    assert main(["sim", "--chip", "lsm6dsl", "--duration-s", "1", "--out", str(rec)]) == 0
+    convert(rec, tmp_path / "OUT.CSV.GZ")
+    assert (tmp_path / "OUT.CSV.GZ").read_bytes()[:2] == b"\x1f\x8b"
+    assert len(load_recording(tmp_path / "OUT.CSV.GZ")) == len(load_recording(rec))

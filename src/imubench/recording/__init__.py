@@ -293,6 +293,10 @@ def _load_native(path: Path, opts: InputOptions) -> Recording:
                 raise RecordingError(f"{path}: header calibration: {exc}") from None
         if opts.rate_hz is not None:
             meta["odr_hz"] = opts.rate_hz
+        if reader.end is None:  # a killed writer, or one still writing
+            log.warning("%s: no end record: the writer did not close this file (killed, or "
+                        "still recording); read %d samples, what came after the last whole "
+                        "record is not in it", path, len(b))
         return Recording(path, meta, b.index, b.t_s, b.values, b.temp_c, b.raw,
                          reader.gaps, reader.damage, reader.end is not None)
 
@@ -376,6 +380,9 @@ def _write_converted(rec: Recording, src: str | Path, dst: Path, kind: str,
         log.warning("%s: dropped %d secret(s) from the header: %s (not copied to %s)", src,
                     len(dropped), ", ".join(dropped), dst)
     meta["converted_from"] = str(src)
+    if not rec.complete:
+        meta["source_incomplete"] = ("the source's writer did not close it (killed or still "
+                                     "recording): samples after its last record are missing")
     # the start of the source, never the conversion's time: its own, else its first
     # absolute time stamp, else unknown (null), which a writer does not replace with now
     meta.setdefault("start_utc", _start_from_stamps(rec.t_s))

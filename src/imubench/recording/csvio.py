@@ -50,7 +50,7 @@ because a real sensor's clock runs off nominal, so ``t * odr_hz`` drifts from th
 
 
 def _open_text(path: Path, mode: str) -> IO[str]:
-    if path.suffix == ".gz":
+    if path.suffix.lower() == ".gz":
         return gzip.open(path, mode + "t", encoding="utf-8", newline="")  # type: ignore[return-value]
     return open(path, mode, encoding="utf-8", newline="")
 
