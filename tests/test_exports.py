@@ -246,3 +246,33 @@ def test_convert_command_shows_progress_and_says_what_it_wrote(tmp_path: Path) -
     assert p.returncode == 0, p.stderr
     assert "Stable32 data file of gy in dps, 2000 values, tau0 0.00961538 s" in p.stdout
     assert "convert" in p.stderr and "100%" in p.stderr  # the bar, on stderr only
+
+
+def test_stable32_export_counts_and_places_the_gaps_at_either_end(tmp_path: Path) -> None:
+    """A recording that starts and ends in a declared gap: the .dat said lost_samples 0
+    and, one value per line from the header's start_utc, put every sample 30 periods
+    (0.288 s) early; a calibrated or damaged source was not stated."""
+    rng = np.random.default_rng(4)
+    idx = np.arange(30, 1990, dtype=np.int64)
+    meta = {"odr_hz": RATE_HZ, "chip": "lsm6dsl", "start_utc": "2026-11-24T12:00:00Z",
+            "storage": "float64"}
+    path = tmp_path / "ends.imbr"
+    with NativeWriter(path, meta) as w:
+        w.write(Batch(idx, idx / RATE_HZ, rng.normal(0, 0.01, (len(idx), 6)),
+                      np.full(len(idx), 25.0), None, (Gap(30, 30, "chip reset"),)))
+        w.write(Batch.empty(gaps=(Gap(2000, 10, "chip reset"),)))
+    src = load_recording(path)
+    assert src.lost_samples == 40
+    out = tmp_path / "gx.dat"
+    convert(path, out, channel="gx")
+    head = {line[2:].split(": ", 1)[0]: json.loads(line.split(": ", 1)[1])
+            for line in out.read_text().splitlines()[1:] if line.startswith("# ")}
+    assert head["lost_samples"] == 40
+    assert head["start_utc"] == "2026-11-24T12:00:00.288461Z"  # the first line's time
+    first_tag = float(next(line for line in out.read_text().splitlines()
+                           if not line.startswith("#")).split()[0])
+    assert first_tag == pytest.approx(61368.5 + 30 / RATE_HZ / 86400.0, abs=1e-11)
+    back = load_recording(out)
+    assert back.metadata["start_utc"] == head["start_utc"]
+    assert back.t_s[0] == 0.0 and back.t_s[1] == pytest.approx(1 / RATE_HZ, rel=1e-4)
+    np.testing.assert_array_equal(back.channel("gx"), src.channel("gx"))

@@ -380,6 +380,8 @@ def _write_converted(rec: Recording, src: str | Path, dst: Path, kind: str,
         log.warning("%s: dropped %d secret(s) from the header: %s (not copied to %s)", src,
                     len(dropped), ", ".join(dropped), dst)
     meta["converted_from"] = str(src)
+    if rec.damage:
+        meta["damage"] = f"{src}: {rec.damage}"
     if not rec.complete:
         meta["source_incomplete"] = ("the source's writer did not close it (killed or still "
                                      "recording): samples after its last record are missing")

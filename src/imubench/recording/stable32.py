@@ -32,7 +32,8 @@ import numpy as np
 from imubench.batch import UNITS
 from imubench.errors import RecordingError
 from imubench.recording.commit import need_parent
-from imubench.recording.timebase import SECONDS_PER_DAY
+from imubench.recording.timebase import MJD_OF_UNIX_EPOCH, SECONDS_PER_DAY
+from imubench.recording.timebase import start_utc as iso_utc
 
 if TYPE_CHECKING:
     from imubench.recording import Recording
@@ -68,15 +69,24 @@ def write_stable32(rec: Recording, channel: str, path: str | Path) -> str:
         raise RecordingError(f"{path}: exists already; recordings are never overwritten")
     series = rec.channel(channel)
     have = np.isfinite(series)
-    lost = int((~have).sum())
+    # holes inside, and the gaps declared before the first or after the last sample
+    lost = int((~have).sum()) + rec.lost_samples - (len(series) - len(rec))
     rate = rec.rate_hz
     meta: dict[str, object] = {
         "channel": channel, "unit": UNITS[channel], "odr_hz": rate, "tau0_s": 1.0 / rate,
         "samples": int(have.sum()), "lost_samples": lost, "source": str(rec.path),
     }
+    cal = rec.metadata.get("calibration")
+    if isinstance(cal, dict) and cal.get("applied"):
+        meta["calibration"] = {k: cal.get(k) for k in ("applied", "path", "sha256")}
+    if rec.damage:
+        meta["damage"] = rec.damage
     start = _start_mjd(rec.metadata.get("start_utc"))
-    if rec.metadata.get("start_utc") is not None:
-        meta["start_utc"] = rec.metadata["start_utc"]
+    first = int(rec.index[0]) if len(rec) else 0
+    if start is not None:  # the time of the first line (a reader starts there)
+        meta["start_utc"] = (iso_utc((start - MJD_OF_UNIX_EPOCH) * SECONDS_PER_DAY
+                                     + first / rate) if first else None
+                             ) or rec.metadata["start_utc"]
     layout = "one value per line"
     if lost:
         layout = "MJD time tag (days) and value per line; lost samples have no line"
@@ -89,13 +99,15 @@ def write_stable32(rec: Recording, channel: str, path: str | Path) -> str:
                  f"{UNITS[channel]}), {layout}\n")
         for key, value in meta.items():
             fh.write(f"# {key}: {json.dumps(value)}\n")
-        _write_values(fh, series, have, rate, start if lost else None)
+        _write_values(fh, series, have, rate, start if lost else None, first)
     return (f"{path}: Stable32 data file of {channel} ({UNITS[channel]}), {int(have.sum())} "
             f"values, tau0 {1.0 / rate:.6g} s, {layout}")
 
 
 def _write_values(fh: IO[str], series: np.ndarray, have: np.ndarray, rate_hz: float,
-                  start_mjd: float | None, block: int = 65536) -> None:
+                  start_mjd: float | None, first_index: int, block: int = 65536) -> None:
+    """The values of ``series`` (its element 0 is sample ``first_index``), one per line,
+    with their MJD time tags from ``start_mjd`` (sample 0) when given."""
     k = np.nonzero(have)[0]
     for s in range(0, len(k), block):
         part = k[s:s + block]
@@ -103,5 +115,5 @@ def _write_values(fh: IO[str], series: np.ndarray, have: np.ndarray, rate_hz: fl
         if start_mjd is None:
             fh.write("".join(f"{v!r}\n" for v in values))
         else:
-            tags = (start_mjd + part / rate_hz / SECONDS_PER_DAY).tolist()
+            tags = (start_mjd + (first_index + part) / rate_hz / SECONDS_PER_DAY).tolist()
             fh.write("".join(f"{t:.12f} {v!r}\n" for t, v in zip(tags, values, strict=True)))

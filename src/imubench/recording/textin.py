@@ -446,9 +446,11 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         unit_name, scale = _time_unit(cols[where_col["t"]], options, ros, t_raw, rate, where)
         t_s = t_raw * scale
         time_note = f"t in {unit_name}"
-        if unit_name.startswith("days (MJD") and len(t_raw):  # dated: keep its start
+        if unit_name.startswith("days (MJD") and len(t_raw):  # dated: keep its start,
+            # and count the seconds from it (MJD x 86400 are seconds since 1858)
             meta.setdefault("start_utc",
                             start_utc((float(t_raw[0]) - MJD_OF_UNIX_EPOCH) * SECONDS_PER_DAY))
+            t_s = (t_raw - float(t_raw[0])) * scale
         if "the header says" in unit_name:
             overridden.append(f"t {unit_name}")
     if raw.header is None and raw.width == 2 and options.rate_hz is not None:
