@@ -822,3 +822,23 @@ def test_an_upper_case_gz_name_is_compressed(tmp_path: Path) -> None:
     convert(rec, tmp_path / "OUT.CSV.GZ")
     assert (tmp_path / "OUT.CSV.GZ").read_bytes()[:2] == b"\x1f\x8b"
     assert len(load_recording(tmp_path / "OUT.CSV.GZ")) == len(load_recording(rec))
+
+
+@pytest.mark.parametrize("suffix", [".imbr", ".csv", ".h5"])
+def test_a_rate_that_contradicts_the_stamps_of_imubench_files_is_refused(
+        tmp_path: Path, suffix: str) -> None:
+    """``--rate 52`` on imubench's own 104 Hz files was taken without a word (every tau
+    twice as long); a foreign CSV's time column was already checked."""
+    from imubench.recording import convert
+
+    rec = tmp_path / "r.imbr"
+    assert main(["sim", "--chip", "lsm6dsl", "--duration-s", "12", "--out", str(rec)]) == 0
+    path = rec if suffix == ".imbr" else tmp_path / f"c{suffix}"
+    if path != rec:
+        convert(rec, path)
+    with pytest.raises(RecordingError, match=r"--rate 52 Hz contradicts the recording's "
+                                             r"time stamps, which give 104 Hz"):
+        load_recording(path, InputOptions(rate_hz=52.0))
+    assert load_recording(path, InputOptions(rate_hz=100.0)).rate_hz == 100.0  # a crystal
+    with pytest.raises(RecordingError, match="contradicts"):
+        convert(rec, tmp_path / "x.csv", InputOptions(rate_hz=52.0))

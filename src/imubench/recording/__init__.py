@@ -205,7 +205,31 @@ def measured_rate(index: np.ndarray, t_s: np.ndarray, nominal_hz: float) -> floa
         return None
     rate = float(np.median((i[h:] - i[: len(t) - h]) / dt))
     off = abs(rate / nominal_hz - 1.0)
-    return rate if MEASURED_RATE_TOLERANCE < off <= 0.1 else None
+    return rate if MEASURED_RATE_TOLERANCE < off <= GIVEN_RATE_TOLERANCE else None
+
+
+GIVEN_RATE_TOLERANCE = 0.1
+"""Largest relative departure of ``--rate`` from the rate of a recording's own time stamps
+(an ODR's tolerance); beyond it ``--rate`` is refused (:func:`_check_given_rate`)."""
+
+
+def _check_given_rate(rec: Recording, given_hz: float, where: str) -> None:
+    """RecordingError when ``--rate`` contradicts the rate the recording's own time stamps
+    show (over at least :data:`MEASURED_RATE_MIN_SPAN_S`) by more than
+    :data:`GIVEN_RATE_TOLERANCE`: ``--rate 52`` on imubench's own 104 Hz files was taken
+    without a word, every tau twice as long, and ``convert --rate`` wrote it into the
+    copy's header for good (a foreign CSV's time column was already checked)."""
+    ok = np.isfinite(rec.t_s)
+    i, t = rec.index[ok].astype(np.float64), rec.t_s[ok]
+    h = len(t) // 2
+    if h < 1 or t[-1] - t[0] < MEASURED_RATE_MIN_SPAN_S or not np.all(np.diff(t) > 0):
+        return  # too short, or stamps rounded coarser than a period: no rate of their own
+    dt = t[h:] - t[: len(t) - h]
+    own = float(np.median((i[h:] - i[: len(t) - h]) / dt))
+    if abs(given_hz / own - 1.0) > GIVEN_RATE_TOLERANCE:
+        raise RecordingError(
+            f"{where}: --rate {given_hz:g} Hz contradicts the recording's time stamps, which "
+            f"give {own:.6g} Hz; drop --rate to read it at its own rate")
 
 
 def _with_measured_rate(rec: Recording) -> Recording:
@@ -233,6 +257,8 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
     path = Path(path)
     opts = options or InputOptions()
     rec, where, stated = _load(path, recording_kind(path), opts)
+    if opts.rate_hz is not None:
+        _check_given_rate(rec, opts.rate_hz, str(path))
     if rec.damage:
         log.warning("%s: damaged: %s; kept %d samples, %d lost in holes", where,
                     rec.damage, len(rec), rec.lost_samples)
