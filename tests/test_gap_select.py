@@ -1031,3 +1031,24 @@ XX
     # without a usable temperature the rows come back unchanged
     flat = RecordTemperature(cm, Series(np.zeros(n), np.full(n, 25.0), fs))
     assert np.array_equal(flat.less_response(y[None, :]), y[None, :])
+
+
+def test_a_located_step_is_fitted_beside_the_temperature_response() -> None:
+    """Under a temperature that rises and levels off (5 -> 8 degC, no response at all), a
+    permanent step took part of the temperature slope, and the record less that response
+    kept a fraction of the step (an outside reviewer's CATS segment: a -0.92 dps step
+    refused as a transient). Fitted beside it, the step stays whole."""
+    from imubench.gap import evidence
+    from imubench.gap.parts import RecordTemperature, Series
+
+    fs, n, t, _, cm, noise = _hour_at_10_hz()
+    warming = 5.0 + 3.0 * (1.0 - np.exp(-t / 1200.0))
+    rec = RecordTemperature(cm, Series(np.zeros(n), warming, fs))
+    assert rec.note == ""
+    at = int(0.8 * n)
+    y = noise() + np.where(np.arange(n) >= at, -0.5, 0.0)
+    step = evidence.StepFit(at / fs, -0.5)
+    plain = rec.less_response(y[None, :])[0]
+    joint = rec.less_response(y[None, :], step_at=at)[0]
+    assert abs(evidence.step_persistence(plain, fs, step) - 1.0) > 0.3  # bent by it
+    assert evidence.step_persistence(joint, fs, step) == pytest.approx(1.0, abs=0.1)

@@ -798,8 +798,8 @@ def only_trend(dx: np.ndarray) -> bool:
     return bool(float(np.std(dx)) <= TREND_ONLY * abs(float(np.mean(dx))))
 
 
-def gls_slopes(dys: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
-               ) -> tuple[np.ndarray, np.ndarray]:
+def gls_slopes(dys: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool],
+               extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Generalized-least-squares slopes of each row of the increments ``dys`` (k, n) on
     ``dx`` beside a constant, with noise covariance ``chol`` (:func:`scipy.linalg.
     cho_factor` of the model's), and their standard errors; each row's ``s^2 = e' C^-1 e
@@ -815,13 +815,14 @@ def gls_slopes(dys: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
     temperature with its 1 degC/h drift) gave z up to 6.5 on nulls whose level wanders;
     with it |z| < 1.4 there, and the blind set's temperature responses keep z 5.2-11.
     NaN when ``dx`` is a trend alone (:func:`only_trend`); NaN for a row with a
-    missing value."""
+    missing value. ``extra``: a further regressor (n,) fitted beside them (a located
+    bias step's increments, :meth:`imubench.gap.parts.RecordTemperature.less_response`)."""
     from scipy.linalg import cho_solve
 
     nan = np.full(len(dys), np.nan)
     if only_trend(dx):
         return nan, nan
-    x = np.column_stack([np.ones_like(dx), dx])
+    x = np.column_stack([np.ones_like(dx), dx] + ([] if extra is None else [extra]))
     cx = cho_solve(chol, x)
     info = x.T @ cx
     if not (np.all(np.isfinite(info)) and np.linalg.det(info) > 0):
@@ -830,9 +831,9 @@ def gls_slopes(dys: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool]
     var = float(inv[1, 1])
     if not var > 0:
         return nan, nan
-    coef = inv @ (cx.T @ dys.T)  # (2, k)
+    coef = inv @ (cx.T @ dys.T)  # (p, k)
     e = dys - (x @ coef).T
-    s2 = np.einsum("kn,nk->k", e, cho_solve(chol, e.T)) / max(dys.shape[1] - 2, 1)
+    s2 = np.einsum("kn,nk->k", e, cho_solve(chol, e.T)) / max(dys.shape[1] - x.shape[1], 1)
     return coef[1], np.sqrt(np.maximum(s2, 1.0) * var)
 
 

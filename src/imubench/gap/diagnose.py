@@ -327,12 +327,20 @@ class _Step:
     def _for_step(self, ys: np.ndarray) -> np.ndarray:
         """``ys`` as the step test sees them: less the kept effects' deterministic parts
         (done by the caller for the record) and, when the temperature test fired, less
-        each one's own temperature response (:meth:`RecordTemperature.less_response`).
-        A temperature response widens the block means' increments and hid a step: a kept
-        one hid a second effect's step (CATS gy, bias step + temperature at 2x their
-        limits), an unmodelled one let a random walk take the step's excess first (CATS
-        az seg 1; ax seg 2 still keeps the walk)."""
-        return self.temp.less_response(ys) if self.temp_fired else ys
+        each one's own temperature response (:meth:`RecordTemperature.less_response`),
+        fitted beside a step at the place a first pass locates in each (the largest one
+        it then sees). A temperature response widens the block means' increments and
+        hid a step: a kept one hid a second effect's step (CATS gy, bias step +
+        temperature at 2x their limits), an unmodelled one let a random walk take the
+        step's excess first (CATS az seg 1; ax seg 2 still keeps the walk)."""
+        if not self.temp_fired:
+            return ys
+        first = self.temp.less_response(ys)
+        out = np.empty_like(first)
+        for k, y in enumerate(first):
+            at = round(evidence.fit_bias_step(y, self.rate_hz).step_time_s * self.rate_hz)
+            out[k] = self.temp.less_response(ys[k:k + 1], step_at=at)[0]
+        return out
 
     def step_stats(self, sims: np.ndarray) -> np.ndarray:
         """The step statistic of each realisation, seen as the record is (:meth:`_for_step`)."""
