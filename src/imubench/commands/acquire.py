@@ -124,8 +124,11 @@ def run(args: argparse.Namespace) -> int:
         stats = record_uri(uri, args.out, args.stats_json, args.duration_s, args.calibration)
     except SourceError as exc:  # name the URI the user wrote, not the one with duration_s
         raise SourceError(str(exc).replace(uri, args.source)) from None
+    # the file's own counts first (the source may have read past the duration, which the
+    # pipeline does not deliver), then the source's
     print(
-        f"{args.out}: {stats['samples']} samples, {stats['gaps']} gaps, "
+        f"{args.out}: {stats['recorded']} samples recorded, {stats['recording_lost']} lost; "
+        f"source: {stats['samples']} read, {stats['gaps']} gaps, "
         f"{stats['lost_samples']} lost, {stats['overruns']} overruns, "
         f"{stats['io_errors']} I/O errors",
         file=summary_stream(args.stats_json),

@@ -145,9 +145,9 @@ class Source(abc.ABC):
         return None
 
     @property
+    @abc.abstractmethod
     def elapsed_s(self) -> float:
-        """Source seconds since the stream started."""
-        return 0.0
+        """Source seconds since the stream started (of the samples read so far)."""
 
     @property
     def expected_samples(self) -> int | None:

@@ -71,6 +71,13 @@ class ReplaySource(Source):
             return 0
         return int(rec.index[-1]) + 1 + sum(g.lost for g in self._gaps if g.at > rec.index[-1])
 
+    @property
+    def elapsed_s(self) -> float:
+        """Recording seconds of the samples replayed so far."""
+        rec = self.recording
+        return (float(rec.t_s[self._pos - 1] - rec.t_s[0]) if self._pos > 0
+                else 0.0)
+
     def _open(self) -> None:
         self._pos = 0
         self._gap_pos = 0

@@ -150,6 +150,11 @@ class SensorTileSource(Source):
         self.presentation: str | None = None
 
     # -- hooks ----------------------------------------------------------------------
+    @property
+    def elapsed_s(self) -> float:
+        """Kit seconds (RTC) of the newest frame read since the stream started."""
+        return 0.0 if self._timeline is None else self._timeline.elapsed_s
+
     def _open(self) -> None:
         if self.firmware is not None:
             self.firmware.start()
