@@ -260,7 +260,8 @@ class CalibrationConfig(_Section):
     file: str | None = Field(
         None,
         description="Calibration file applied to every sample before it is recorded and "
-        "analysed (unit: path); raw counts stay in the recording, whose header states the "
+        "analysed (unit: path); raw counts stay in the recording (.imbr; a CSV holds the "
+        "corrected values only), whose header states the "
         "calibration ([docs/calibration.md](docs/calibration.md))",
     )
 

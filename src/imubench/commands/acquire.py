@@ -112,7 +112,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write the acquisition counters as JSON here (- for stdout)")
     p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
                    help="calibration file applied to the values (docs/calibration.md); "
-                   "raw counts stay in the recording")
+                   "raw counts stay in an .imbr recording (a CSV holds the corrected values only)")
     p.set_defaults(func=run)
 
 

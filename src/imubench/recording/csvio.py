@@ -28,9 +28,9 @@ import contextlib
 import gzip
 import io
 import json
+import logging
 import math
 import os
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -40,6 +40,7 @@ import numpy as np
 from imubench.batch import CHANNELS, UNITS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
 from imubench.recording.commit import cut_back, need_parent
+from imubench.recording.timebase import utc_now
 
 COLUMNS: tuple[str, ...] = ("t", *CHANNELS, "temp")
 COLUMN_UNITS: dict[str, str] = {"t": "s", **UNITS, "index": "samples"}
@@ -47,6 +48,8 @@ COLUMN_UNITS: dict[str, str] = {"t": "s", **UNITS, "index": "samples"}
 INDEX_COLUMN = "index"
 """Optional extra column: the sample index (ODR periods since start). imubench writes it
 because a real sensor's clock runs off nominal, so ``t * odr_hz`` drifts from the index."""
+
+log = logging.getLogger("imubench.recording")
 
 
 def _open_text(path: Path, mode: str) -> IO[str]:
@@ -71,9 +74,13 @@ class CsvWriter:
             raise RecordingError(f"{self.path}: exists already; recordings are never overwritten")
         self.metadata = dict(metadata)
         self.metadata["units"] = COLUMN_UNITS  # the header says what the columns are in
+        cal = self.metadata.get("calibration")
+        if isinstance(cal, dict) and cal.get("applied"):
+            log.warning("%s: a CSV holds the calibrated values only (it has no raw-count "
+                        "columns): keep an .imbr or .h5 recording to go back to what the "
+                        "chip said", self.path)
         # a live recording starts now, as a native one (convert states the source's)
-        self.metadata.setdefault("start_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ",
-                                                            time.gmtime()))
+        self.metadata.setdefault("start_utc", utc_now())
         self.samples = 0
         self.gaps = 0
         self.lost_samples = 0

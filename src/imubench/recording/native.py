@@ -56,6 +56,7 @@ import numpy as np
 from imubench.batch import CHANNELS, Batch, Gap, explain_holes
 from imubench.errors import RecordingError
 from imubench.recording.commit import cut_back, need_parent
+from imubench.recording.timebase import utc_now
 
 MAGIC = b"IMBR"
 VERSION = 1
@@ -83,7 +84,7 @@ class NativeWriter:
         self.metadata = dict(metadata)
         self.metadata.setdefault("format", "imubench-native")
         self.metadata.setdefault("version", VERSION)
-        self.metadata.setdefault("start_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
+        self.metadata.setdefault("start_utc", utc_now())
         self.metadata.setdefault("channels", list(CHANNELS))
         storage = self.metadata.setdefault("storage", STORAGE_FLOAT)
         if storage not in (STORAGE_RAW, STORAGE_FLOAT):
@@ -201,7 +202,7 @@ class NativeWriter:
             return
         end = {
             "samples": self.samples, "gaps": self.gaps, "lost_samples": self.lost_samples,
-            "stopped_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "stopped_utc": utc_now(),
         }
         with self._all_or_nothing():
             self._record(b"E", json.dumps(end).encode())

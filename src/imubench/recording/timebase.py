@@ -62,6 +62,15 @@ MJD_OF_UNIX_EPOCH = 40_587.0
 """The Modified Julian Date of 1970-01-01 00:00 UTC."""
 
 
+def utc_now() -> str:
+    """Now as ISO 8601 UTC to the millisecond: a live recording's ``start_utc`` (whole
+    seconds put it up to a second before the first sample, and a Stable32 export's MJD
+    tags with it)."""
+    import datetime as _dt
+
+    return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+
+
 def start_utc(unix_s: float) -> str | None:
     """ISO 8601 UTC of a Unix time in seconds of 2001-2099 (:data:`EPOCH_S`); None for a
     time that counts from anything else (a start that is not known)."""
