@@ -842,3 +842,15 @@ def test_a_rate_that_contradicts_the_stamps_of_imubench_files_is_refused(
     assert load_recording(path, InputOptions(rate_hz=100.0)).rate_hz == 100.0  # a crystal
     with pytest.raises(RecordingError, match="contradicts"):
         convert(rec, tmp_path / "x.csv", InputOptions(rate_hz=52.0))
+
+
+def test_a_temperature_column_named_by_its_sensor_is_read(tmp_path: Path) -> None:
+    """``imu_temp`` was dropped without a word (only listed in the read-as line)."""
+    for name in ("imu_temp", "die_temperature", "chip_temp [degC]", "temperature_c"):
+        p = tmp_path / "x.csv"
+        p.write_text(f"t,gyro_z [dps],{name}\n" + "".join(
+            f"{i / 104:.6f},{0.001 * (i % 7):.4f},{25 + i * 1e-3:.3f}\n" for i in range(500)))
+        rec = load_recording(p)
+        assert rec.channels == ["gz", "temp"], name
+        assert rec.temp_c[10] == pytest.approx(25.01)
+        p.unlink()

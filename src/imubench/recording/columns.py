@@ -45,7 +45,11 @@ def _aliases() -> dict[str, str]:
         out[name] = "t"
         for suffix in _TIME_SUFFIXES:
             out[name + suffix] = "t"
-    out.update({"temp": "temp", "temperature": "temp", "temp_c": "temp", "die_temp": "temp",
+    for stem in ("imu", "die", "chip", "sensor", "board", "gyro", "accel"):
+        for word in ("temp", "temperature"):
+            out[f"{stem}_{word}"] = out[f"{stem}{word}"] = "temp"
+    out.update({"temp": "temp", "temperature": "temp", "temp_c": "temp",
+                "temperature_c": "temp", "temp_degc": "temp",
                 "index": "index", "sample": "index", "sample_index": "index"})
     return out
 
