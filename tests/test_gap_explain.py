@@ -297,8 +297,8 @@ def test_all_kept_effects_sentence_reads_whole_when_the_held_out_gap_widens() ->
                holdout={"gap_before": 0.122, "gap_after": 0.268, "gap_excess_before": 0.0,
                         "gap_excess_after": 0.0})
     text = headline(c, 10)
-    assert ("(with all kept effects on the held-out part the Allan-curve gap widens "
-            "(0.122 -> 0.268))." in text), text
+    assert ("(with all kept effects the held-out Allan curve is within its scatter before "
+            "and after (systematic gap 0 -> 0, its gap widens 0.122 -> 0.268))." in text), text
 
 
 def test_held_out_check_of_a_bias_step_is_said_not_to_apply() -> None:
@@ -431,3 +431,30 @@ def test_a_departure_left_after_the_most_effects_says_the_selection_stopped() ->
     text = "\n".join(explain_channel(c, 10))
     assert (f"A significant departure remains after the kept effects (the selection "
             f"keeps at most {MAX_EFFECTS} effects).") in text, text
+
+
+def test_a_verdict_that_does_not_close_the_gap_alone_says_so_beside_the_others() -> None:
+    """A temperature + sine pair: "on the held-out part the Allan-curve gap does not
+    close (1.42 -> 1.35)" opened the sentence, before it said both together close 100 %;
+    and a held-out part without a systematic gap got "closes 30 % of the Allan-curve
+    gap", a share of scatter."""
+    from imubench.gap.explain import headline
+
+    sine = {"effect": "sine", "params": {"sine_amplitude": 0.05, "sine_freq": 2.7},
+            "gap_after": 0.5, "holdout_gap_after": 1.35, "holdout_gap_excess_after": 1.4,
+            "holdout_chi2_drop_parts": {"allan": 2e5, "bands": 10.0, "statistics": 1.0}}
+    temp = {"effect": "temperature", "params": {"temp_coeff": 0.00976},
+            "gap_after": 0.01, "holdout_gap_after": 0.01, "holdout_gap_excess_after": 0.0}
+    c = _entry("sine", kept=[sine, temp],
+               holdout={"gap_before": 1.42, "gap_after": 0.01, "gap_excess_before": 1.41,
+                        "gap_excess_after": 0.0})
+    text = headline(c, 10)
+    assert "; on its own, on the held-out part the Allan-curve gap does not close" in text
+    assert "(all kept effects together close 100% of the systematic" in text
+    flat = _entry("sine", kept=[{**sine, "holdout_gap_after": 0.08,
+                                 "holdout_gap_excess_after": 0.0}],
+                  holdout={"gap_before": 0.115, "gap_after": 0.08, "gap_excess_before": 0.034,
+                           "gap_excess_after": 0.0})
+    text = headline(flat, 10)
+    assert "closes" not in text
+    assert "within its scatter before and after (systematic gap 0.034 -> 0)" in text

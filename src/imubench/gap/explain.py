@@ -191,6 +191,14 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         ea, ga = h.get("gap_excess_after"), h.get("gap_after")
     if eb is not None and eb > 0.05 and ea is not None:
         frac, what = 1.0 - ea / eb, "the systematic Allan-curve gap"
+    elif eb is not None and ea is not None:  # nothing systematic to close there: a share
+        # of the raw gap would be a share of scatter
+        text = (f"; the held-out Allan curve is within its scatter before and after "
+                f"(systematic gap {_f(eb)} -> {_f(ea)}")
+        gb = h.get("gap_before")
+        if ga is not None and gb and ga > 1.05 * gb:
+            text += f"; its gap widens {_f(gb)} -> {_f(ga)}"
+        return text + ")" + _holdout_evidence(after)
     elif ga is not None and h["gap_before"]:
         frac, what = 1.0 - ga / h["gap_before"], "the Allan-curve gap"
     else:
@@ -204,13 +212,19 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
     moves = "widens" if ga is not None and ga > 1.05 * h["gap_before"] else "does not close"
     text = (f"; on the held-out part the Allan-curve gap {moves} "
             f"({_f(h['gap_before'])} -> {_f(ga)})")
+    return text + _holdout_evidence(after)
+
+
+def _holdout_evidence(after: dict[str, Any] | None) -> str:
+    """Where the held-out check's evidence for a kept effect is (its largest chi-squared
+    drop), or empty."""
     parts = (after or {}).get("holdout_chi2_drop_parts") or {}
     best = max(parts, key=lambda k: parts[k]) if parts else ""
-    if best and parts[best] > 0:
-        text += (f"; the held-out check's evidence for it is in the {PART_NAMES[best]} "
-                 f"(chi-squared falls by {parts[best]:.1f}")
-        text += (", the short taus weighing most)" if best == "allan" else ")")
-    return text
+    if not (best and parts[best] > 0):
+        return ""
+    text = (f"; the held-out check's evidence for it is in the {PART_NAMES[best]} "
+            f"(chi-squared falls by {parts[best]:.1f}")
+    return text + (", the short taus weighing most)" if best == "allan" else ")")
 
 
 def headline(c: dict[str, Any], realisations: int,
@@ -243,8 +257,11 @@ def headline(c: dict[str, Any], realisations: int,
     text = describe(verdict, (main or ranked or {}).get("params", {}), units)
     # the held-out figures of the verdict's effect alone (kept dicts are cumulative)
     alone = _closed(c.get("holdout"), main) if kept and kept[0] is main else ""
-    text = text[0].upper() + text[1:] + alone + "."
     others = [k for k in kept if k is not main]
+    if others and alone.startswith("; on the held-out part"):  # the others close the rest
+        alone = alone.replace("; on the held-out part", "; on its own, on the held-out part",
+                              1)
+    text = text[0].upper() + text[1:] + alone + "."
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units)
                                            for k in others)
