@@ -483,3 +483,28 @@ def test_cli_says_how_much_of_the_recording_is_missing(tmp_path: Path) -> None:
     doc = json.loads(out.read_text())
     # samples: the record's span (holes included), as before
     assert (doc["samples"], doc["lost_samples"], doc["holes"]) == (40000, 4000, 1)
+
+
+def test_a_bias_step_verdict_shows_the_block_means_of_the_whole_record(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The evidence plot of a bias step was the fit part's per-tau z: a step in the
+    held-out part left both curves flat, the plot showing nothing behind the verdict."""
+    n = int(480 * RATE)
+    model = NoiseModel.quiet().with_all(white=0.004)
+    s = simulate(model, n, RATE, seed=8, temperature=TEMP)
+    vals = np.column_stack([s[c] for c in CHANNELS])
+    vals[int(0.7 * n):, 0] += 0.05  # gx steps in the held-out part
+    rec = tmp_path / "step.csv"
+    with open_writer(rec, {"odr_hz": RATE}) as w:
+        w.write(Batch(np.arange(n, dtype=np.int64), s["t_s"], vals, s["temp_c"]))
+    mfile = tmp_path / "m.toml"
+    mfile.write_text(model.to_toml(), encoding="utf-8")
+    rep = tmp_path / "rep"
+    rc, err = run_inproc(capsys, str(rec), "--model", str(mfile), "--channels", "gx",
+                         "--realisations", "4", "--json", str(tmp_path / "g.json"),
+                         "--report", str(rep))
+    assert rc == 0, err
+    doc = json.loads((tmp_path / "g.json").read_text())
+    assert doc["channels"]["gx"]["verdict"] == "bias_step"
+    svg = (rep / "gx_evidence.svg").read_text()
+    assert "block means over the whole record" in svg and "time in the record (s)" in svg

@@ -431,6 +431,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             st = evidence.fit_bias_step(step_y, whole.rate_hz)
             cands.append(Candidate(eff, {"step_time_s": st.step_time_s,
                                          "step_size": st.step_size}, 2))
+            n_block = max(1, len(step_y) // evidence.STEP_BLOCKS)
+            means = evidence.block_means_of(step_y, n_block)
+            ev["bias_step"] = ((np.arange(len(means)) + 0.5) * n_block / whole.rate_hz,
+                               means)
             kept_share = evidence.step_persistence(step_y, whole.rate_hz, st)
             if kept_share < evidence.STEP_PERSISTENCE:
                 moved = (f"keep {kept_share:.0%} of its size" if kept_share >= 0 else

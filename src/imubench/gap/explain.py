@@ -191,8 +191,8 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         ea, ga = h.get("gap_excess_after"), h.get("gap_after")
     if eb is not None and eb > 0.05 and ea is not None:
         frac, what = 1.0 - ea / eb, "the systematic Allan-curve gap"
-    elif eb is not None and ea is not None:  # nothing systematic to close there: a share
-        # of the raw gap would be a share of scatter
+    elif eb is not None and ea is not None and (after or {}).get("effect") != "bias_step":
+        # nothing systematic to close there: a share of the raw gap would be of scatter
         text = (f"; the held-out Allan curve is within its scatter before and after "
                 f"(systematic gap {_f(eb)} -> {_f(ea)}")
         gb = h.get("gap_before")

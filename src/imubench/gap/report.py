@@ -23,6 +23,7 @@ from imubench.batch import UNITS
 from imubench.gap.curves import Comparison
 from imubench.gap.diagnose import ChannelDiagnosis
 from imubench.gap.errors import GapError
+from imubench.gap.evidence import STEP_WINDOW_BLOCKS
 from imubench.gap.explain import explain_channel, params_text
 
 
@@ -84,6 +85,21 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         ax.set_ylabel(f"{d.channel} block mean ({unit})")
         ax.legend(fontsize=7)
         return "block means over time (fit part)"
+    if eff == "bias_step" and "bias_step" in ev and d.winner is not None:
+        t, means = ev["bias_step"]
+        ok = np.isfinite(means)
+        ax.plot(t[ok], means[ok], ".", ms=3, color="k", label="real (block means)")
+        at, size = d.winner.params["step_time_s"], d.winner.params["step_size"]
+        after = t >= at
+        before = means[ok & ~after][-STEP_WINDOW_BLOCKS:]  # the fit's local level
+        base = float(np.mean(before)) if before.size else float(np.mean(means[ok]))
+        level = base + np.where(after, size, 0.0)
+        ax.plot(t, level, "r-", label=f"step {size:.3g} {unit} at {at:.6g} s")
+        ax.axvline(at, color="r", ls=":", lw=0.8)
+        ax.set_xlabel("time in the record (s)")
+        ax.set_ylabel(f"{d.channel} block mean ({unit})")
+        ax.legend(fontsize=7)
+        return "block means over the whole record (the step is located on it)"
     if eff == "outliers" and "outliers" in ev:
         of = ev["outliers"]
         ax.hist(of.detected / of.sigma, bins=40, color="tab:red")
