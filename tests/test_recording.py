@@ -854,3 +854,30 @@ def test_a_temperature_column_named_by_its_sensor_is_read(tmp_path: Path) -> Non
         assert rec.channels == ["gz", "temp"], name
         assert rec.temp_c[10] == pytest.approx(25.01)
         p.unlink()
+
+
+def test_a_convert_to_hdf5_is_refused_before_it_can_fill_the_disk(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """h5py on a full disk printed seven tracebacks, then a segmentation fault, and left a
+    corrupt file. The free space is checked first (a full tmpfs needs root to make: the
+    disk's answer is replaced here)."""
+    import shutil
+
+    from imubench.recording import convert
+
+    rec = tmp_path / "r.imbr"
+    assert main(["sim", "--chip", "lsm6dsl", "--duration-s", "5", "--out", str(rec)]) == 0
+    real = shutil.disk_usage
+
+    def full(path: str) -> object:
+        u = real(path)
+        return type(u)(u.total, u.total - 1000, 1000)
+
+    monkeypatch.setattr(shutil, "disk_usage", full)
+    with pytest.raises(RecordingError, match=r"r\.h5: 0\.0 MB free on its disk, .* nothing "
+                                             "was written"):
+        convert(rec, tmp_path / "r.h5")
+    assert not (tmp_path / "r.h5").exists()
+    monkeypatch.setattr(shutil, "disk_usage", real)
+    convert(rec, tmp_path / "r.h5")
+    assert len(load_recording(tmp_path / "r.h5")) == len(load_recording(rec))

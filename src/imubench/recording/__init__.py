@@ -378,6 +378,8 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
         rec = _calibrated(rec, calibration)
     out = Path(dst)
     existed = out.exists()
+    if kind == "hdf5" and not existed:
+        _check_room_for_hdf5(rec, out)
     try:
         return _write_converted(rec, src, out, kind, channel, on_progress)
     except BaseException as exc:
@@ -389,6 +391,31 @@ def convert(src: str | Path, dst: str | Path, options: InputOptions | None = Non
             raise RecordingError(f"{dst}: {exc.strerror or exc}; nothing was kept of the "
                                  "partial output") from exc
         raise
+
+
+HDF5_BYTES_PER_SAMPLE = 8 + 8 + 4 + 6 * 8 + 6 * 2
+"""Uncompressed bytes of one sample in an HDF5 recording (index, t, temperature, six
+values, six raw counts)."""
+
+
+def _check_room_for_hdf5(rec: Recording, dst: Path) -> None:
+    """RecordingError when the disk under ``dst`` has less free space than ``rec`` takes
+    uncompressed: HDF5 (h5py 3) does not fail cleanly on a full disk (a convert to a
+    full tmpfs printed seven library tracebacks, then crashed with a segmentation fault
+    and left a corrupt file). Compression may make it fit in less; the check is
+    deliberately on the safe side."""
+    import shutil
+
+    parent = dst.parent if str(dst.parent) else Path(".")
+    if not parent.is_dir():
+        return  # the writer names the missing directory
+    need = len(rec) * HDF5_BYTES_PER_SAMPLE + (1 << 20)
+    free = shutil.disk_usage(parent).free
+    if free < need:
+        raise RecordingError(
+            f"{dst}: {free / 1e6:.1f} MB free on its disk, {need / 1e6:.1f} MB needed for "
+            f"{len(rec)} samples uncompressed; HDF5 cannot fail cleanly on a full disk, so "
+            "nothing was written: free some space or convert to .imbr or .csv.gz")
 
 
 def _write_converted(rec: Recording, src: str | Path, dst: Path, kind: str,
