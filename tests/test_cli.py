@@ -129,7 +129,9 @@ def test_ctrl_c_in_the_first_second(tmp_path: Path, delay_s: float) -> None:
 def test_interrupted_sim_keeps_what_it_made(tmp_path: Path, sig: int, status: int,
                                             word: str) -> None:
     out = tmp_path / "r.imbr"
-    proc = subprocess.Popen(imubench("sim", "--duration-s", "1e6", "--out", str(out)),
+    stats = tmp_path / "s.json"
+    proc = subprocess.Popen(imubench("sim", "--duration-s", "1e6", "--out", str(out),
+                                     "--stats-json", str(stats)),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     end = time.monotonic() + 120
     while (not out.exists() or out.stat().st_size < 200_000) and time.monotonic() < end:
@@ -144,6 +146,9 @@ def test_interrupted_sim_keeps_what_it_made(tmp_path: Path, sig: int, status: in
     rec = load_recording(out)
     assert len(rec) > 1000 and rec.damage is None  # closed cleanly, end record written
     np.testing.assert_array_equal(rec.index, np.arange(len(rec)))
+    counted = json.loads(stats.read_text())  # the counters are written too (they were not)
+    assert counted["interrupted"] is True and counted["recorded"] == len(rec)
+    assert counted["produced"] == counted["recorded"] + counted["recording_lost"]
 
 
 def test_stats_json_dash_goes_to_stdout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

@@ -11,7 +11,8 @@ error shows here), ``elapsed_s``, ``expected_samples``, ``lost_by_reason``) plus
 ``duration_s`` (source seconds elapsed), ``produced`` and what the recording holds
 (``recorded``, ``recording_lost``); with ``--calibration``, ``calibration_extrapolated``:
 the samples whose die temperature lay outside the calibration's sweep (a warning says
-when it leaves and re-enters it). Ctrl-C stops the acquisition and keeps, closed and
+when it leaves and re-enters it). After Ctrl-C or SIGTERM the counters of what was kept
+are still written, with ``"interrupted": true``. Ctrl-C stops the acquisition and keeps, closed and
 readable, everything recorded so far.
 """
 
@@ -58,15 +59,32 @@ def record(src: Source, out: Path, duration_s: float | None = None,
             while not pipeline.join(WAIT_SLICE_S):
                 bar.fraction(pipeline.produced / (pipeline.info.odr_hz * (duration_s or 1)))
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM (imubench.cli raises it for both): keep
-        # what was recorded: stop, drain, close the file
+        # what was recorded: stop, drain, close the file, and say what it holds
         pipeline.stop()
         pipeline.join()
-        raise
+        stats = _stats(src, pipeline, recorder, live)
+        stats["interrupted"] = True
+        raise AcquisitionInterrupted(stats) from None
     if pipeline.error is not None:
         raise pipeline.error
     errors = pipeline.consumer_errors()
     if errors:
         raise next(iter(errors.values()))
+    return _stats(src, pipeline, recorder, live)
+
+
+class AcquisitionInterrupted(KeyboardInterrupt):
+    """A stop by Ctrl-C or SIGTERM (a KeyboardInterrupt, as :mod:`imubench.cli` expects),
+    with the counters of what was recorded up to it (:attr:`stats`)."""
+
+    def __init__(self, stats: dict[str, Any]) -> None:
+        super().__init__()
+        self.stats = stats
+
+
+def _stats(src: Source, pipeline: Pipeline, recorder: Recorder,
+           live: LiveCalibration | None) -> dict[str, Any]:
+    """The counters of a finished (or stopped) acquisition: the module docstring."""
     tel = src.telemetry()
     stats: dict[str, Any] = tel.as_dict()
     stats["duration_s"] = tel.elapsed_s
@@ -89,7 +107,12 @@ def record_uri(uri: str, out: Path, stats_json: Path | None,
     src = open_source(uri)
     if cal is not None:  # another chip or range: refused before anything is recorded
         cal.check_data(src.info.chip, src.info.fs_dps, src.info.fs_g, None, f"source {uri}")
-    stats = record(src, out, duration_s, cal)
+    try:
+        stats = record(src, out, duration_s, cal)
+    except AcquisitionInterrupted as stop:  # the counters of what was kept, then the exit
+        if stats_json is not None:
+            write_json(stop.stats, str(stats_json))
+        raise
     if stats_json is not None:
         write_json(stats, str(stats_json))
     return stats
