@@ -31,7 +31,8 @@ class Telemetry:
         samples: samples delivered in batches.
         gaps: gaps declared (holes in the sample index, each with a reason).
         lost_samples: samples lost at the source (sum of the gaps' ``lost``).
-        overruns: FIFO overruns (chips).
+        overruns: polls that found the FIFO's overrun flag set (chips); samples lost to
+            overwritten FIFO data are under ``lost_by_reason["fifo overrun"]``, flag or not.
         bus_bytes: wire bytes moved on the I2C bus or the serial link.
         bus_utilization: share of the link's payload limit used, 0..1 (0 when unknown).
         io_errors: failed transfers (each retried or counted as a loss).
