@@ -58,9 +58,10 @@ def main() -> None:
                                    "--station", str(st), "--serial", f"COV-{seed}",
                                    "--report", str(rep)], capture_output=True, text=True,
                                   cwd=REPO, env=os.environ)
-            if proc.returncode not in (0, 1):
+            found = sorted(rep.rglob("result.json"))  # PASS 0, FAIL 1, INCONCLUSIVE 3
+            if not found:
                 sys.exit(f"seed {seed}: jig run exited {proc.returncode}\n{proc.stderr[-2000:]}")
-            result = json.loads(sorted(rep.rglob("result.json"))[-1].read_text())
+            result = json.loads(found[-1].read_text())
             for m in result["measurements"]:
                 if m["name"] in rows:
                     rows[m["name"]].append((m["value"], m["ci_low"], m["ci_high"]))
