@@ -336,3 +336,20 @@ def test_every_source_reports_its_elapsed_time(tmp_path: Path, uri: str,
     assert 9.9 <= s["elapsed_s"] < 13.0  # a chip source polls past the end in 2.7 s steps
     n = len(load_recording(tmp_path / "r.imbr"))
     assert f"r.imbr: {n} samples recorded, 0 lost; source: " in capsys.readouterr().out
+
+
+def test_a_replay_ending_in_a_short_batch_reports_its_time(tmp_path: Path) -> None:
+    """The last batch of a replay is short when the recording's length is not a multiple
+    of the batch: elapsed_s then read past the end (IndexError: acquire exited 70, the
+    daemon's last snapshot was never published)."""
+    from imubench.cli import main
+
+    rec = tmp_path / "r.imbr"
+    assert main(["sim", "--chip", "lsm6dsl", "--duration-s", "1.05", "--out", str(rec)]) == 0
+    n = len(load_recording(rec))
+    assert n % 10  # not whole 0.1 s batches at 104 Hz
+    stats = tmp_path / "s.json"
+    assert main(["acquire", f"replay://{rec}?clock=virtual", "--duration-s", "5", "--out",
+                 str(tmp_path / "c.imbr"), "--stats-json", str(stats)]) == 0
+    s = json.loads(stats.read_text())
+    assert s["recorded"] == n and s["elapsed_s"] == pytest.approx((n - 1) / 104.0, rel=1e-3)

@@ -140,3 +140,43 @@ def test_daemon_stops_on_duration_and_resumes_state(tmp_path: Path) -> None:
     lengths, counts = eng.runs(0)
     assert list(lengths) == [105] and list(counts) == [2]  # 104 samples = 105 phase points
     assert eng.n_samples > 2 * 104
+
+
+def test_a_saved_state_of_other_settings_is_not_resumed(tmp_path: Path) -> None:
+    """A state was resumed when the ODR and the statistics matched: after a restart at
+    2000 dps the new counts were summed at the old sensitivity (live OADEV 32 % low), and
+    with a calibration added every start crashed the engine (raw counts, then values)."""
+    from imubench.stats.streaming import StreamingAllan
+
+    port = free_port()
+    base = quickstart_file().read_text().replace(
+        'memory = "bounded"', f'memory = "bounded"\nstate_path = "{tmp_path}/state.npz"'
+    ).replace("clock=wall", "clock=virtual").replace("port = 1883", f"port = {port}").replace(
+        'path = "recordings/', f'path = "{tmp_path}/recordings/') + "\n[run]\nduration_s = 1.0\n"
+    cal = tmp_path / "cal.toml"
+    cal.write_text('format = "imubench-calibration"\nversion = 1\n[provenance]\n'
+                   'serial = "S"\ndate_utc = "2026-12-03T00:00:00Z"\nstation = "b"\n'
+                   '[gyro]\nunit = "dps"\nmethod = "t"\ntemp_ref_c = 25.0\n'
+                   'offset = [0.0, 0.0, 0.0]\nmatrix = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], '
+                   '[0.0, 0.0, 1.0]]\n')
+    runs = [("", "resumed Allan state"),
+            ("&fs_dps=2000", "sensitivity per count 0.00875"),
+            ("&fs_dps=2000", "resumed Allan state"),
+            ("&fs_dps=2000", "input raw counts, now values (a calibration was added")]
+    for k, (extra, expected) in enumerate(runs):
+        text = base.replace("model=datasheet:lsm6dsl", f"model=datasheet:lsm6dsl{extra}")
+        if k == 3:
+            text += f'\n[calibration]\nfile = "{cal}"\n'
+        cfg = tmp_path / "c.toml"
+        cfg.write_text(text)
+        proc = subprocess.run([sys.executable, "-m", "imubench.cli", "run", "--config",
+                               str(cfg)], capture_output=True, text=True, timeout=60,
+                              cwd=tmp_path)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        if k:
+            assert expected in proc.stdout, proc.stdout
+        eng = StreamingAllan.load_state((tmp_path / "state.npz").read_bytes())
+        if k == 2:  # resumed: both runs, with the time between them as gap rows
+            assert eng.n_samples > 2 * 104 and list(eng.runs(0)[0]) == [105], proc.stdout
+        else:  # a fresh engine
+            assert eng.n_samples == 104, (k, proc.stdout)

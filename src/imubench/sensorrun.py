@@ -53,6 +53,42 @@ def per_channel(snap: Snapshot) -> list[Mapping[str, Any]]:
     return snap
 
 
+def _changed_settings(saved: StreamingAllan, fresh: StreamingAllan,
+                      use_raw: bool) -> list[str]:
+    """What differs between a saved engine and the one this run would start: the rate,
+    the statistics, the memory mode, the averaging factors (taus, max_tau_s), and the
+    input's kind and scale (raw counts at a sensitivity, or values: a full scale or a
+    calibration changed). A state was resumed when the rate and the statistics matched:
+    after a restart at 2000 dps instead of 250 the new counts were scaled at the old
+    sensitivity (live OADEV 32 % low, the interval excluding the truth), a bounded state
+    ran on under memory = "exact", and a state of raw counts fed calibrated values
+    crashed the engine at every start (an outside reviewer, multi-day runs)."""
+    out = []
+    if abs(saved.nominal_rate_hz - fresh.nominal_rate_hz) > 1e-9:
+        out.append(f"ODR {saved.nominal_rate_hz:g} Hz, now {fresh.nominal_rate_hz:g}")
+    if list(saved.stats) != list(fresh.stats):
+        out.append(f"statistics {', '.join(saved.stats)}, now {', '.join(fresh.stats)}")
+    if saved.memory != fresh.memory:
+        out.append(f"memory {saved.memory}, now {fresh.memory}")
+    if list(saved.ms) != list(fresh.ms):
+        out.append(f"taus up to {saved.max_m / saved.nominal_rate_hz:g} s on "
+                   f"{len(saved.ms)} factors, now {fresh.max_m / fresh.nominal_rate_hz:g} s "
+                   f"on {len(fresh.ms)}")
+    kind = "raw counts" if use_raw else "values"
+    if saved.input_is_integer is not None and saved.input_is_integer != use_raw:
+        out.append(f"input {'raw counts' if saved.input_is_integer else 'values'}, "
+                   f"now {kind} (a calibration was added or removed)")
+    elif saved.channel_scale is not None:
+        new_scale = np.broadcast_to(np.asarray(fresh.scale_arg if fresh.scale_arg is not None
+                                               else 1.0, float), saved.channel_scale.shape)
+        if not np.allclose(saved.channel_scale, new_scale, rtol=1e-9):
+            out.append("sensitivity per count "
+                       f"{', '.join(f'{v:g}' for v in saved.channel_scale[[0, 3]])}, now "
+                       f"{', '.join(f'{v:g}' for v in new_scale[[0, 3]])} (another full "
+                       "scale)")
+    return out
+
+
 class SensorRun:
     """Everything the daemon runs for one sensor.
 
@@ -136,20 +172,23 @@ class SensorRun:
             assert info.accel_sensitivity_g is not None
             g, acc = info.gyro_sensitivity_dps, info.accel_sensitivity_g
             scale = [g, g, g, acc, acc, acc]
+        fresh = StreamingAllan(info.odr_hz, taus=a.tau_spec, stats=list(a.stats),
+                               max_tau_s=a.max_tau_s, memory=a.memory, scale=scale)
         state = a.state_file(self.name)
         if state is not None and state.exists():
             try:
                 saved_at = state.stat().st_mtime
                 eng = StreamingAllan.load_state(state.read_bytes())
-                if (abs(eng.nominal_rate_hz - info.odr_hz) < 1e-9
-                        and list(eng.stats) == list(a.stats)):
+                changed = _changed_settings(eng, fresh, use_raw)
+                if not changed:
                     self._resume(eng, state, saved_at)
                     return eng
-                self.say(f"ignoring {state}: it was made with other settings")
+                self.say(f"ignoring {state}: it was made with other settings "
+                         f"({'; '.join(changed)}); the engine starts empty and the state "
+                         "is replaced at the next save")
             except (ImubenchError, OSError, ValueError, KeyError) as exc:
                 self.say(f"ignoring {state}: {exc}")
-        return StreamingAllan(info.odr_hz, taus=a.tau_spec, stats=list(a.stats),
-                              max_tau_s=a.max_tau_s, memory=a.memory, scale=scale)
+        return fresh
 
     def _resume(self, eng: StreamingAllan, state: Path, saved_at: float) -> None:
         """Take ``eng`` (loaded from ``state``, written at ``saved_at``, Unix s) as this

@@ -75,8 +75,8 @@ class ReplaySource(Source):
     def elapsed_s(self) -> float:
         """Recording seconds of the samples replayed so far."""
         rec = self.recording
-        return (float(rec.t_s[self._pos - 1] - rec.t_s[0]) if self._pos > 0
-                else 0.0)
+        done = min(self._pos, len(rec))  # the last batch may be short
+        return float(rec.t_s[done - 1] - rec.t_s[0]) if done > 0 else 0.0
 
     def _open(self) -> None:
         self._pos = 0

@@ -447,6 +447,23 @@ class StreamingAllan:
         self.tau0_s = 1.0 / self.rate_hz
 
     @property
+    def input_is_integer(self) -> bool | None:
+        """Whether the engine sums integer counts (True) or float values (False); None
+        before the first update."""
+        return self._int
+
+    @property
+    def channel_scale(self) -> np.ndarray | None:
+        """The factor each channel's input is multiplied by (unit per count for raw
+        counts, 1 for values); None before the first update."""
+        return self.scale if self._nch is not None else None
+
+    @property
+    def scale_arg(self) -> float | Sequence[float] | None:
+        """The ``scale`` the engine was made with (None: 1 for every channel)."""
+        return self._scale_arg
+
+    @property
     def n_samples(self) -> int:
         """Samples (rows) given to update() so far."""
         return self._n_proc + self._inbox_rows if self._nch is not None else 0
