@@ -565,3 +565,36 @@ def test_tls_client_certificate_password_and_acl(
 
     asyncio.run(scenario())
     assert all(password not in r.getMessage() for r in caplog.records)
+
+
+def test_a_snapshot_over_the_embedded_brokers_limit_is_not_sent(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """8 statistics at 100 taus grew the payload past the embedded broker's 1 MiB packet
+    limit hours into a run: the broker closed the connection on every attempt and not one
+    snapshot reached a subscriber. Oversize snapshots are now counted and said, and the
+    rest still pass."""
+    station = station_name()
+
+    async def scenario() -> None:
+        broker = EmbeddedBroker("127.0.0.1", 0)
+        host, port = await broker.start()
+        try:
+            pub = MqttPublisher(host, port, station, "imu0", qos=1,
+                                max_payload_bytes=broker.max_packet_size - 4096)
+            async with aiomqtt.Client(host, port) as sub:
+                await sub.subscribe(f"imubench/{station}/imu0/allan", qos=1)
+                async with pub:
+                    assert await pub.wait_connected(5)
+                    await pub.publish_allan(snapshot(1))
+                    await pub.publish_allan({**snapshot(2), "pad": "x" * (2 << 20)})
+                    await pub.publish_allan(snapshot(3))
+                    got = [json.loads(m.payload) for m in await receive(sub, 2)]  # type: ignore[arg-type]
+                    assert [g["seq"] for g in got] == [0, 2]  # the subscriber sees 1 missed
+                    assert pub.connections == 1  # never thrown off
+            assert (pub.oversize_snapshots, pub.dropped_snapshots) == (1, 1)
+        finally:
+            await broker.stop()
+
+    with caplog.at_level(logging.ERROR):
+        asyncio.run(scenario())
+    assert "exceeds the broker's packet limit" in caplog.text

@@ -54,6 +54,9 @@ CUT_JOIN_S = 60.0
 """Longest wait, once cut short, for a consumer to finish the batch in hand, s."""
 STATE_SAVE_S = 30.0
 """Longest wait for the engine state to be made and written, s."""
+PACKET_HEADROOM_BYTES = 4096
+"""Bytes of an MQTT PUBLISH packet besides its payload allowed for: fixed header, topic,
+packet id (the topic is under 300 bytes)."""
 PREPARE_JOIN_S = 1.0
 """Longest wait, after a stop request, for the sensor being prepared to finish, s."""
 SNAPSHOT_LEAD = 0.25
@@ -151,6 +154,7 @@ class Daemon:
             "connected": pub.connected, "connections": pub.connections,
             "published_snapshots": pub.published_snapshots,
             "dropped_snapshots": pub.dropped_snapshots,
+            "oversize_snapshots": pub.oversize_snapshots,
             "backlog_snapshots": pub.buffered_snapshots,
         }
         return payload
@@ -251,6 +255,8 @@ class Daemon:
             tls=tls, tls_ca=cfg.mqtt.tls_ca, tls_cert=cfg.mqtt.tls_cert,
             tls_key=cfg.mqtt.tls_key, tls_insecure=cfg.mqtt.tls_insecure, qos=cfg.mqtt.qos,
             keepalive_s=cfg.mqtt.keepalive_s, backlog_snapshots=cfg.mqtt.backlog_snapshots,
+            max_payload_bytes=(None if broker is None
+                               else broker.max_packet_size - PACKET_HEADROOM_BYTES),
         )
         for unit in self.sensors:
             await publisher.publish_status(unit.status_detail(), unit.name)

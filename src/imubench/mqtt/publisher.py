@@ -176,6 +176,7 @@ class MqttPublisher:
         timeout_s: float = 10.0,
         ack_timeout_s: float | None = None,
         status_detail: Mapping[str, Any] | None = None,
+        max_payload_bytes: int | None = None,
     ) -> None:
         if qos not in (0, 1, 2):
             raise MqttError(f"mqtt qos {qos!r} is invalid; use 0, 1 or 2")
@@ -238,6 +239,11 @@ class MqttPublisher:
         self._connected = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self.dropped_snapshots = 0
+        self.max_payload_bytes = max_payload_bytes
+        """Snapshots larger than this (the broker's packet limit less the topic and the
+        header) are not sent: the broker would close the connection on each attempt."""
+        self.oversize_snapshots = 0
+        self._oversize_logged = 0
         self.published_snapshots = 0
         self.connections = 0
         self.last_error: str | None = None
@@ -266,6 +272,20 @@ class MqttPublisher:
         name = sensor or self.sensor
         data = encode_json({**payload, "seq": self._seq[name]})
         self._seq[name] += 1
+        if self.max_payload_bytes is not None and len(data) > self.max_payload_bytes:
+            # the broker would drop the connection on every attempt: nothing would pass
+            self.oversize_snapshots += 1
+            self.dropped_by_sensor[name] += 1
+            self.dropped_snapshots += 1
+            self._status_dirty.add(name)
+            if self.oversize_snapshots >= 2 * self._oversize_logged:  # 1, 2, 4, 8, ...
+                self._oversize_logged = self.oversize_snapshots
+                log.error("%s: snapshot of %d bytes exceeds the broker's packet limit (%d "
+                          "bytes for the payload): not sent (%d so far); publish fewer "
+                          "statistics or taus (allan.stats, allan.taus), or use a broker "
+                          "of your own (mqtt.broker)", name, len(data),
+                          self.max_payload_bytes, self.oversize_snapshots)
+            return
         self._buffer.append((name, data))
         self._trim_backlog()
         self._wake.set()
