@@ -180,3 +180,23 @@ def test_a_saved_state_of_other_settings_is_not_resumed(tmp_path: Path) -> None:
             assert eng.n_samples > 2 * 104 and list(eng.runs(0)[0]) == [105], proc.stdout
         else:  # a fresh engine
             assert eng.n_samples == 104, (k, proc.stdout)
+
+
+def test_faults_reach_the_log(tmp_path: Path) -> None:
+    """A two-hour bus outage and hundreds of resets reached MQTT only: stderr (and so the
+    journal) stayed empty. The daemon now writes a warning with what was lost since the
+    last one, by reason, at most once a minute."""
+    port = free_port()
+    text = quickstart_file().read_text().replace("port = 1883", f"port = {port}").replace(
+        'path = "recordings/', f'path = "{tmp_path}/recordings/').replace(
+        'live_table = "auto"', 'live_table = "off"').replace(
+        "model=datasheet:lsm6dsl", "model=datasheet:lsm6dsl&reset_every_s=0.7")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text + "\n[run]\nduration_s = 3.0\n")
+    proc = subprocess.run([sys.executable, "-m", "imubench.cli", "run", "--config", str(cfg)],
+                          capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    lines = [ln for ln in (proc.stdout + proc.stderr).splitlines()
+             if "WARNING imubench.daemon: imu0: since the last report: source lost (chip "
+                "reset) +" in ln]
+    assert len(lines) == 1, proc.stdout + proc.stderr  # once a minute at most

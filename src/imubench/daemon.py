@@ -127,6 +127,8 @@ class Daemon:
             if snap is None:
                 continue
             await publisher.publish_allan(self._payload(unit, snap), unit.name)
+            for line in unit.fault_lines(now):
+                log.warning("%s", line)
             if every > 0 and now >= next_save and (saving is None or saving.done()):
                 next_save = now + every
                 saving = asyncio.create_task(self._save_state(unit))
