@@ -350,3 +350,22 @@ def test_daemon_serves_the_live_view_when_enabled(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_the_recorders_health_counts_what_it_could_not_write() -> None:
+    """After a full disk the snapshot's ``health.consumers.recorder`` said 4492800
+    delivered and 0 lost, where the summary said 2269728 written and 2223072 lost."""
+    from types import SimpleNamespace
+
+    from imubench.pipeline import Account
+    from imubench.recorder import NOT_RECORDED
+    from imubench.sensorrun import SensorRun
+
+    unit = SensorRun.__new__(SensorRun)
+    unit.recorder = SimpleNamespace(not_recorded=2223072)  # type: ignore[assignment]
+    acc = Account(delivered=4492800, lost_by_reason={"chip reset": 24})
+    got = unit._account("recorder", acc)
+    assert got == {"delivered": 2269728, "lost": 2223096,
+                   "lost_by_reason": {"chip reset": 24, NOT_RECORDED: 2223072}}
+    assert unit._account("engine", acc) == {"delivered": 4492800, "lost": 24,
+                                            "lost_by_reason": {"chip reset": 24}}

@@ -320,9 +320,9 @@ def _load_native(path: Path, opts: InputOptions) -> Recording:
         if opts.rate_hz is not None:
             meta["odr_hz"] = opts.rate_hz
         if reader.end is None:  # a killed writer, or one still writing
-            log.warning("%s: no end record: the writer did not close this file (killed, or "
-                        "still recording); read %d samples, what came after the last whole "
-                        "record is not in it", path, len(b))
+            log.warning("%s: no end record: the writer did not close this file (killed, "
+                        "its disk full, or still recording); read %d samples, what came "
+                        "after the last whole record is not in it", path, len(b))
         return Recording(path, meta, b.index, b.t_s, b.values, b.temp_c, b.raw,
                          reader.gaps, reader.damage, reader.end is not None)
 
