@@ -211,7 +211,9 @@ class SensorRun:
         saved = dt.datetime.fromtimestamp(saved_at, dt.UTC).isoformat(timespec="seconds")
         self.say(f"resumed Allan state from {state} ({self.resumed_samples} samples, saved "
                  f"{saved}, {pause_s:.0f} s ago): the runs are kept apart by a gap; samples "
-                 "taken after that save and before this start are not in it")
+                 "taken after that save and before this start (up to "
+                 f"{pause_s * eng.nominal_rate_hz:.0f}, if the last run went on until now; "
+                 "its recording holds them) are not in it")
 
     async def save_state(self) -> None:
         """Write the engine state to ``allan.state_path`` (atomically), when configured;
@@ -225,8 +227,12 @@ class SensorRun:
         def write() -> None:
             state.parent.mkdir(parents=True, exist_ok=True)
             tmp = state.with_suffix(state.suffix + ".tmp")
-            tmp.write_bytes(blob)
-            tmp.replace(state)
+            try:
+                tmp.write_bytes(blob)
+                tmp.replace(state)
+            except OSError:  # a full disk left an empty .tmp beside the state
+                tmp.unlink(missing_ok=True)
+                raise
 
         await asyncio.to_thread(write)
 
