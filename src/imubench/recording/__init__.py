@@ -195,17 +195,29 @@ def measured_rate(index: np.ndarray, t_s: np.ndarray, nominal_hz: float) -> floa
     apart, so a host's read jitter weighs little, and robust to the first seconds,
     stamped at the nominal rate before the tick period is first measured (a least-squares
     slope took 108.03 Hz from those for 107.90)."""
+    rate = _stamps_rate(index, t_s)
+    if rate is None:
+        return None
+    off = abs(rate / nominal_hz - 1.0)
+    return rate if MEASURED_RATE_TOLERANCE < off <= GIVEN_RATE_TOLERANCE else None
+
+
+def _stamps_rate(index: np.ndarray, t_s: np.ndarray, strict: bool = False) -> float | None:
+    """The median over k of ``(index[k + n/2] - index[k]) / (t[k + n/2] - t[k])`` (see
+    :func:`measured_rate`); None over less than :data:`MEASURED_RATE_MIN_SPAN_S`, where
+    those spans do not all increase, or (``strict``) where two stamps repeat (rounded
+    coarser than a period: the stamps have no rate of their own)."""
     ok = np.isfinite(t_s)
     i, t = index[ok].astype(np.float64), t_s[ok]
     h = len(t) // 2
     if h < 1 or t[-1] - t[0] < MEASURED_RATE_MIN_SPAN_S:
         return None
+    if strict and not np.all(np.diff(t) > 0):
+        return None
     dt = t[h:] - t[: len(t) - h]
     if not np.all(dt > 0):
         return None
-    rate = float(np.median((i[h:] - i[: len(t) - h]) / dt))
-    off = abs(rate / nominal_hz - 1.0)
-    return rate if MEASURED_RATE_TOLERANCE < off <= GIVEN_RATE_TOLERANCE else None
+    return float(np.median((i[h:] - i[: len(t) - h]) / dt))
 
 
 GIVEN_RATE_TOLERANCE = 0.1
@@ -219,14 +231,8 @@ def _check_given_rate(rec: Recording, given_hz: float, where: str) -> None:
     :data:`GIVEN_RATE_TOLERANCE`: ``--rate 52`` on imubench's own 104 Hz files was taken
     without a word, every tau twice as long, and ``convert --rate`` wrote it into the
     copy's header for good (a foreign CSV's time column was already checked)."""
-    ok = np.isfinite(rec.t_s)
-    i, t = rec.index[ok].astype(np.float64), rec.t_s[ok]
-    h = len(t) // 2
-    if h < 1 or t[-1] - t[0] < MEASURED_RATE_MIN_SPAN_S or not np.all(np.diff(t) > 0):
-        return  # too short, or stamps rounded coarser than a period: no rate of their own
-    dt = t[h:] - t[: len(t) - h]
-    own = float(np.median((i[h:] - i[: len(t) - h]) / dt))
-    if abs(given_hz / own - 1.0) > GIVEN_RATE_TOLERANCE:
+    own = _stamps_rate(rec.index, rec.t_s, strict=True)
+    if own is not None and abs(given_hz / own - 1.0) > GIVEN_RATE_TOLERANCE:
         raise RecordingError(
             f"{where}: --rate {given_hz:g} Hz contradicts the recording's time stamps, which "
             f"give {own:.6g} Hz; drop --rate to read it at its own rate")
