@@ -85,6 +85,9 @@ def test_quickstart_daemon_end_to_end(tmp_path: Path) -> None:
         stamps = [time.mktime(time.strptime(s["time"][:19], "%Y-%m-%dT%H:%M:%S")) for s in snaps]
         assert stamps[-1] - stamps[0] <= 4.0  # at least one per second
         assert snaps[-1]["samples"] > snaps[0]["samples"]
+        for s in snaps:  # the samples the deviations are computed on: N - 1 terms at m = 1
+            # (it was read at the publish tick, after the snapshot was made)
+            assert s["channels"]["gx"]["n"][0] == s["samples"] - 1, s["samples"]
         recs = list((tmp_path / "recordings").glob("*.imbr"))
         assert len(recs) == 1
         size1 = recs[0].stat().st_size

@@ -68,6 +68,11 @@ class AllanConsumer(Consumer):
         self._lock = threading.Lock()
         self.temperature_c: float | None = None
         """The die temperature of the latest sample that has one, degC."""
+        self.samples_fed = 0
+        """Samples (not gap rows) given to the engine in this run."""
+        self.samples_at_snapshot = 0
+        """:attr:`samples_fed` when the latest snapshot was made (the payload's count of
+        the samples its deviations are computed on)."""
         self.leading_gap_rows = 0
         """Gap rows put before the first sample (an engine resumed from a saved state: the
         time between the runs, so that no estimate joins them as if continuous)."""
@@ -96,6 +101,7 @@ class AllanConsumer(Consumer):
         rate = self.measured_rate() if self.measured_rate is not None else None
         if rate is not None:
             engine.set_rate(rate)
+        self.samples_at_snapshot = self.samples_fed
         return engine.snapshot()
 
     def _request(self, what: Callable[[StreamingAllan], Any]
@@ -163,6 +169,7 @@ class AllanConsumer(Consumer):
                 engine.update(src[lo:hi], gaps=np.isnan(batch.values[lo:hi]))
             else:
                 engine.update(src[lo:hi])
+            self.samples_fed += hi - lo
             self._last_index = int(idx[hi - 1])
         self._serve()
 
