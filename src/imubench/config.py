@@ -561,7 +561,9 @@ class BufferConfig(_Section):
 
 class RunConfig(_Section):
     duration_s: float | None = Field(
-        None, gt=0, description="Stop after this much data (unit: s); unset = until signalled"
+        None, gt=0, description="Stop after this much data: duration_s x the nominal ODR "
+        "samples, so a chip whose clock runs fast gets there sooner (unit: s); unset = until "
+        "signalled",
     )
 
 
