@@ -57,12 +57,13 @@ def per_channel(snap: Snapshot) -> list[Mapping[str, Any]]:
     return snap
 
 
-def _changed_settings(saved: StreamingAllan, fresh: StreamingAllan,
-                      use_raw: bool) -> list[str]:
+def _changed_settings(saved: StreamingAllan, fresh: StreamingAllan, use_raw: bool,
+                      scale: list[float] | None) -> list[str]:
     """What differs between a saved engine and the one this run would start: the rate,
     the statistics, the memory mode, the averaging factors (taus, max_tau_s), and the
     input's kind and scale (raw counts at a sensitivity, or values: a full scale or a
-    calibration changed). A state was resumed when the rate and the statistics matched:
+    calibration changed; ``scale``: this run's unit per count, None for values). A state
+    was resumed when the rate and the statistics matched:
     after a restart at 2000 dps instead of 250 the new counts were scaled at the old
     sensitivity (live OADEV 32 % low, the interval excluding the truth), a bounded state
     ran on under memory = "exact", and a state of raw counts fed calibrated values
@@ -78,13 +79,13 @@ def _changed_settings(saved: StreamingAllan, fresh: StreamingAllan,
         out.append(f"taus up to {saved.max_m / saved.nominal_rate_hz:g} s on "
                    f"{len(saved.ms)} factors, now {fresh.max_m / fresh.nominal_rate_hz:g} s "
                    f"on {len(fresh.ms)}")
-    kind = "raw counts" if use_raw else "values"
     if saved.input_is_integer is not None and saved.input_is_integer != use_raw:
         out.append(f"input {'raw counts' if saved.input_is_integer else 'values'}, "
-                   f"now {kind} (a calibration was added or removed)")
+                   f"now {'raw counts' if use_raw else 'values'} (a calibration was added "
+                   "or removed)")
     elif saved.channel_scale is not None:
-        new_scale = np.broadcast_to(np.asarray(fresh.scale_arg if fresh.scale_arg is not None
-                                               else 1.0, float), saved.channel_scale.shape)
+        new_scale = np.broadcast_to(np.asarray(1.0 if scale is None else scale, float),
+                                    saved.channel_scale.shape)
         if not np.allclose(saved.channel_scale, new_scale, rtol=1e-9):
             out.append("sensitivity per count "
                        f"{', '.join(f'{v:g}' for v in saved.channel_scale[[0, 3]])}, now "
@@ -185,7 +186,7 @@ class SensorRun:
             try:
                 saved_at = state.stat().st_mtime
                 eng = StreamingAllan.load_state(state.read_bytes())
-                changed = _changed_settings(eng, fresh, use_raw)
+                changed = _changed_settings(eng, fresh, use_raw, scale)
                 if not changed:
                     self._resume(eng, state, saved_at)
                     return eng

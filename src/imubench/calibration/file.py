@@ -207,8 +207,7 @@ class Calibration:
                     f"{self._where()}: [{name}] was made at full scale {sc.full_scale:g} "
                     f"{sc.unit}; {where} is at {fs:g} {sc.unit} (offset and gains belong "
                     "to the range they were measured at)")
-            if temp_c is not None and sc.temp_range_c is not None and np.any(
-                    sc.outside_sweep(temp_c)):
+            if temp_c is not None and np.any(sc.outside_sweep(temp_c)):
                 t = np.asarray(temp_c, dtype=np.float64)
                 warnings.append(self.extrapolation_warning(
                     name, float(np.nanmin(t)), float(np.nanmax(t)), where))

@@ -153,17 +153,16 @@ def polynomial(temps_c: np.ndarray, means: np.ndarray, stderr: np.ndarray, temp_
     # Birge ratio: where the points scatter more than their standard errors say (the
     # bias wanders between chamber points: flicker, random walk), the coefficients'
     # standard errors grow by sqrt(chi2 / dof); never shrunk below the noise's
-    scaled = [f.dof > 0 and f.chi2 > f.dof for f in fits]
-    birge = np.array([np.sqrt(f.chi2 / f.dof) if up else 1.0 for f, up in zip(fits, scaled,
-                                                                             strict=True)])
-    err = np.array([f.stderr for f in fits]) * birge[:, None]
+    dof = np.array([float(f.dof) for f in fits])
+    ratio = np.array([f.chi2 / f.dof if f.dof > 0 else 1.0 for f in fits])
+    scaled = ratio > 1.0
+    err = np.array([f.stderr for f in fits]) * np.sqrt(np.where(scaled, ratio, 1.0))[:, None]
     zero = np.zeros(3)
     return TemperatureFit(
         "polynomial", float(temp_ref_c), par[:, 0], par[:, 1],
         par[:, 2] if degree == 2 else zero, err[:, 1], err[:, 2] if degree == 2 else zero,
         float(sum(f.chi2 for f in fits)), int(sum(f.dof for f in fits)),
-        np.array([float(f.dof) if up else math.inf for f, up in zip(fits, scaled,
-                                                                     strict=True)]),
+        np.where(scaled, dof, math.inf),
         None if times_s is None else par[:, -1],
     )
 

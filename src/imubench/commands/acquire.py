@@ -11,9 +11,9 @@ error shows here), ``elapsed_s``, ``expected_samples``, ``lost_by_reason``) plus
 ``duration_s`` (source seconds elapsed), ``produced`` and what the recording holds
 (``recorded``, ``recording_lost``); with ``--calibration``, ``calibration_extrapolated``:
 the samples whose die temperature lay outside the calibration's sweep (a warning says
-when it leaves and re-enters it). After Ctrl-C or SIGTERM the counters of what was kept
-are still written, with ``"interrupted": true``. Ctrl-C stops the acquisition and keeps, closed and
-readable, everything recorded so far.
+when it leaves and re-enters it). Ctrl-C or SIGTERM stops the acquisition and keeps,
+closed and readable, everything recorded so far; the counters of it are still written,
+with ``"interrupted": true``.
 """
 
 from __future__ import annotations

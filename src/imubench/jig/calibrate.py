@@ -107,14 +107,11 @@ class SweepData:
     fits: dict[str, tcal.TemperatureFit] = field(default_factory=dict)
 
 
-def _drift_times(sweep: list[TemperaturePoint]) -> np.ndarray | None:
-    """The points' times (s) for the polynomial's drift term, where the sweep revisits a
-    set point (which measures the drift) and keeps a degree of freedom beside the four
-    parameters; None otherwise."""
+def _drift_measured(sweep: list[TemperaturePoint]) -> bool:
+    """Whether the polynomial can take a drift term: the sweep revisits a set point (which
+    measures the drift) and keeps a degree of freedom beside the four parameters."""
     sets = [p.set_point_c for p in sweep]
-    if len(set(sets)) == len(sets) or len(sweep) < 5:
-        return None
-    return np.array([p.time_s for p in sweep])
+    return len(set(sets)) < len(sets) and len(sweep) >= 5
 
 
 def temperature_fits(proc: Procedures, cols: slice) -> SweepData:
@@ -127,7 +124,8 @@ def temperature_fits(proc: Procedures, cols: slice) -> SweepData:
     static = proc.static()
     temps = np.array([p.die_temp_c for p in sweep])
     off = np.array([p.offsets(cols)[0] for p in sweep])
-    spacing = float(np.median(np.diff([p.time_s for p in sweep]))) if len(sweep) > 1 else 0.0
+    times = np.array([p.time_s for p in sweep])
+    spacing = float(np.median(np.diff(times))) if len(sweep) > 1 else 0.0
     se = np.sqrt(pooled(np.array([p.offsets(cols)[1] for p in sweep])) ** 2
                  + bias_wander(static, cols, spacing))
     # the three-point procedures use the sweep points at the ambient, hot and cold set
@@ -141,7 +139,7 @@ def temperature_fits(proc: Procedures, cols: slice) -> SweepData:
         "three-point-note": tcal.three_point_note(t3, y3, t3[0], t3[1], t3[2]),
         "three-point-exact": tcal.three_point_exact(t3, y3, t3[0], t3[1], t3[2]),
         "polynomial": tcal.polynomial(temps, off, se, static.die_temp_c, degree=2,
-                                      times_s=_drift_times(sweep)),
+                                      times_s=times if _drift_measured(sweep) else None),
     }
     return SweepData(temps, off, se, fits)
 

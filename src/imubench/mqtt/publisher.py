@@ -275,9 +275,7 @@ class MqttPublisher:
         if self.max_payload_bytes is not None and len(data) > self.max_payload_bytes:
             # the broker would drop the connection on every attempt: nothing would pass
             self.oversize_snapshots += 1
-            self.dropped_by_sensor[name] += 1
-            self.dropped_snapshots += 1
-            self._status_dirty.add(name)
+            self._drop(name)
             if self.oversize_snapshots >= 2 * self._oversize_logged:  # 1, 2, 4, 8, ...
                 self._oversize_logged = self.oversize_snapshots
                 log.error("%s: snapshot of %d bytes exceeds the broker's packet limit (%d "
@@ -295,6 +293,12 @@ class MqttPublisher:
         """Snapshots handed to ``publish_allan`` so far, all sensors."""
         return sum(self._seq.values())
 
+    def _drop(self, name: str) -> None:
+        """Count one snapshot of sensor ``name`` not sent (its retained status says so)."""
+        self.dropped_by_sensor[name] += 1
+        self.dropped_snapshots += 1
+        self._status_dirty.add(name)
+
     def _trim_backlog(self) -> None:
         dropped = 0
         while len(self._buffer) > self._buffer_max:
@@ -304,18 +308,15 @@ class MqttPublisher:
                 self._buffer.appendleft(head)
             else:
                 name, _ = self._buffer.popleft()
-            self.dropped_by_sensor[name] += 1
-            self._status_dirty.add(name)
+            self._drop(name)
             dropped += 1
-        if dropped:
-            self.dropped_snapshots += dropped
-            if self.dropped_snapshots >= 2 * self._drops_logged:  # log at 1, 2, 4, 8, ...
-                self._drops_logged = self.dropped_snapshots
-                log.warning(
-                    "MQTT backlog full (%d snapshots): dropped the oldest, %d dropped so far",
-                    self._buffer_max,
-                    self.dropped_snapshots,
-                )
+        if dropped and self.dropped_snapshots >= 2 * self._drops_logged:  # 1, 2, 4, 8, ...
+            self._drops_logged = self.dropped_snapshots
+            log.warning(
+                "MQTT backlog full (%d snapshots): dropped the oldest, %d dropped so far",
+                self._buffer_max,
+                self.dropped_snapshots,
+            )
 
     async def publish_status(self, detail: Mapping[str, Any] | None = None,
                              sensor: str | None = None) -> None:

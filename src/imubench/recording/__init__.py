@@ -412,11 +412,10 @@ def _check_room_for_hdf5(rec: Recording, dst: Path) -> None:
     deliberately on the safe side."""
     import shutil
 
-    parent = dst.parent if str(dst.parent) else Path(".")
-    if not parent.is_dir():
+    if not dst.parent.is_dir():
         return  # the writer names the missing directory
     need = len(rec) * HDF5_BYTES_PER_SAMPLE + (1 << 20)
-    free = shutil.disk_usage(parent).free
+    free = shutil.disk_usage(dst.parent).free
     if free < need:
         raise RecordingError(
             f"{dst}: {free / 1e6:.1f} MB free on its disk, {need / 1e6:.1f} MB needed for "

@@ -83,10 +83,11 @@ def write_stable32(rec: Recording, channel: str, path: str | Path) -> str:
         meta["damage"] = rec.damage
     start = _start_mjd(rec.metadata.get("start_utc"))
     first = int(rec.index[0]) if len(rec) else 0
-    if start is not None:  # the time of the first line (a reader starts there)
-        meta["start_utc"] = (iso_utc((start - MJD_OF_UNIX_EPOCH) * SECONDS_PER_DAY
-                                     + first / rate) if first else None
-                             ) or rec.metadata["start_utc"]
+    if start is not None:
+        meta["start_utc"] = rec.metadata["start_utc"]
+        if first:  # the time of the first line (a reader starts there)
+            meta["start_utc"] = iso_utc((start - MJD_OF_UNIX_EPOCH) * SECONDS_PER_DAY
+                                        + first / rate) or meta["start_utc"]
     layout = "one value per line"
     if lost:
         layout = "MJD time tag (days) and value per line; lost samples have no line"

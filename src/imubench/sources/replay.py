@@ -75,8 +75,7 @@ class ReplaySource(Source):
     def elapsed_s(self) -> float:
         """Recording seconds of the samples replayed so far."""
         rec = self.recording
-        done = min(self._pos, len(rec))  # the last batch may be short
-        return float(rec.t_s[done - 1] - rec.t_s[0]) if done > 0 else 0.0
+        return float(rec.t_s[self._pos - 1] - rec.t_s[0]) if self._pos > 0 else 0.0
 
     def _open(self) -> None:
         self._pos = 0
@@ -97,8 +96,8 @@ class ReplaySource(Source):
             rest = self._take_gaps(None)  # the recording ended in a gap
             return Batch.empty(with_raw=rec.raw is not None, gaps=rest) if rest else None
         n = max(1, round(self.batch_s * rec.rate_hz))
-        sl = slice(self._pos, self._pos + n)
-        self._pos += n
+        sl = slice(self._pos, min(self._pos + n, len(rec)))  # the last batch may be short
+        self._pos = sl.stop
         index = rec.index[sl]
         batch = Batch(index, rec.t_s[sl], rec.values[sl], rec.temp_c[sl],
                       None if rec.raw is None else rec.raw[sl],

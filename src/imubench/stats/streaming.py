@@ -459,11 +459,6 @@ class StreamingAllan:
         return self.scale if self._nch is not None else None
 
     @property
-    def scale_arg(self) -> float | Sequence[float] | None:
-        """The ``scale`` the engine was made with (None: 1 for every channel)."""
-        return self._scale_arg
-
-    @property
     def n_samples(self) -> int:
         """Samples (rows) given to update() so far."""
         return self._n_proc + self._inbox_rows if self._nch is not None else 0
