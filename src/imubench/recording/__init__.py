@@ -306,13 +306,7 @@ def _load(path: Path, kind: str, opts: InputOptions) -> tuple[Recording, str, bo
 
 def _load_native(path: Path, opts: InputOptions) -> Recording:
     with NativeReader(path) as reader:
-        batches = list(reader.batches())
-        if batches:
-            b = Batch.concat(batches)
-        else:
-            empty = np.zeros(0)
-            b = Batch(np.zeros(0, np.int64), empty, np.zeros((0, 6)), empty,
-                      np.zeros((0, 6), np.int16) if reader.storage == STORAGE_RAW else None)
+        b = reader.read_all()
         meta = dict(reader.metadata)
         cal = meta.get("calibration")
         if reader.storage == STORAGE_RAW and isinstance(cal, dict) and cal.get("applied"):

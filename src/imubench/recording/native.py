@@ -323,6 +323,31 @@ class NativeReader:
                 self.damaged.append(f"{problem}; resumed at byte {nxt}")
                 fh.seek(nxt)
 
+    def read_all(self) -> Batch:
+        """Every data record (:meth:`batches`) as one Batch. The arrays are sized once
+        from the file's length (no record holds more samples than its bytes allow) and
+        filled in place: a long recording takes its arrays' memory once, where a list of
+        batches and their join took it twice."""
+        width = 2 if self.storage == STORAGE_RAW else 8
+        cap = os.fstat(self._fh.fileno()).st_size // (8 + 8 + 4 + 6 * width)
+        index = np.empty(cap, np.int64)
+        t_s = np.empty(cap)
+        temp = np.empty(cap)
+        values = np.empty((cap, 6))
+        raw = np.empty((cap, 6), np.int16) if self.storage == STORAGE_RAW else None
+        n = 0
+        for b in self.batches():
+            k = len(b)
+            index[n:n + k] = b.index
+            t_s[n:n + k] = b.t_s
+            temp[n:n + k] = b.temp_c
+            values[n:n + k] = b.values
+            if raw is not None:
+                raw[n:n + k] = b.raw
+            n += k
+        return Batch(index[:n], t_s[:n], values[:n], temp[:n],
+                     None if raw is None else raw[:n])
+
     def _out_of_order(self, batch: Batch, offset: int) -> str | None:
         """Why a data record that passed its CRC is still not taken: its sample indices
         do not increase, or do not follow the last record taken (a record written twice,
