@@ -46,7 +46,7 @@ import numpy as np
 
 from imubench.batch import UNEXPLAINED
 from imubench.commands.acquire import record_uri
-from imubench.recorder import segment_path
+from imubench.errors import RecordingError
 from imubench.recording import load_recording
 
 REPO = Path(__file__).resolve().parents[1]
@@ -212,20 +212,21 @@ def disk_full(repeats: int) -> Row:
             row.tracebacks += "Traceback" in out
             m = re.search(r"stopped after (\d+) samples produced", out)
             produced = int(m[1]) if m else 0
-            base = disk / "bench1_imu0.imbr"
-            segs = [base] + [segment_path(base, k) for k in range(2, 20)
-                             if segment_path(base, k).exists()]
-            recs = [load_recording(p) for p in segs]
-            got = sum(len(r) for r in recs)
-            lost = sum(g.lost for r in recs for g in r.gaps)
-            idx = np.concatenate([r.index for r in recs])
+            # the first segment reads with the ones after it (their indices must increase)
+            try:
+                rec = load_recording(disk / "bench1_imu0.imbr")
+            except RecordingError as exc:  # e.g. a segment repeating samples
+                row.unaccounted += produced
+                row.note = str(exc)
+                continue
+            got = len(rec)
+            lost = sum(g.lost for g in rec.gaps)
             row.delivered += got
             row.lost += lost
             row.unaccounted += produced - got - lost
-            row.duplicated += len(idx) - len(np.unique(idx))
-            damaged = sum(r.damage is not None for r in recs)
-            row.note = (f"{len(segs)} segments in the last run; "
-                        f"{damaged} segment(s) with a partial record")
+            row.duplicated += len(rec.index) - len(np.unique(rec.index))
+            row.note = (f"{len(rec.metadata.get('segments', [1]))} segments in the last "
+                        f"run; damage: {rec.damage or 'none'}")
         finally:
             subprocess.run(["umount", "-l", str(disk)], capture_output=True)
             shutil.rmtree(tmp, ignore_errors=True)

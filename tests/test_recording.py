@@ -12,7 +12,7 @@ import pytest
 from imubench.batch import Batch, Gap
 from imubench.cli import main
 from imubench.errors import RecordingError
-from imubench.recording import InputOptions, load_recording, open_writer
+from imubench.recording import InputOptions, load_recording, open_writer, segment_path
 
 SENS = np.array([8.75e-3] * 3 + [0.061e-3] * 3)
 
@@ -881,3 +881,42 @@ def test_a_convert_to_hdf5_is_refused_before_it_can_fill_the_disk(
     monkeypatch.setattr(shutil, "disk_usage", real)
     convert(rec, tmp_path / "r.h5")
     assert len(load_recording(tmp_path / "r.h5")) == len(load_recording(rec))
+
+
+@pytest.mark.parametrize("suffix", [".imbr", ".csv"])
+def test_a_recording_in_segments_reads_whole_from_its_first_file(
+        tmp_path: Path, suffix: str, caplog: pytest.LogCaptureFixture) -> None:
+    """A recorder that met a full disk goes on in ``NAME.part2.SUFFIX`` (its header names
+    the segment before it, and its gap records the samples not recorded): reading
+    ``NAME.SUFFIX`` gives every segment, ``NAME.part2.SUFFIX`` that segment alone, and a
+    file of that name that does not continue it is not joined."""
+    batches = make_batches(n=1024, lost=0)
+    first, second = Batch.concat(batches[:4]), Batch.concat(batches[4:])
+    base = tmp_path / f"run{suffix}"
+    part2 = segment_path(base, 2)
+    assert part2.name == f"run.part2{suffix}"
+    with open_writer(base, meta(storage="raw_int16")) as w:
+        w.write(first)
+    later = Batch(second.index + 300, second.t_s + 300 / 104.0, second.values,
+                  second.temp_c, second.raw, (Gap(512 + 300, 300, "disk full: not recorded"),))
+    with open_writer(part2, meta(storage="raw_int16", segment=2,
+                                 previous_segment=str(base))) as w:
+        w.write(later)
+    with caplog.at_level("INFO"):
+        rec = load_recording(base)
+    assert "read with its 1 later segment(s): run.part2" in caplog.text
+    assert len(rec) == 1024 and rec.lost_samples == 300
+    assert rec.metadata["segments"] == [base.name, part2.name]
+    np.testing.assert_array_equal(rec.index, np.r_[first.index, later.index])
+    np.testing.assert_allclose(rec.values, np.r_[first.values, later.values], rtol=1e-6)
+    gx = rec.channel("gx")
+    assert len(gx) == 1324 and np.isnan(gx[512:812]).all()
+    alone = load_recording(part2)
+    assert len(alone) == 512 and "segments" not in alone.metadata
+    other = tmp_path / f"other{suffix}"
+    with open_writer(other, meta(storage="raw_int16")) as w:
+        w.write(first)
+    part2.rename(segment_path(other, 2))
+    with caplog.at_level("WARNING"):
+        assert len(load_recording(other)) == 512
+    assert "not read as a segment of" in caplog.text

@@ -36,6 +36,7 @@ from imubench.recording import (
     Writer,
     open_writer,
     recording_kind,
+    segment_path,
 )
 from imubench.sources.base import SourceInfo
 
@@ -43,22 +44,9 @@ log = logging.getLogger(__name__)
 
 NOT_RECORDED = "disk full: not recorded"
 """Gap reason of the samples taken while no segment could be written."""
-SUFFIXES = (".csv.gz", ".imbr", ".csv")
 LIVE_KINDS = ("native", "csv")
 """Recording kinds a live acquisition writes: crash-safe, batch by batch (an HDF5 file
 cut by a crash is refused whole, so HDF5 is for ``convert`` only)."""
-
-
-def segment_path(path: Path, segment: int) -> Path:
-    """``NAME.partN.SUFFIX`` for segment ``N`` >= 2 (segment 1 is ``path`` itself)."""
-    if segment <= 1:
-        return path
-    name = path.name
-    for suffix in SUFFIXES:
-        if name.lower().endswith(suffix):
-            stem = name[: -len(suffix)]
-            return path.with_name(f"{stem}.part{segment}{name[len(stem):]}")
-    return path.with_name(f"{name}.part{segment}")
 
 
 class Recorder(Consumer):

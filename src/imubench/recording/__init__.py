@@ -40,7 +40,7 @@ from imubench.recording.textin import read_text
 __all__ = [
     "STABLE32_SUFFIX", "STORAGE_FLOAT", "STORAGE_RAW", "Converted", "CsvWriter", "Gap",
     "Hdf5Writer", "InputOptions", "NativeReader", "NativeWriter", "Recording", "convert",
-    "load_recording", "open_writer", "recording_kind", "writer_kind",
+    "load_recording", "open_writer", "recording_kind", "segment_path", "writer_kind",
 ]
 
 log = logging.getLogger(__name__)
@@ -165,6 +165,23 @@ class Recording:
         return Batch(self.index, self.t_s, self.values, self.temp_c, self.raw)
 
 
+SEGMENT_SUFFIXES = (".csv.gz", ".imbr", ".csv")
+"""Suffixes of the recordings a live acquisition writes in segments."""
+
+
+def segment_path(path: Path, segment: int) -> Path:
+    """``NAME.partN.SUFFIX`` for segment ``N`` >= 2 (segment 1 is ``path`` itself): where
+    the recorder goes on after a full disk (:mod:`imubench.recorder`)."""
+    if segment <= 1:
+        return path
+    name = path.name
+    for suffix in SEGMENT_SUFFIXES:
+        if name.lower().endswith(suffix):
+            stem = name[: -len(suffix)]
+            return path.with_name(f"{stem}.part{segment}{name[len(stem):]}")
+    return path.with_name(f"{name}.part{segment}")
+
+
 MEASURED_RATE_MIN_SPAN_S = 10.0
 """Shortest span of time stamps the sample rate is measured from, s."""
 MEASURED_RATE_TOLERANCE = 1e-4
@@ -262,7 +279,10 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
     """
     path = Path(path)
     opts = options or InputOptions()
-    rec, where, stated = _load(path, recording_kind(path), opts)
+    kind = recording_kind(path)
+    rec, where, stated = _load(path, kind, opts)
+    if "segment" not in rec.metadata:
+        rec = _with_segments(rec, kind, opts)
     if opts.rate_hz is not None:
         _check_given_rate(rec, opts.rate_hz, str(path))
     if rec.damage:
@@ -271,6 +291,43 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
     # a converted recording's header may carry one: it is measured again, or --rate rules
     rec.metadata.pop("measured_odr_hz", None)
     return _with_measured_rate(rec) if stated and opts.rate_hz is None else rec
+
+
+def _with_segments(first: Recording, kind: str, opts: InputOptions) -> Recording:
+    """``first`` joined with the segments that continue it (``NAME.part2.imbr``, ...:
+    :func:`segment_path`, each header's ``previous_segment`` naming the one before), as
+    one recording: a recorder that met a full disk went on in a new segment, and the
+    segments with their gap records hold every sample of the run. Reading ``NAME.imbr``
+    alone gave the first segment's samples as the whole run, without a word. A later
+    segment given by its own name is read alone."""
+    parts = [first]
+    while (nxt := segment_path(first.path, len(parts) + 1)).exists():
+        rec = _load(nxt, kind, opts)[0]
+        previous = Path(str(rec.metadata.get("previous_segment") or "")).name
+        if previous != parts[-1].path.name:
+            log.warning("%s: not read as a segment of %s: its header names %r as the "
+                        "segment before it", nxt, first.path, previous or None)
+            break
+        if len(rec) and len(parts[-1]) and rec.index[0] <= parts[-1].index[-1]:
+            raise RecordingError(
+                f"{nxt}: its first sample {int(rec.index[0])} does not follow "
+                f"{parts[-1].path.name}'s last {int(parts[-1].index[-1])}")
+        parts.append(rec)
+    if len(parts) == 1:
+        return first
+    log.info("%s: read with its %d later segment(s): %s", first.path, len(parts) - 1,
+             ", ".join(p.path.name for p in parts[1:]))
+    raws = [p.raw for p in parts]
+    damage = "; ".join(f"{p.path.name}: {p.damage}" for p in parts if p.damage)
+    meta = {**first.metadata, "segments": [p.path.name for p in parts]}
+    return Recording(
+        first.path, meta,
+        np.concatenate([p.index for p in parts]),
+        np.concatenate([p.t_s for p in parts]),
+        np.concatenate([p.values for p in parts]),
+        np.concatenate([p.temp_c for p in parts]),
+        None if any(r is None for r in raws) else np.concatenate(raws),  # type: ignore[arg-type]
+        [g for p in parts for g in p.gaps], damage or None, parts[-1].complete)
 
 
 def _load(path: Path, kind: str, opts: InputOptions) -> tuple[Recording, str, bool]:

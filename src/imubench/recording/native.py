@@ -342,7 +342,7 @@ class NativeReader:
             t_s[n:n + k] = b.t_s
             temp[n:n + k] = b.temp_c
             values[n:n + k] = b.values
-            if raw is not None:
+            if raw is not None and b.raw is not None:  # every record holds counts
                 raw[n:n + k] = b.raw
             n += k
         return Batch(index[:n], t_s[:n], values[:n], temp[:n],
