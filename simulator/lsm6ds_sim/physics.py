@@ -248,7 +248,7 @@ class SensorPhysics:
         self._const_key: tuple[bytes, bytes] | None = None
         self._thermal: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._thermal_key: tuple[bytes, bytes] | None = None
-        self._buf = np.empty((0, 6))
+        self._buf = np.empty((0, 0))
         self._buf_pos = 0
         self._buf_dt: float | None = None
 
@@ -294,39 +294,52 @@ class SensorPhysics:
         return self._t_base_s + (self.samples_generated - self._k_base) * self._dt_s
 
     # ----------------------------------------------------------------- generation
-    def _take_noise(self, n: int, dt_s: float) -> np.ndarray | None:
-        """Noise of the next n samples, served from blocks of at least ``noise_block``.
+    def _take_noise(self, n: int, dt_s: float) -> tuple[list[int], np.ndarray] | None:
+        """Noise of the next n samples, served from blocks of at least ``noise_block``:
+        the channel columns (indices into :data:`CHANNELS`) that have noise terms and an
+        (n, len(columns)) array, or None when no channel has any.
 
         Each term is a fixed function of the sample index (for a constant dt_s), so
         serving it from look-ahead blocks gives the same values as generating it per call,
         while the per-call cost of many small calls (a FIFO read loop) stays low. When
         dt_s changes, the unused look-ahead is discarded: the continuation is deterministic
-        but skips those samples' random draws.
+        but skips those samples' random draws. Only the noisy channels are held (the gap
+        diagnosis realises one channel of six: a (n, 6) buffer of zeros cost it a fifth of
+        its time).
         """
         assert self._noise is not None
-        if not any(cn.terms for cn in self._noise.values()):
+        noisy = [(CHANNELS.index(ch), cn) for ch, cn in self._noise.items() if cn.terms]
+        if not noisy:
             return None
+        cols = [i for i, _ in noisy]
         if self._buf_dt != dt_s:
-            self._buf = np.empty((0, 6))
+            self._buf = np.empty((0, len(cols)))
             self._buf_pos = 0
             self._buf_dt = dt_s
-        out = np.empty((n, 6))
+        if self._buf_pos >= len(self._buf) and n >= self.noise_block:
+            # the next block would be exactly these n samples: served without a copy
+            first = self.samples_generated
+            t = self._t_base_s + (np.arange(first, first + n) - self._k_base) * dt_s
+            out = np.empty((n, len(cols)))
+            for j, (_, cn) in enumerate(noisy):
+                out[:, j] = cn.generate(n, dt_s, t)
+            return cols, out
+        out = np.empty((n, len(cols)))
         done = 0
         while done < n:
             if self._buf_pos >= len(self._buf):
                 k = max(self.noise_block, n - done)
                 first = self.samples_generated + done + (len(self._buf) - self._buf_pos)
                 t = self._t_base_s + (np.arange(first, first + k) - self._k_base) * dt_s
-                buf = np.zeros((k, 6))
-                for ch, cn in self._noise.items():
-                    if cn.terms:
-                        buf[:, CHANNELS.index(ch)] = cn.generate(k, dt_s, t)
+                buf = np.empty((k, len(cols)))
+                for j, (_, cn) in enumerate(noisy):
+                    buf[:, j] = cn.generate(k, dt_s, t)
                 self._buf, self._buf_pos = buf, 0
             take = min(n - done, len(self._buf) - self._buf_pos)
             out[done : done + take] = self._buf[self._buf_pos : self._buf_pos + take]
             self._buf_pos += take
             done += take
-        return out
+        return cols, out
 
     def _times(self, n: int, dt_s: float) -> np.ndarray:
         if self._dt_s != dt_s:
@@ -374,12 +387,15 @@ class SensorPhysics:
         out = np.empty((n, 6))
         out[:] = self._constant_part()
         thermal = self._thermal_coefficients()
-        if thermal is not None:
+        if thermal is not None:  # column by column: only those with a temperature term
             ref, lin, quad = thermal
-            dT = temp[:, None] - ref
-            out += dT * (lin + dT * quad)
+            for c in np.flatnonzero((lin != 0) | (quad != 0)):
+                dT = temp - ref[c]
+                out[:, c] += dT * (lin[c] + dT * quad[c])
         if noise is not None:
-            out += noise
+            cols, values = noise
+            for j, col in enumerate(cols):
+                out[:, col] += values[:, j]
         for i, ch in enumerate(CHANNELS):
             if self.model[ch].bandwidth_hz > 0:
                 out[:, i] = self._filters[ch].apply(out[:, i], dt_s)
