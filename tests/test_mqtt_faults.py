@@ -5,22 +5,29 @@ dropped (issue 12, faults survived; the long version is ``bench/fault_mqtt.py``)
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Callable
 from pathlib import Path
 
 import mqtt_fixtures
+import pytest
 from mqtt_fixtures import MosquittoProcess, deliver_across_faults, persistent_mosquitto_config
 
 private_mosquitto = mqtt_fixtures.private_mosquitto
 
 
 def test_kill_restart_and_sigstop_lose_nothing_within_backlog(
-    private_mosquitto: Callable[..., MosquittoProcess], tmp_path: Path
+    private_mosquitto: Callable[..., MosquittoProcess], tmp_path: Path,
+    caplog: pytest.LogCaptureFixture,
 ) -> None:
     broker = private_mosquitto(persistent_mosquitto_config(tmp_path))
-    count = asyncio.run(deliver_across_faults(broker, [("kill", 2.0), ("stop", 3.0)]))
+    with caplog.at_level(logging.WARNING, logger="imubench.mqtt.publisher"):
+        count = asyncio.run(deliver_across_faults(broker, [("kill", 2.0), ("stop", 3.0)]))
     assert count.produced > 40
     assert count.connections >= 2  # reconnected after the kill
+    # each outage's warning gets its answer in the log (a journal showed only the first)
+    assert "unavailable" in caplog.text
+    assert caplog.text.count(" back after ") >= 1, caplog.text
     assert (count.received, count.dropped, count.duplicated) == (count.produced, 0, 0), count
 
 

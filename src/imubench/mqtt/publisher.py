@@ -32,6 +32,7 @@ import os
 import random
 import socket
 import ssl
+import time
 import uuid
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -400,6 +401,7 @@ class MqttPublisher:
             self._task = asyncio.current_task()  # so that close() waits for this loop
         backoff = self._reconnect_min_s
         failures = 0
+        down_since: float | None = None  # monotonic time of the first failed attempt
         while not self._closing.is_set():
             try:
                 async with self._client() as client:
@@ -409,9 +411,16 @@ class MqttPublisher:
                     self._status_dirty = set(self.sensors)
                     self._node_dirty = True
                     self._connected.set()
-                    log.info(
-                        "MQTT publisher %s connected to %s:%d", self.client_id, self.host, self.port
-                    )
+                    if down_since is None:
+                        log.info("MQTT publisher %s connected to %s:%d", self.client_id,
+                                 self.host, self.port)
+                    else:  # the warning that it was unavailable gets its answer
+                        log.warning(
+                            "MQTT broker %s:%d back after %.0f s; %d snapshots waiting, %d "
+                            "dropped so far", self.host, self.port,
+                            time.monotonic() - down_since, len(self._buffer),
+                            self.dropped_snapshots)
+                        down_since = None
                     try:
                         await self._pump(client)
                     except asyncio.CancelledError:
@@ -425,6 +434,8 @@ class MqttPublisher:
             except aiomqtt.MqttError as exc:
                 self.last_error = str(exc)
                 failures += 1
+                if down_since is None:
+                    down_since = time.monotonic()
                 wait_s = random.uniform(backoff / 2, backoff)
                 level = logging.WARNING if failures == 1 else logging.DEBUG
                 log.log(
