@@ -32,6 +32,7 @@ from scipy.special import stdtrit  # Student's t quantile stdtrit(df, p) = t.ppf
 
 from imubench import stats
 from imubench.calibration.errors import CalibrationError
+from imubench.stats.result import StatResult
 
 MIN_SAMPLES = 16
 """Fewest finite samples a capture mean is computed from."""
@@ -81,10 +82,13 @@ def capture_mean(y: np.ndarray, rate_hz: float, lsb: float, what: str) -> MeanEs
     mean = float(np.mean(y[finite]))
     duration_s = n / rate_hz
     floor_var = lsb**2 / 12.0 if float(np.std(y[finite])) < lsb else 0.0
-    m = (len(y) - 1) // 4
     se_noise, edf = 0.0, math.inf
-    if m >= 1 and float(np.ptp(y[finite])) > 0:
-        res = stats.oadev(y, rate_hz, data_type="freq", afs=[m], confidence=0.683)
+    if float(np.ptp(y[finite])) > 0:
+        res = _longest_oadev(y, rate_hz)
+        if res is None:
+            raise TooFewSamplesError(
+                f"{what}: the samples lost leave no stretch long enough for a standard "
+                f"error ({n} of {len(y)} samples)")
         adev = float(res.dev[0])
         alpha = int(res.alpha[0]) if int(res.alpha[0]) != -99 else 0
         alpha = min(0, max(-2, alpha))
@@ -95,6 +99,21 @@ def capture_mean(y: np.ndarray, rate_hz: float, lsb: float, what: str) -> MeanEs
     if stderr == 0.0:  # constant without a known LSB: nothing says how good it is
         raise CalibrationError(f"{what}: constant samples and no output resolution given")
     return MeanEstimate(mean, stderr, edf, n, duration_s)
+
+
+def _longest_oadev(y: np.ndarray, rate_hz: float) -> StatResult | None:
+    """OADEV of ``y`` at the longest averaging factor it gives a finite value at, from
+    ``m = floor((len - 1) / 4)`` down by halves (None below m = 1). Lost samples (NaN)
+    remove every term whose span holds one: a hole in the middle of a capture leaves no
+    term at m = N/4 (the standard error came out NaN, and every fit that used the capture
+    failed with "not finite"), but some at m = N/8 or N/16."""
+    m = (len(y) - 1) // 4
+    while m >= 1:
+        res = stats.oadev(y, rate_hz, data_type="freq", afs=[m], confidence=0.683)
+        if len(res) and math.isfinite(float(res.dev[0])) and float(res.dev[0]) > 0:
+            return res
+        m //= 2
+    return None
 
 
 __all__ = ["MIN_SAMPLES", "MeanEstimate", "TooFewSamplesError", "capture_mean"]
