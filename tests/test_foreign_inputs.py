@@ -17,8 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from imubench.batch import Batch
 from imubench.errors import RecordingError
-from imubench.recording import InputOptions, load_recording
+from imubench.recording import InputOptions, load_recording, open_writer
 
 CORPUS = Path(__file__).parent / "data" / "foreign"
 sys.path.insert(0, str(CORPUS))
@@ -432,3 +433,52 @@ def test_bag_stamped_once_per_burst_reads_in_order_at_the_given_rate(tmp_path: P
         load_recording(tmp_path / "b")
     rec = load_recording(tmp_path / "b", InputOptions(rate_hz=400.0, columns={"t": "-"}))
     assert len(rec) == 2000 and rec.rate_hz == 400.0 and rec.lost_samples == 0
+
+
+def _stamped(path: Path, rate_line: str, stamp_hz: float, n: int = 8000,
+             index: bool = False) -> Path:
+    rng = np.random.default_rng(4)
+    t = np.arange(n) / stamp_hz
+    y = rng.normal(0.0, 0.5, n)
+    head = "index,t,gx" if index else "t,gx"
+    rows = [f"{k},{t[k]:.6f},{y[k]:.6f}" if index else f"{t[k]:.6f},{y[k]:.6f}"
+            for k in range(n)]
+    path.write_text(f"{rate_line}\n{head}\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_a_stated_rate_is_checked_against_the_time_stamps(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``# odr_hz: 104`` over stamps 3.75 % slower (no index column) was read on the
+    104 Hz grid: rows slipped off their samples as fake holes (311 in 8000 at 100.1 Hz,
+    every ADEV from 1 s NaN) or as "damaged" lines. Within 10 % the stamps' rate is read,
+    with a warning; beyond, the file is refused (which of the two is right cannot be
+    told), with an index column too."""
+    with caplog.at_level("WARNING"):
+        rec = load_recording(_stamped(tmp_path / "a.csv", "# odr_hz: 104", 100.1))
+    assert len(rec) == 8000 and rec.lost_samples == 0 and rec.damage is None
+    assert rec.rate_hz == pytest.approx(100.1, rel=1e-6)
+    assert "states 104 Hz (# odr_hz) but its time stamps give 100.1 Hz" in caplog.text
+    with pytest.raises(RecordingError, match=r"states 200 Hz .* stamps give 100 Hz"):
+        load_recording(_stamped(tmp_path / "b.csv", "# sample_rate: 200", 100.0))
+    with pytest.raises(RecordingError, match=r"states 200 Hz but the time stamps give 100 Hz"):
+        load_recording(_stamped(tmp_path / "c.csv", "# odr_hz: 200", 100.0, index=True))
+    # stamps on the stated rate: read as before, no warning about them
+    caplog.clear()
+    rec = load_recording(_stamped(tmp_path / "d.csv", "# odr_hz: 100", 100.0))
+    assert rec.rate_hz == 100.0 and len(rec) == 8000 and "stamps give" not in caplog.text
+
+
+def test_a_chip_clock_30_percent_slow_is_measured_in_a_native_file(tmp_path: Path) -> None:
+    """imubench's own files are stamped from the chip's counter: a part 30 % slow (the
+    driver measures up to 50 %) was read at its nominal ODR, every tau 30 % long."""
+    n = 3000
+    idx = np.arange(n, dtype=np.int64)
+    raw = np.zeros((n, 6), np.int16)
+    b = Batch(idx, idx / 72.8, raw * 1.0, np.full(n, 25.0), raw)
+    path = tmp_path / "slow.imbr"
+    with open_writer(path, {"chip": "lsm6dsl", "odr_hz": 104.0, "storage": "raw_int16",
+                            "gyro_sensitivity_dps": 8.75e-3,
+                            "accel_sensitivity_g": 0.061e-3}) as w:
+        w.write(b)
+    assert load_recording(path).rate_hz == pytest.approx(72.8, rel=1e-6)

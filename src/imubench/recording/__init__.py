@@ -36,6 +36,7 @@ from imubench.recording.rosin import is_ros2_bag, read_ros
 from imubench.recording.secrets import drop_secrets
 from imubench.recording.stable32 import write_stable32
 from imubench.recording.textin import read_text
+from imubench.recording.timebase import GIVEN_RATE_TOLERANCE
 
 __all__ = [
     "STABLE32_SUFFIX", "STORAGE_FLOAT", "STORAGE_RAW", "Converted", "CsvWriter", "Gap",
@@ -200,8 +201,9 @@ def coverage_text(samples: int, lost_samples: int, holes: int) -> str:
 
 def measured_rate(index: np.ndarray, t_s: np.ndarray, nominal_hz: float) -> float | None:
     """The rate the samples were taken at by their time stamps, when it departs from
-    ``nominal_hz`` by more than :data:`MEASURED_RATE_TOLERANCE` and at most 10 % over at
-    least :data:`MEASURED_RATE_MIN_SPAN_S`; else None.
+    ``nominal_hz`` by more than :data:`MEASURED_RATE_TOLERANCE` over at least
+    :data:`MEASURED_RATE_MIN_SPAN_S`; else None (how far off is the caller's to judge,
+    :func:`_with_measured_rate`).
 
     imubench stamps each sample from the chip's timestamp counter with the tick period
     measured against the host clock (docs/drivers.md), so a part whose oscillator runs
@@ -215,8 +217,7 @@ def measured_rate(index: np.ndarray, t_s: np.ndarray, nominal_hz: float) -> floa
     rate = _stamps_rate(index, t_s)
     if rate is None:
         return None
-    off = abs(rate / nominal_hz - 1.0)
-    return rate if MEASURED_RATE_TOLERANCE < off <= GIVEN_RATE_TOLERANCE else None
+    return rate if abs(rate / nominal_hz - 1.0) > MEASURED_RATE_TOLERANCE else None
 
 
 def _stamps_rate(index: np.ndarray, t_s: np.ndarray, strict: bool = False) -> float | None:
@@ -237,9 +238,6 @@ def _stamps_rate(index: np.ndarray, t_s: np.ndarray, strict: bool = False) -> fl
     return float(np.median((i[h:] - i[: len(t) - h]) / dt))
 
 
-GIVEN_RATE_TOLERANCE = 0.1
-"""Largest relative departure of ``--rate`` from the rate of a recording's own time stamps
-(an ODR's tolerance); beyond it ``--rate`` is refused (:func:`_check_given_rate`)."""
 
 
 def _check_given_rate(rec: Recording, given_hz: float, where: str) -> None:
@@ -255,17 +253,34 @@ def _check_given_rate(rec: Recording, given_hz: float, where: str) -> None:
             f"give {own:.6g} Hz; drop --rate to read it at its own rate")
 
 
-def _with_measured_rate(rec: Recording) -> Recording:
+CHIP_CLOCK_MAX_OFF = 0.5
+"""Largest departure of the time stamps of imubench's own files (stamped from the chip's
+timestamp counter) from the header's nominal ODR that is taken as the chip's clock (the
+driver measures a tick period up to 50 % off); beyond it the stamps are refused."""
+
+
+def _with_measured_rate(rec: Recording, kind: str) -> Recording:
     """``rec`` with ``measured_odr_hz`` in its metadata when :func:`measured_rate` finds
-    one (said in a warning)."""
+    one (said in a warning). A text file's stated rate is trusted up to
+    :data:`GIVEN_RATE_TOLERANCE` from its stamps, the nominal ODR of imubench's own files
+    (native, HDF5, its CSV with a ``chip`` line) up to :data:`CHIP_CLOCK_MAX_OFF` (a
+    chip 30 % slow was read at its nominal rate, every tau 30 % long, since only 10 % was
+    measured); beyond, RecordingError naming both."""
     nominal = float(rec.metadata["odr_hz"])
     rate = measured_rate(rec.index, rec.t_s, nominal)
-    if rate is not None:
-        rec.metadata["measured_odr_hz"] = rate
-        log.warning("%s: rate %.6g Hz, measured from the time stamps: the chip's clock runs "
-                    "%+.3g %% off its nominal ODR %g Hz (the header's odr_hz); taus use the "
-                    "measured rate (--rate overrides)", rec.path, rate,
-                    100.0 * (rate / nominal - 1.0), nominal)
+    if rate is None:
+        return rec
+    off = rate / nominal - 1.0
+    own = kind in ("native", "hdf5") or (kind == "csv" and "chip" in rec.metadata)
+    limit = CHIP_CLOCK_MAX_OFF if own else GIVEN_RATE_TOLERANCE
+    if abs(off) > limit:
+        raise RecordingError(
+            f"{rec.path}: the header states {nominal:g} Hz but the time stamps give "
+            f"{rate:.6g} Hz ({100.0 * off:+.3g} %); give --rate HZ with the right one")
+    rec.metadata["measured_odr_hz"] = rate
+    log.warning("%s: rate %.6g Hz, measured from the time stamps: the clock runs %+.3g %% "
+                "off the nominal %g Hz the header states (odr_hz); taus use the measured "
+                "rate (--rate overrides)", rec.path, rate, 100.0 * off, nominal)
     return rec
 
 
@@ -290,7 +305,7 @@ def load_recording(path: str | Path, options: InputOptions | None = None) -> Rec
                     rec.damage, len(rec), rec.lost_samples)
     # a converted recording's header may carry one: it is measured again, or --rate rules
     rec.metadata.pop("measured_odr_hz", None)
-    return _with_measured_rate(rec) if stated and opts.rate_hz is None else rec
+    return _with_measured_rate(rec, kind) if stated and opts.rate_hz is None else rec
 
 
 def _with_segments(first: Recording, kind: str, opts: InputOptions) -> Recording:

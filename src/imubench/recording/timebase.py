@@ -449,6 +449,10 @@ def timebase_from_times(t_s: np.ndarray, where: str, rate_hz: float | None = Non
                     "from t (least squares" + (f"; {note})" if note else ")"))
 
 
+GIVEN_RATE_TOLERANCE = 0.1
+"""Largest relative departure of a rate the user or the file states from the rate of the
+recording's own time stamps (an ODR's tolerance); beyond it the file is refused, since
+which of the two is wrong cannot be told."""
 INDEX_DISAGREE_SHARE = 0.01
 """An index column that contradicts the time stamps at more than this share of the rows
 (and more than one) is refused rather than read around."""
