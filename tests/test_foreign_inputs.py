@@ -482,3 +482,30 @@ def test_a_chip_clock_30_percent_slow_is_measured_in_a_native_file(tmp_path: Pat
                             "accel_sensitivity_g": 0.061e-3}) as w:
         w.write(b)
     assert load_recording(path).rate_hz == pytest.approx(72.8, rel=1e-6)
+
+
+@pytest.mark.parametrize("line", [
+    "# Fs=100", "# fs = 100", "# odr_hz=100", "# sample rate = 100 Hz", "# rate 100",
+    "# rate_hz 100", "% fs: 100", "# Sample Rate (Hz): 100", "# tau: 0.01",
+    "# period: 0.01", "# interval: 10 ms", "# rate: 100000 mHz", "# rate: 0.0001 MHz"])
+def test_rate_lines_in_other_forms_are_read(tmp_path: Path, line: str) -> None:
+    """A rate or period line not in the ``# key: value`` form (or in ``%`` MATLAB
+    comments, or with the unit in brackets) was ignored and the series read at 1 Hz
+    without a word; ``mHz`` was read as MHz (rate 5e8 Hz for ``500 mHz``)."""
+    path = tmp_path / "s.txt"
+    y = np.random.default_rng(1).normal(size=300)
+    path.write_text(line + "\n" + "\n".join(f"{v:.6f}" for v in y) + "\n")
+    rec = load_recording(path, InputOptions(default_rate_hz=1.0))
+    assert rec.rate_hz == pytest.approx(100.0)
+
+
+def test_an_unread_comment_is_named_when_the_rate_is_assumed(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "s.txt"
+    path.write_text("# frequency: 100 Hz\n" + "\n".join(str(k % 7) for k in range(50)))
+    with caplog.at_level("WARNING"):
+        assert load_recording(path, InputOptions(default_rate_hz=1.0)).rate_hz == 1.0
+    assert "no rate in its comment lines ('# frequency: 100 Hz'" in caplog.text
+    path.write_text("# rate: 100 mhz\n1\n2\n3\n")
+    with pytest.raises(RecordingError, match="write mHz .* or MHz"):
+        load_recording(path, InputOptions(default_rate_hz=1.0))

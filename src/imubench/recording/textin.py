@@ -52,6 +52,8 @@ from imubench.recording.options import (
 )
 from imubench.recording.textmeta import (
     SNIFF_BYTES,
+    rate_line,
+    split_key_unit,
     stated_rate,
     stated_unit,
     text_encoding,
@@ -215,6 +217,8 @@ class _Raw:
     decimal_comma: bool = False
     """The file was read with every comma as a decimal point (one column)."""
     encoding: str = "utf-8-sig"
+    comments: list[str] = field(default_factory=list)
+    """The first comment lines above the data (named when no rate was found in them)."""
 
     def add(self, row: list[float], lineno: int) -> None:
         """Append a data row read from line ``lineno``."""
@@ -283,12 +287,19 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
                 raw.width = len(fields)
                 raw.comment_header = True
                 return
+            if len(raw.comments) < 3:
+                raw.comments.append(line)
             if ":" in line and line.startswith("#"):
                 key, _, value = line[1:].partition(":")
+                key, unit = split_key_unit(key)
                 try:
-                    raw.meta[key.strip()] = json.loads(value)
+                    raw.meta[key] = json.loads(value) if not unit else f"{value} {unit}"
                 except json.JSONDecodeError:
-                    raw.meta[key.strip()] = value.strip()
+                    raw.meta[key] = value.strip() + (f" {unit}" if unit else "")
+            else:
+                found = rate_line(line[1:])
+                if found is not None:
+                    raw.meta[found[0]] = found[1]
         return
     if raw.comment_header and not raw.n_rows and not raw.bad_lines and len(
             _split(line, raw.delim)) != raw.width:
@@ -498,6 +509,10 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         tb = Timebase.in_order(rate, len(table),
                                "given" if options.rate_hz is not None or meta_rate is not None
                                else "assumed (tau in samples)")
+        if options.rate_hz is None and meta_rate is None and raw.comments:
+            notes.append(f"{where}: no rate in its comment lines ({raw.comments[0]!r} ...): "
+                         f"read at {rate:g} Hz, tau in samples; give --rate HZ if they "
+                         "state one")
     keep = tb.keep
     bad = sorted(raw.bad_lines + [raw.row_lines[i] for i in np.nonzero(~keep)[0]])
     if t_s is None:

@@ -29,12 +29,17 @@ RATE_KEYS_HZ = frozenset({
 PERIOD_KEYS_S = frozenset({
     "tau0", "tau0_s", "tau_0", "tau_0_s", "dt", "dt_s", "ts", "sample_period",
     "sample_period_s", "sampling_period", "sampling_period_s", "sample_interval",
-    "sample_interval_s", "sampling_interval", "sampling_interval_s"})
+    "sample_interval_s", "sampling_interval", "sampling_interval_s", "tau", "period",
+    "interval", "sampling_time", "sample_time"})
 """Metadata keys stating the sample period in seconds (Stable32's tau0)."""
 UNIT_KEYS = frozenset({"unit", "units"})
 """Metadata keys stating the unit of a headerless file's values."""
 
-_RATE_UNITS = {"": 1.0, "hz": 1.0, "khz": 1e3, "mhz": 1e6}
+_RATE_UNITS = {"": 1.0, "hz": 1.0, "khz": 1e3, "mHz": 1e-3, "MHz": 1e6}
+"""Rate units (lower case but for mHz and MHz, told apart by their case: ``# rate: 500 mHz``
+was read as 500 MHz)."""
+RATE_MAX_HZ = 1e6
+"""Largest rate a metadata line may state (as a time column may give, TIME_RATE_HZ)."""
 _PERIOD_UNITS = {"": 1.0, "s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6,
                  "ns": 1e-9}
 _VALUE = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*?)?\s*$")
@@ -43,6 +48,37 @@ _VALUE = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d]
 def normalise_key(key: str) -> str:
     """``Sample Rate`` -> ``sample_rate``."""
     return re.sub(r"[\s\-]+", "_", key.strip().lower())
+
+
+def split_key_unit(key: str) -> tuple[str, str]:
+    """``"Sample Rate (Hz)"`` -> ``("Sample Rate", "Hz")``; a key without a bracketed
+    unit -> ``(key, "")``."""
+    m = re.match(r"^\s*(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]\s*$", key)
+    return (m.group(1), m.group(2)) if m and m.group(1) else (key.strip(), "")
+
+
+_NUMBER_START = re.compile(r"^(.*?)\s+([-+]?(?:\d|\.\d).*)$")
+
+
+def rate_line(text: str) -> tuple[str, str] | None:
+    """(key, value) of a comment line that states the rate or period in another form than
+    ``key: value``: ``Fs=100``, ``fs = 100``, ``sample rate = 100 Hz``, ``rate 100``,
+    ``Sample Rate (Hz) = 100``, ``interval 10 ms`` (MATLAB's ``%`` too, the caller strips
+    the comment character); None for any other line. Such lines were ignored and the file
+    read at 1 Hz without a word."""
+    sep = re.search(r"[:=]", text)
+    if sep is not None:
+        key, value = text[:sep.start()], text[sep.end():]
+    else:
+        m = _NUMBER_START.match(text.strip())
+        if m is None:
+            return None
+        key, value = m.group(1), m.group(2)
+    key, unit = split_key_unit(key)
+    value = value.strip()
+    if normalise_key(key) not in RATE_KEYS_HZ | PERIOD_KEYS_S or not _VALUE.match(value):
+        return None
+    return key, value + (f" {unit}" if unit else "")
 
 
 def _quantity(value: Any, key: str, units: Mapping[str, float], where: str) -> float:
@@ -56,13 +92,21 @@ def _quantity(value: Any, key: str, units: Mapping[str, float], where: str) -> f
         m = _VALUE.match(str(value))
         if not m:
             raise RecordingError(f"{where}: metadata {key} {value!r} is not a number")
-        number, unit = float(m.group(1)), (m.group(2) or "").strip().lower()
+        unit = (m.group(2) or "").strip()
+        if units is _RATE_UNITS and unit.lower() == "mhz" and unit not in ("mHz", "MHz"):
+            raise RecordingError(f"{where}: metadata {key} {value!r}: write mHz "
+                                 "(millihertz) or MHz (megahertz)")
+        number, unit = float(m.group(1)), unit if unit in ("mHz", "MHz") else unit.lower()
     if unit not in units:
         raise RecordingError(f"{where}: metadata {key} {value!r}: unit {unit!r} is not one "
                              f"of {', '.join(u for u in units if u)}")
     out = number * units[unit]
     if not (math.isfinite(out) and out > 0):
         raise RecordingError(f"{where}: metadata {key} {value!r} must be a positive number")
+    hz = out if units is _RATE_UNITS else 1.0 / out
+    if hz > RATE_MAX_HZ:
+        raise RecordingError(f"{where}: metadata {key} {value!r} states {hz:.4g} Hz, not a "
+                             "rate an IMU records at; give --rate HZ")
     return out
 
 
