@@ -355,3 +355,29 @@ def test_datasheet_units_of_an_absent_term_are_null_with_the_upper_limit() -> No
     _, (_, hi) = f.coefficient("flicker")
     assert ds["bias_instability_deg_per_h_upper_95"] == pytest.approx(hi * 3600.0)
     assert ds["arw_deg_per_sqrt_h"] == pytest.approx(0.004 * 60, rel=0.03)
+
+
+def test_a_constant_channel_is_left_out_and_the_others_fitted(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A dead axis (gz the same value in every sample) stopped the whole fit and the
+    report; it is left out with its reason in the JSON and the report, and the other
+    channels are fitted (white noise of 0.004 dps/sqrt(Hz) recovered). Named with
+    --channels it is still an error."""
+    rng = np.random.default_rng(3)
+    n, rate = 20000, 100.0
+    rows = ["t,gx [dps],gy [dps],gz [dps]"]
+    gx, gy = rng.normal(0, 0.04, n), rng.normal(0, 0.04, n)
+    rows += [f"{k / rate:.4f},{gx[k]:.6f},{gy[k]:.6f},0.25" for k in range(n)]
+    path = tmp_path / "dead.csv"
+    path.write_text("\n".join(rows) + "\n")
+    assert main(["fit", str(path), "-o", str(tmp_path / "m.toml"), "--json",
+                 str(tmp_path / "f.json")]) == 0
+    doc = json.loads((tmp_path / "f.json").read_text())
+    assert sorted(doc["channels"]) == ["gx", "gy"]
+    assert "constant (0.25 dps" in doc["skipped_channels"]["gz"]
+    white = doc["channels"]["gx"]["params"]["white"]
+    assert white == pytest.approx(0.004, rel=0.05)
+    assert main(["report", str(path), "--out", str(tmp_path / "r")]) == 0
+    assert "gz left out: constant" in (tmp_path / "r" / "gyro.html").read_text()
+    assert main(["fit", str(path), "--channels", "gz", "-o", str(tmp_path / "z.toml")]) == 2
+    assert "constant" in capsys.readouterr().err

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as _dt
 import logging
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -56,6 +56,9 @@ class RecordingFit:
     """Samples missing in its holes (the Allan curves are computed across them)."""
     holes: int = 0
     """Holes between recorded samples."""
+    skipped: dict[str, str] = field(default_factory=dict)
+    """Channels left out, with why (a constant, dead axis when no ``--channels`` named
+    it): they stay quiet in the model file."""
 
     def coverage(self) -> str:
         """``54950 samples, 2 holes (6050 samples, 9.9 % missing)``, or ``""``."""
@@ -121,6 +124,7 @@ class RecordingFit:
                                "avar": f"{UNITS[ch]}^2", "edf": "1"}}
                 for ch, f in self.fits.items()
             },
+            "skipped_channels": dict(self.skipped),
             "kalibr": self._kalibr_or_reason(),
             "kalibr_units": dict(KALIBR_UNITS),
             "datasheet_comparison": datasheet_comparison(self.chip, params),
@@ -180,9 +184,18 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
     if not chans:
         raise FitError(f"{source}: no gyro or accel channel with data to fit")
     fits = {}
+    skipped: dict[str, str] = {}
     temp_c = rec.channel("temp")  # dense like the channels: NaN where samples are lost
     for k, ch in enumerate(chans):
         y = rec.channel(ch)
+        finite = y[np.isfinite(y)]
+        if channels is None and len(chans) > 1 and finite.size and np.ptp(finite) == 0:
+            # a dead or unconnected axis: the others are still fitted (one constant
+            # channel stopped the whole fit, and report has no --channels)
+            skipped[ch] = (f"constant ({finite[0]:g} {UNITS[ch]} in every sample): a stuck "
+                           "or unconnected axis has no noise to fit")
+            log.warning("%s: %s left out: %s", source, ch, skipped[ch])
+            continue
         try:
             fits[ch] = fit_channel(y, rec.rate_hz, terms=terms, method=method, channel=ch)
         except FitError as exc:
@@ -194,9 +207,12 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
                 fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, warning))
         if on_channel is not None:
             on_channel(k + 1, len(chans))
+    if not fits:
+        raise FitError(f"{source}: every channel is constant; there is no noise to fit")
     chip = rec.metadata.get("chip")
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits,
-                        tuple(rec.metadata.get("units_assumed", ())), *_coverage(rec))
+                        tuple(rec.metadata.get("units_assumed", ())), *_coverage(rec),
+                        skipped=skipped)
 
 
 def _coverage(rec: Recording) -> tuple[int, int, int]:

@@ -56,7 +56,7 @@ def _title(kind: str, result: RecordingFit, sensor: str, duration_s: float) -> s
 
 def _info(result: RecordingFit, n_samples: int, model: NoiseModel | None,
           notes: list[str]) -> PageInfo:
-    notes = list(notes)
+    notes = list(notes) + [f"{ch} left out: {why}" for ch, why in result.skipped.items()]
     if model is not None:
         model_rate = model.meta.get("rate_hz")
         if isinstance(model_rate, (int, float)) and not np.isclose(model_rate,
