@@ -507,5 +507,5 @@ def test_an_unread_comment_is_named_when_the_rate_is_assumed(
         assert load_recording(path, InputOptions(default_rate_hz=1.0)).rate_hz == 1.0
     assert "no rate in its comment lines ('# frequency: 100 Hz'" in caplog.text
     path.write_text("# rate: 100 mhz\n1\n2\n3\n")
-    with pytest.raises(RecordingError, match="write mHz .* or MHz"):
+    with pytest.raises(RecordingError, match=r"write mHz .* or MHz"):
         load_recording(path, InputOptions(default_rate_hz=1.0))

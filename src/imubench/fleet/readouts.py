@@ -13,10 +13,12 @@ A live curve is often incomplete and its long-tau end noisy, so each reading say
 is (``kind``): ``value``; ``upper`` for B while the floor is not established: the curve
 is still falling, or rises from its first tau, or its rise after the minimum is within
 the confidence intervals (no later point has ``ci_low`` above the minimum's
-``ci_high``): B is at most this; ``none`` for N or K when no point's slope is within
-:data:`SLOPE_TOLERANCE` of -1/2 or +1/2, and for K also when the rise it would be read
-on is not significant in that sense. A number is never shown for a term the curve does
-not show; without confidence limits B is only an upper bound and K is not read.
+``ci_high``): B is then at most the least upper confidence limit over the curve / 0.664
+(the least point itself lies below the true curve by chance); ``none`` for N or K when no
+point's slope is within :data:`SLOPE_TOLERANCE` of -1/2 or +1/2, and for K also when the
+rise it would be read on is not significant in that sense. A number is never shown for a
+term the curve does not show; without confidence limits B is only an upper bound and K is
+not read.
 
 Datasheet units come from :func:`imubench.noisefit.units.datasheet_units` (gyro in dps:
 N mdps/sqrt(Hz) and deg/sqrt(h), B deg/h, K deg/h/sqrt(h); accel in g: N ug/sqrt(Hz),
@@ -32,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from imubench.noisefit.identify import local_slopes
-from imubench.noisefit.tangent import tangent_readings
+from imubench.noisefit.tangent import FLICKER_FLOOR, tangent_readings
 from imubench.noisefit.units import ACCEL, GYRO, datasheet_units
 
 SLOPE_TOLERANCE: float = 0.2
@@ -66,19 +68,24 @@ def _column(values: Sequence[Any] | None, n: int) -> np.ndarray:
 
 
 def read_terms(tau_s: Sequence[Any], dev: Sequence[Any],
-               ci_low: Sequence[Any] | None = None, ci_high: Sequence[Any] | None = None
-               ) -> dict[str, dict[str, Any]]:
+               ci_low: Sequence[Any] | None = None, ci_high: Sequence[Any] | None = None,
+               alpha: Sequence[Any] | None = None) -> dict[str, dict[str, Any]]:
     """N, B, K of one channel's ADEV curve in its own units (module docstring).
 
-    ``tau_s``, ``dev``, ``ci_low``, ``ci_high``: the published lists (JSON nulls allowed).
+    ``tau_s``, ``dev``, ``ci_low``, ``ci_high``: the published lists (JSON nulls allowed);
+    ``alpha``: the noise type identified at each tau, when known: B's upper bound leaves
+    out points identified as phase noise (alpha > 0), whose chi-squared intervals assume a
+    noise that decorrelates within a few samples (a flicker-dominated long tau identified
+    as white PM got 101 degrees of freedom where the record held ~5 averages, and the
+    bound fell below the true B on 1 of 20 2 h records; 0 of 20 without such points).
     Returns ``{"N"|"B"|"K": {"value": float | None, "kind": "value"|"upper"|"none",
     "tau_s": the tau read at | None, "slope": local slope there | None, "note": str}}``.
     """
     n = len(tau_s)
     cols = np.vstack([_column(tau_s, n), _column(dev, n), _column(ci_low, n),
-                      _column(ci_high, n)])
+                      _column(ci_high, n), _column(alpha, n)])
     keep = np.isfinite(cols[0]) & np.isfinite(cols[1]) & (cols[0] > 0) & (cols[1] > 0)
-    tau, dev_arr, lo, hi = cols[:, keep][:, np.argsort(cols[0, keep])]
+    tau, dev_arr, lo, hi, ids = cols[:, keep][:, np.argsort(cols[0, keep])]
     if tau.size < MIN_POINTS:
         note = f"{tau.size} tau(s) so far; readouts need {MIN_POINTS}"
         return {t: {"value": None, "kind": "none", "tau_s": None, "slope": None, "note": note}
@@ -99,8 +106,17 @@ def read_terms(tau_s: Sequence[Any], dev: Sequence[Any],
         elif term == "B" and (i == 0 or not risen[i + 1:].any()):
             where = ("rising from the first tau" if i == 0 else "still falling"
                      if i == tau.size - 1 else "not significantly rising after its minimum")
-            entry.update(kind="upper", note=f"curve {where}: floor not established, "
-                                            "B at most this")
+            # the bound is the least upper confidence limit, not the least point: the
+            # lowest of many points (the last ones of few degrees of freedom) lies below
+            # the true curve by chance, and B = min / 0.664 read 0.37-0.75 of the truth
+            ok = np.isfinite(hi) & ~(ids > 0)  # NaN (not known) compares False
+            j = int(np.argmin(np.where(ok, hi, np.inf))) if ok.any() else i
+            bound = float(hi[j]) if ok.any() else float(dev_arr[i])
+            entry.update(kind="upper", value=bound / FLICKER_FLOOR, tau_s=float(tau[j]),
+                         slope=float(slope[j]),
+                         note=f"curve {where}: floor not established; B at most the "
+                              f"least upper confidence limit / 0.664 (at tau = "
+                              f"{tau[j]:.4g} s)")
         elif term == "K" and (abs(s - 0.5) > SLOPE_TOLERANCE or not risen[i]):
             entry.update(value=None, kind="none",
                          note=f"no significant +1/2 slope region yet (nearest {s:+.2f} at "

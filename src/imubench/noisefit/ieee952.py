@@ -121,10 +121,13 @@ def _line_reading(symbol: str, fit: ChannelFit) -> Readout:
 def _floor_reading(curve: StatResult) -> Readout:
     """B from the flat minimum of the measured OADEV (module docstring)."""
     r = read_terms(curve.tau_s.tolist(), curve.dev.tolist(), curve.ci_low.tolist(),
-                   curve.ci_high.tolist())["B"]
+                   curve.ci_high.tolist(), curve.alpha.tolist())["B"]
     if r["value"] is None or r["tau_s"] is None:
         return Readout("B", None, None, None, None, "none", "measured OADEV", r["note"])
     i = int(np.argmin(np.abs(curve.tau_s - r["tau_s"])))
+    if r["kind"] == "upper":  # the bound read_terms made: the least upper limit / 0.664
+        return Readout("B", float(r["value"]), float(curve.tau_s[i]), None, None, "upper",
+                       "measured OADEV", r["note"])
     dev = float(curve.dev[i])
     lo, hi = float(curve.ci_low[i]), float(curve.ci_high[i])
     interval = (lo / FLICKER_FLOOR, hi / FLICKER_FLOOR) if np.isfinite(lo + hi) else None
