@@ -242,3 +242,37 @@ def test_plugin_is_inert_without_a_station(tmp_path: Path) -> None:
     assert "1 passed, 1 skipped" in proc.stdout
     assert "jig fixtures need a jig run" in proc.stdout
     assert not (tmp_path / "measurements.json").exists()
+
+
+def test_limits_in_another_unit_of_the_kind_load_and_others_are_refused(
+        tmp_path: Path) -> None:
+    """A limit may state any unit of the measurement's kind (converted at the
+    measurement); one of another kind, or a name the suite does not measure under a
+    suite group (a typo), is refused at load naming the file and the limit: they were
+    judged 1000x off, or FAILed the board at the end of the run."""
+    text = (REPO / "config" / "limits-lsm6dsl.toml").read_text()
+    p = tmp_path / "lim.toml"
+    p.write_text(text.replace(
+        'ax = { low = -90.0, high = 90.0, unit = "mg"',
+        'ax = { low = -0.09, high = 0.09, unit = "g"'))
+    assert load_limits(p)["zero_g_offset.ax"].unit == "g"
+    p.write_text(text.replace('unit = "mdps/sqrt(Hz)"', 'unit = "deg/h"', 1))
+    with pytest.raises(JigError, match=r"lim\.toml: limit 'noise_density\.gx' is in "
+                                       r"'deg/h', which is not a unit of"):
+        load_limits(p)
+    p.write_text(text.replace("[zero_rate_level]\ngx =", "[zero_rate_level]\ngzz ="))
+    with pytest.raises(JigError, match=r"limit 'zero_rate_level\.gzz': the suite measures "
+                                       r"no such quantity"):
+        load_limits(p)
+
+
+def test_unit_conversions_against_their_definitions() -> None:
+    from imubench.jig.units import conversion_factor
+
+    assert conversion_factor("g", "mg") == pytest.approx(1e3)
+    assert conversion_factor("mdps/sqrt(Hz)", "deg/sqrt(h)") == pytest.approx(0.06)
+    assert conversion_factor("deg/h", "dps") == pytest.approx(1 / 3600)
+    assert conversion_factor("m/s2", "g") == pytest.approx(1 / 9.80665)
+    assert conversion_factor("%", "ppm") == pytest.approx(1e4)
+    with pytest.raises(JigError):
+        conversion_factor("dps", "g")

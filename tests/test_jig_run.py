@@ -339,12 +339,27 @@ def _run_with(tmp_path: Path, select: str, setting: str, value: str, status: int
 
 def test_a_rate_step_beyond_full_scale_is_named_not_measured(tmp_path: Path) -> None:
     """400 dps on a 250 dps gyro clips: the means of clipped samples read a healthy
-    board's sensitivity as -26.7 % (FAIL) and a 3.5 % error as 2.5 % (PASS)."""
-    proc, res = _run_with(tmp_path, "sensitivity", "rates_dps", "[100.0, 400.0]", 1)
+    board's sensitivity as -26.7 % (FAIL) and a 3.5 % error as 2.5 % (PASS). A station
+    rate beyond the output's range is the station's setting: INCONCLUSIVE before the
+    table turns (it was a FAIL charged to the board). A board whose output clips within
+    the range (a +20 % gain at 250 dps) still FAILs, naming the clipping."""
+    proc, res = _run_with(tmp_path, "sensitivity", "rates_dps", "[100.0, 400.0]", 3)
     assert not any(m["name"].startswith("gyro_sensitivity") for m in res["measurements"])
+    assert "beyond what the DUT's gyro output holds at its full scale" in proc.stdout
+    assert res["verdict"] == "INCONCLUSIVE" and not failing(res)
+    model = load_model(DATASHEET_MODEL).with_channel("gx", scale_error=0.2)
+    path = tmp_path / "model-gain.toml"
+    path.write_text(model.to_toml())
+    capture = FAST.format(static_s=30.0).replace("rates_dps = [100.0, 200.0]",
+                                                 "rates_dps = [100.0, 250.0]")
+    station = write_station(tmp_path, "gain", model=path, select_tests="sensitivity",
+                            capture=capture)
+    proc = jig(station, tmp_path / "reports", "--serial", "SN-GAIN")
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "the output was clipped at its full scale (gx" in proc.stdout
+    _, res = result_of(tmp_path / "reports", "SN-GAIN")
     why = res["broken_reasons"]["suite/test_5_gyro.py::test_sensitivity[x]"]
-    assert why.startswith("imubench.calibration.errors.CalibrationError: rate +400 dps")
+    assert why.startswith("imubench.calibration.errors.CalibrationError: rate +250 dps")
 
 
 def test_an_interrupted_run_leaves_no_junit_that_reads_as_a_result(tmp_path: Path) -> None:
@@ -380,3 +395,29 @@ def test_a_capture_too_short_for_a_mean_is_inconclusive_not_fail(tmp_path: Path)
     assert "10 samples; a capture mean needs at least 16" in why
     assert "INCONCLUSIVE: test suite/test_4_accelerometer.py::test_zero_g_offset[x]" in (
         proc.stdout)
+
+
+def test_a_limit_in_g_judges_the_offset_in_g_and_wrong_chip_limits_exit_2(
+        tmp_path: Path) -> None:
+    """zero_g_offset limits stated in g: the offset is converted and reported in g (it was
+    the mg value labelled g, a good board FAILed at 59.95 "g"); limits for another chip
+    than the URI names: exit 2 before any run (it was a FAIL in the board's history)."""
+    limits = tmp_path / "limits-g.toml"
+    limits.write_text(LIMITS.read_text().replace('low = -90.0, high = 90.0, unit = "mg"',
+                                                 'low = -0.09, high = 0.09, unit = "g"'))
+    station = write_station(tmp_path, "ing", select_tests="zero_g",
+                            capture=FAST.format(static_s=20.0))
+    station.write_text(station.read_text().replace(str(LIMITS), str(limits)))
+    proc = jig(station, tmp_path / "reports", "--serial", "SN-G")
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    _, res = result_of(tmp_path / "reports", "SN-G")
+    offsets = [m for m in res["measurements"] if m["name"].startswith("zero_g_offset.")]
+    assert len(offsets) == 3 and all(m["unit"] == "g" for m in offsets)
+    assert all(abs(m["value"]) < 0.09 and m["verdict"] == "PASS" for m in offsets)
+    assert "converted from mg to the limit's g" in offsets[0]["method"]
+    other = write_station(tmp_path, "dsm")
+    other.write_text(other.read_text().replace("sim://lsm6dsl?", "sim://lsm6dsm?"))
+    proc = jig(other, tmp_path / "r2", "--serial", "SN-DSM")
+    assert proc.returncode == 2 and "limits are for lsm6dsl, the DUT URI names an lsm6dsm" \
+        in proc.stderr
+    assert not (tmp_path / "r2" / "SN-DSM").exists()

@@ -10,4 +10,10 @@ class JigError(ImubenchError):
     says which file, key, fixture command or capture, and what to do)."""
 
 
-__all__ = ["JigError"]
+class StationError(JigError):
+    """A station or limits setting that keeps a test from judging the board (limits for
+    another chip, a limit the suite needs missing, a rate beyond the DUT's full scale):
+    the test is INCONCLUSIVE, never a FAIL charged to the board."""
+
+
+__all__ = ["JigError", "StationError"]

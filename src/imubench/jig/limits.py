@@ -22,10 +22,43 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from imubench.jig.errors import JigError
+from imubench.jig.errors import JigError, StationError
+from imubench.jig.units import conversion_hint, convertible
 from imubench.tomlread import read_toml
 
 LIMIT_KEYS = frozenset({"low", "high", "unit", "typ", "basis"})
+
+_GYRO, _ACCEL = ("gx", "gy", "gz"), ("ax", "ay", "az")
+SUITE_UNITS: dict[str, str] = {
+    "identity.who_am_i": "-",
+    **{f"self_test.gyro_{a}": "dps" for a in "xyz"},
+    **{f"self_test.accel_{a}": "g" for a in "xyz"},
+    **{f"zero_rate_level.{c}": "dps" for c in _GYRO},
+    **{f"zero_g_offset.{c}": "mg" for c in _ACCEL},
+    **{f"noise_density.{c}": "mdps/sqrt(Hz)" for c in _GYRO},
+    **{f"noise_density.{c}": "ug/sqrt(Hz)" for c in _ACCEL},
+    **{f"angle_random_walk.{c}": "deg/sqrt(h)" for c in _GYRO},
+    **{f"bias_instability.{c}": "deg/h" for c in _GYRO},
+    **{f"bias_instability.{c}": "ug" for c in _ACCEL},
+    "temperature_sensor.offset": "degC",
+    "fifo.lost_samples": "samples",
+    "fifo.session_lost_samples": "samples",
+    "fifo.odr_error": "%",
+    **{f"accel_calibration.gain_error.{c}": "%" for c in _ACCEL},
+    "accel_calibration.residual_max": "mg",
+    "accel_calibration.chi2_per_dof": "1",
+    **{f"gyro_sensitivity.{c}": "%" for c in _GYRO},
+    **{f"gyro_cross_axis.{c}": "%" for c in _GYRO},
+    **{f"temperature_coefficient.{c}": "dps/degC" for c in _GYRO},
+    **{f"temperature_coefficient.{c}": "mg/degC" for c in _ACCEL},
+    "temperature_calibration.residual_max.gyro": "dps",
+    "temperature_calibration.residual_max.accel": "mg",
+}
+"""Every measurement the shipped suite makes, with the unit it computes it in: a limit of
+that name may state any unit of the same dimension (:mod:`imubench.jig.units`; the value
+is converted into it), and a limit under one of these groups that the suite does not
+measure (a typo: ``zero_rate_level.gzz``) is refused when the file is loaded."""
+SUITE_GROUPS = frozenset(name.split(".")[0] for name in SUITE_UNITS)
 
 
 @dataclass(frozen=True)
@@ -51,7 +84,7 @@ class Limits:
             return self.limits[name]
         except KeyError:
             where = self.path if self.path is not None else "limits"
-            raise JigError(
+            raise StationError(
                 f"{where}: no limit for measurement {name!r}; add it (known: "
                 f"{', '.join(sorted(self.limits)[:8])}, ...)"
             ) from None
@@ -100,7 +133,26 @@ def load_limits(path: str | Path) -> Limits:
     _walk(data, "", str(p), out)
     if not out:
         raise JigError(f"{p}: no limits (tables with a 'unit' key)")
+    _check_suite_names(out, str(p))
     return Limits(chip, p, out)
 
 
-__all__ = ["Limit", "Limits", "load_limits"]
+def _check_suite_names(limits: Mapping[str, Limit], where: str) -> None:
+    """JigError for a limit under a suite group that the suite does not measure, or in a
+    unit that is not of the measurement's dimension (:data:`SUITE_UNITS`)."""
+    for name, lim in limits.items():
+        own = SUITE_UNITS.get(name)
+        if own is None:
+            if name.split(".")[0] in SUITE_GROUPS:
+                group = name.split(".")[0]
+                known = sorted(n for n in SUITE_UNITS if n.startswith(group + "."))
+                raise JigError(f"{where}: limit {name!r}: the suite measures no such "
+                               f"quantity (in [{group}]: {', '.join(known)})")
+            continue
+        if not convertible(own, lim.unit):
+            raise JigError(f"{where}: limit {name!r} is in {lim.unit!r}, which is not a "
+                           f"unit of {name} (measured in {own!r}; "
+                           f"{conversion_hint(own)})")
+
+
+__all__ = ["SUITE_UNITS", "Limit", "Limits", "load_limits"]

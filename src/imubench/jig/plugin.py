@@ -105,10 +105,14 @@ def measure(jig: JigSession, request: pytest.FixtureRequest) -> Measure:
     return record
 
 
-def _too_short(exc: BaseException) -> bool:
+def _not_the_boards(exc: BaseException) -> bool:
+    """Whether a test's error says nothing of the board: a capture too short (the
+    station's length or the data lost), or a station or limits setting
+    (:class:`~imubench.jig.errors.StationError`): INCONCLUSIVE, not FAIL."""
     from imubench.calibration.means import TooFewSamplesError  # only when a test failed
+    from imubench.jig.errors import StationError
 
-    return isinstance(exc, TooFewSamplesError)
+    return isinstance(exc, TooFewSamplesError | StationError)
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -130,8 +134,8 @@ def pytest_runtest_makereport(
             rep.outcome = "skipped"
             rep.longrepr = (str(item.path), item.location[1] or 0,
                             "INCONCLUSIVE: " + "; ".join(m.describe() for m in unsure))
-    if rep.failed and call.excinfo is not None and _too_short(call.excinfo.value):
-        # too short a capture: nothing was measured, which says nothing of the board
+    if rep.failed and call.excinfo is not None and _not_the_boards(call.excinfo.value):
+        # nothing was measured, for a reason that says nothing of the board
         rep.outcome = "skipped"
         rep.longrepr = (str(item.path), item.location[1] or 0,
                         f"INCONCLUSIVE: {call.excinfo.value}")

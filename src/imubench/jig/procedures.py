@@ -25,7 +25,8 @@ from imubench.batch import CHANNELS
 from imubench.calibration.accel import SIX_POSITIONS
 from imubench.calibration.errors import CalibrationError
 from imubench.calibration.means import MeanEstimate, capture_mean
-from imubench.jig.dut import Capture, Dut
+from imubench.jig.dut import INT16_MAX, Capture, Dut
+from imubench.jig.errors import StationError
 from imubench.jig.fixtures.base import AXES, Fixture
 from imubench.jig.station import CaptureSection
 
@@ -94,6 +95,11 @@ def point(label: str, cap: Capture, force: np.ndarray, rate: np.ndarray) -> Poin
     return Point(label, cap, means, np.asarray(force, float), np.asarray(rate, float))
 
 
+RATE_HEADROOM = 0.9
+"""Share of the gyro output's range (int16 counts x sensitivity) a station rate may use:
+the rest is left for the zero-rate level and a gain error."""
+
+
 class Procedures:
     """The run's captures, each taken on first use (module docstring)."""
 
@@ -124,7 +130,18 @@ class Procedures:
         return self._six
 
     def rate_table(self) -> list[tuple[str, float, Point]]:
-        """(axis, rate_dps, point) for each axis at 0 and +-r."""
+        """(axis, rate_dps, point) for each axis at 0 and +-r; StationError, before the
+        table turns, when a station rate lies beyond what the DUT's output can hold at
+        its full scale (a station setting, not the board: it was a FAIL)."""
+        sens = self.dut.info.gyro_sensitivity_dps
+        top = max((abs(r) for r in self.cfg.rates_dps), default=0.0)
+        if sens is not None and top > RATE_HEADROOM * INT16_MAX * sens:
+            raise StationError(
+                f"station capture.rates_dps reaches {top:g} dps, beyond what the DUT's "
+                f"gyro output holds at its full scale ({INT16_MAX * sens:.4g} dps at "
+                f"{self.dut.info.fs_dps:g} dps full scale, with {1 - RATE_HEADROOM:.0%} "
+                "left for the zero-rate level): lower the rates or raise fs_dps in the "
+                "DUT URI")
         if self._rates is None:
             out = []
             for axis in AXES:

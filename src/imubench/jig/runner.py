@@ -83,13 +83,18 @@ def run_jig(station_path: str | Path, report_dir: str | Path, *, dut: str | None
     """Run the station's suite on one board; see the module docstring."""
     station = load_station(station_path)
     uri = dut or resolve_uri_paths(station.dut.uri, Path(station_path).resolve().parent)
-    check_source_uri(uri)
+    parsed = check_source_uri(uri)
     sn = serial or station.dut.serial
     if not sn:
         raise JigError("no serial number: pass --serial SN or set dut.serial in"
                        f" {station_path}")
     check_serial(sn)
-    load_limits(station.resolve(station.station.limits))
+    limits = load_limits(station.resolve(station.station.limits))
+    # the chip the URI names (the device tells otherwise, and the session checks it)
+    chip = parsed.params.get("chip") or (parsed.target if parsed.scheme == "sim" else None)
+    if chip is not None and chip != limits.chip:
+        raise JigError(f"{limits.path}: limits are for {limits.chip}, the DUT URI names an "
+                       f"{chip}; use config/limits-{chip}.toml")
     extra = [station.resolve(t) for t in station.station.tests]
     for t in extra:
         if not t.exists():

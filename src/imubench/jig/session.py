@@ -12,12 +12,13 @@ from typing import Any, TypeVar, cast
 import numpy as np
 
 from imubench.jig.dut import Dut, resolve_uri_paths
-from imubench.jig.errors import JigError
+from imubench.jig.errors import JigError, StationError
 from imubench.jig.fixtures.base import Fixture
-from imubench.jig.limits import Limits, load_limits
+from imubench.jig.limits import SUITE_UNITS, Limits, load_limits
 from imubench.jig.measurement import Measurement
 from imubench.jig.procedures import Procedures
 from imubench.jig.station import Station, load_station
+from imubench.jig.units import conversion_factor
 
 T = TypeVar("T")
 MEASUREMENTS_FILE = "measurements.json"
@@ -67,7 +68,7 @@ class JigSession:
         self.dut = Dut(self.uri, self.station.dut.defects)
         try:
             if self.limits.chip != self.dut.info.chip:
-                raise JigError(f"{self.limits.path}: limits are for {self.limits.chip}, the"
+                raise StationError(f"{self.limits.path}: limits are for {self.limits.chip}, the"
                                f" DUT is an {self.dut.info.chip}; use"
                                f" config/limits-{self.dut.info.chip}.toml")
             self.fixture, self._server = make_fixture(self.station, self.dut)
@@ -86,15 +87,21 @@ class JigSession:
                 method: str = "", test: str = "") -> Measurement:
         """Record one measurement judged against its limits: from the limits file when
         it has ``name``, else from ``low``/``high`` (one of them required)."""
+        unit = unit if unit is not None else SUITE_UNITS.get(name)
         if name in self.limits:
             lim = self.limits[name]
             if unit is not None and unit != lim.unit:
-                raise JigError(f"measurement {name!r} reported in {unit!r} but its limit in"
-                               f" {self.limits.path} is in {lim.unit!r}")
+                try:
+                    k = conversion_factor(unit, lim.unit)
+                except JigError as exc:
+                    raise StationError(f"measurement {name!r}: its limit in "
+                                       f"{self.limits.path}: {exc}") from None
+                value, ci = value * k, (ci[0] * k, ci[1] * k)
+                method += f" (converted from {unit} to the limit's {lim.unit})"
             unit, low, high = lim.unit, lim.low, lim.high
         elif low is None and high is None:
-            raise JigError(f"measurement {name!r}: no limit in {self.limits.path} and none"
-                           " given (pass low= and/or high=)")
+            raise StationError(f"measurement {name!r}: no limit in {self.limits.path} and "
+                               "none given (pass low= and/or high=)")
         m = Measurement.judged(name, value, unit or "", low, high, ci, method, test)
         self.measurements.append(m)
         return m
