@@ -125,11 +125,11 @@ def test_healthy_board_passes_is_kept_and_published(
     assert f"published on imubench/{name}/dut/jig" in proc.stdout
     run, res = result_of(report, "SN-OK-1")
     assert res["verdict"] == "PASS" and res["exit_status"] == 0
-    assert len(res["measurements"]) == 50 and not res["broken_tests"]
+    assert len(res["measurements"]) == 51 and not res["broken_tests"]
     assert res["fixture"].startswith("serial ") and res["source_time_s"] > 600
     # JUnit XML from pytest itself, the measurements as properties
     junit = (run / "junit.xml").read_text()
-    assert junit.count("<testcase ") == 47 and "<failure" not in junit
+    assert junit.count("<testcase ") == 48 and "<failure" not in junit
     assert 'name="measurement:noise_density.gx"' in junit
     html = (run / "report.html").read_text()
     assert html.count("<img ") == 3 and ">PASS<" in html and "Tilt error budget" in html
@@ -147,7 +147,7 @@ def test_healthy_board_passes_is_kept_and_published(
     assert cal.gyro is not None and abs(cal.gyro.temp_coeff1[0] - 0.01) < 1e-3  # the model's
     payload = asyncio.run(_retained(host, port, f"imubench/{name}/dut/jig"))
     assert payload["verdict"] == "PASS" and payload["serial"] == "SN-OK-1"
-    assert len(payload["measurements"]) == 50
+    assert len(payload["measurements"]) == 51
     assert all(set(m) == set(PAYLOAD_KEYS) for m in payload["measurements"])
     # a re-test adds a run and never touches the first one
     first = (run / "result.json").read_text()
@@ -421,3 +421,17 @@ def test_a_limit_in_g_judges_the_offset_in_g_and_wrong_chip_limits_exit_2(
     assert proc.returncode == 2 and "limits are for lsm6dsl, the DUT URI names an lsm6dsm" \
         in proc.stderr
     assert not (tmp_path / "r2" / "SN-DSM").exists()
+
+
+def test_a_board_that_resets_itself_fails_on_the_session_losses(tmp_path: Path) -> None:
+    """A chip that resets itself (every 1000 s: 1152 samples lost in a reviewer's run; every
+    200 s here) PASSed: only the static capture's 60 s were checked for losses."""
+    station = write_station(tmp_path, "resets")
+    station.write_text(station.read_text().replace("clock=virtual&",
+                                                   "clock=virtual&reset_every_s=200&"))
+    proc = jig(station, tmp_path / "reports", "--serial", "SN-RESET")
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
+    _, res = result_of(tmp_path / "reports", "SN-RESET")
+    assert "fifo.session_lost_samples" in failing(res)
+    m = next(m for m in res["measurements"] if m["name"] == "fifo.session_lost_samples")
+    assert m["value"] > 0 and "chip reset" in m["method"]

@@ -3,12 +3,11 @@
 Every function returns a :class:`Value` (value, ``(ci_low, ci_high)``, method text) in
 the unit of the limits file. Conventions (IEEE Std 952-1997 Annex C; NIST SP 1065):
 
-* noise density ``N``: the white-noise level read from the overlapping Allan deviation
-  at ``tau_N`` = 0.1 s (``N = sigma(tau_N) sqrt(tau_N)``; ``AVAR = N^2 / tau`` for white
-  noise), with the chi-squared interval of that deviation (EDF by Greenhall-Riley,
-  ``imubench.stats``). 0.1 s is short enough that flicker and random walk add < 1 % for
-  this class of sensor and long enough to stay above an output low-pass;
-* angle random walk: ``sigma(1 s) x 60`` in deg/sqrt(h) (the -1/2 line read at 1 s);
+* noise density ``N``: the white term of a white + flicker + random-walk GLS fit of the
+  overlapping Allan variance (``imubench.noisefit``) at octave taus from ``tau_N`` = 0.1 s
+  (long enough to stay above an output low-pass), with the fit's interval; a single
+  reading of the deviation takes in the flicker and random walk there;
+* angle random walk: ``60 N`` in deg/sqrt(h) (the -1/2 line read at 1 s is N);
 * bias instability ``B = min sigma / 0.664`` (flicker floor ``sqrt(2 ln2 / pi) B``).
   The minimum is a floor only when the curve rises significantly after it (a later
   point's lower confidence limit above the minimum); otherwise (the minimum at or near
@@ -37,10 +36,10 @@ from imubench import stats
 from imubench.batch import CHANNELS
 from imubench.calibration.means import MeanEstimate
 from imubench.jig.dut import Capture
+from imubench.noisefit import FitError, fit_channel
 from imubench.stats.result import StatResult
 
 TAU_NOISE_DENSITY_S = 0.1
-TAU_ARW_S = 1.0
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 """ADEV of flicker noise of coefficient B is 0.664 B (IEEE 952 C.3)."""
 SCALE = {
@@ -85,19 +84,45 @@ def _at(y: np.ndarray, rate_hz: float, tau_s: float, confidence: float,
 
 
 def noise_density(cap: Capture, ch: str, confidence: float) -> Value:
-    """White-noise density (unit/sqrt(Hz)) of channel ``ch`` from OADEV at 0.1 s."""
-    tau, dev, lo, hi, how = _at(cap.channel(ch), cap.odr_hz, TAU_NOISE_DENSITY_S, confidence,
-                                float(cap.lsb[CHANNELS.index(ch)]))
-    r = math.sqrt(tau)
-    return Value(dev * r, (lo * r, hi * r), f"OADEV at tau = {tau:.3g} s x sqrt(tau), {how}")
+    """White-noise density N (unit/sqrt(Hz)) of channel ``ch`` (module docstring): the
+    white term of a GLS fit of white, flicker and random walk (:mod:`imubench.noisefit`;
+    IEEE 952 C: ``AVAR = N^2 / tau + (2 ln2 / pi) B^2 + K^2 tau / 3``) to the OAVAR at
+    octave taus from ``TAU_NOISE_DENSITY_S`` (above an output low-pass), with the fit's
+    95 % interval rescaled to ``confidence``. The deviation read at one tau takes in the
+    other terms: a board with flicker B = 0.006 dps read N up to 9 % high at 0.1 s and its
+    ARW (then OADEV(1 s) x 60) 30-60 % high, outside every interval."""
+    y = cap.channel(ch)
+    lsb = float(cap.lsb[CHANNELS.index(ch)])
+    finite = y[np.isfinite(y)]
+    if len(finite) and float(np.ptp(finite)) == 0.0:
+        tau, dev, lo, hi, how = _at(y, cap.odr_hz, TAU_NOISE_DENSITY_S, confidence, lsb)
+        r = math.sqrt(tau)
+        return Value(dev * r, (lo * r, hi * r), f"OADEV at tau = {tau:.3g} s x sqrt(tau), {how}")
+    m0 = max(1, round(TAU_NOISE_DENSITY_S * cap.odr_hz))
+    afs = [m0 * 2**k for k in range(64) if m0 * 2**k <= (len(y) - 1) // 4]
+    terms = "white,flicker,random_walk" if len(afs) >= 5 else "white"
+    try:
+        fit = fit_channel(y, cap.odr_hz, terms=terms, channel=ch,
+                          taus=[m / cap.odr_hz for m in afs])
+    except FitError as exc:
+        return Value(math.nan, (math.nan, math.nan), f"no fit: {exc}")
+    value, ci = fit.coefficient("white")
+    if ci is None:
+        return Value(value, (math.nan, math.nan), "white term without an interval")
+    k = float(norm.ppf(0.5 + confidence / 2.0) / norm.ppf(0.975))
+    lo, hi = value - k * (value - ci[0]), value + k * (ci[1] - value)
+    return Value(value, (max(lo, 0.0), hi),
+                 f"white term of a {terms.replace(',', ' + ')} GLS fit of the OAVAR at "
+                 f"{len(afs)} octave taus from {afs[0] / cap.odr_hz:.3g} s; "
+                 f"{confidence:.0%} interval")
 
 
 def angle_random_walk(cap: Capture, ch: str, confidence: float) -> Value:
-    """ARW (deg/sqrt(h)) of gyro channel ``ch`` = OADEV(1 s) x 60."""
-    tau, dev, lo, hi, how = _at(cap.channel(ch), cap.odr_hz, TAU_ARW_S, confidence,
-                                float(cap.lsb[CHANNELS.index(ch)]))
-    k = 60.0 * math.sqrt(tau)
-    return Value(dev * k, (lo * k, hi * k), f"OADEV at tau = {tau:.3g} s x 60, {how}")
+    """ARW (deg/sqrt(h)) of gyro channel ``ch``: 60 x the white density N in dps/sqrt(Hz)
+    (:func:`noise_density`; IEEE 952: the -1/2 line read at 1 s, which is N, not the
+    curve's value there)."""
+    v = noise_density(cap, ch, confidence).scaled(60.0)
+    return Value(v.value, v.ci, v.method + "; x 60 (deg/sqrt(h) per dps/sqrt(Hz))")
 
 
 def bias_instability(res: StatResult) -> tuple[Value, bool]:
@@ -154,6 +179,6 @@ def interval_from_stderr(value: float, stderr: float, confidence: float, method:
     return Value(value, (value - q * stderr, value + q * stderr), method)
 
 
-__all__ = ["FLICKER_FLOOR", "SCALE", "TAU_ARW_S", "TAU_NOISE_DENSITY_S", "Value",
+__all__ = ["FLICKER_FLOOR", "SCALE", "TAU_NOISE_DENSITY_S", "Value",
            "angle_random_walk", "bias_instability", "interval_from_stderr", "mean_value",
            "noise_density", "oadev", "self_test_value", "with_extra_uncertainty"]

@@ -59,7 +59,9 @@ class Capture:
 
     Attributes:
         label: what was captured (``static +Z``, ``rate +100 dps about x``, ...).
-        odr_hz: nominal output data rate.
+        odr_hz: the rate of the samples, Hz: the ODR measured from the chip's timestamp
+            counter where the source measures it (a part 9.5 % slow read its noise
+            density 4.8 % low at the nominal rate), else the nominal ODR.
         index0: sample index of the first sample.
         values: (n, 6) float64 dps and g in gx..az order, NaN where lost.
         temp_c: (n,) die temperature, NaN where lost or not measured.
@@ -213,7 +215,8 @@ class Dut:
                 gaps.extend(g for g in b.gaps if g.at > first)
             if self._pending is not None or (len(b) and int(b.index[-1]) >= end - 1):
                 break
-        return _dense(label, odr, first, n, parts, tuple(gaps), self.lsb)
+        rate = self.measured_odr_hz or odr
+        return _dense(label, rate, first, n, parts, tuple(gaps), self.lsb)
 
     def wait_temperature_stable(self, stable_c: float, window_s: float,
                                 timeout_s: float) -> tuple[float, float]:
