@@ -509,3 +509,25 @@ def test_an_unread_comment_is_named_when_the_rate_is_assumed(
     path.write_text("# rate: 100 mhz\n1\n2\n3\n")
     with pytest.raises(RecordingError, match=r"write mHz .* or MHz"):
         load_recording(path, InputOptions(default_rate_hz=1.0))
+
+
+@pytest.mark.parametrize(("header", "level", "match"), [
+    ("t,ax,az", 9.80665, r"ax and az read 9\.81 g at rest, which is m/s2 read as g"),
+    ("t,az", 9.80665, r"az read 9\.81 g at rest, which is m/s2 read as g"),
+    ("t,ax,ay,az", 16384.0, r"reads 1\.638e\+04 g at rest in g, beyond any "
+                            r"accelerometer's range \(raw counts\?\)"),
+    ("t,ax [mg],ay [mg],az [mg]", 1.0, r"reads 0\.001 g at rest in mg, not 1 g")])
+def test_an_accelerometer_level_no_unit_explains_is_refused(
+        tmp_path: Path, header: str, level: float, match: str) -> None:
+    """The gravity check needed all three axes (``t,ax,az`` in m/s^2 read as 9.8 g), and
+    raw counts (16384 per g under ``ax,ay,az``) or g under a ``[mg]`` header were read
+    without a word."""
+    n = header.count(",")
+    rng = np.random.default_rng(0)
+    rows = [header] + [f"{k / 100:.2f}," + ",".join(
+        f"{(level if j == n - 1 else 0.0) + rng.normal(0, level * 1e-3):.6f}"
+        for j in range(n)) for k in range(500)]
+    path = tmp_path / "acc.csv"
+    path.write_text("\n".join(rows) + "\n")
+    with pytest.raises(RecordingError, match=match):
+        load_recording(path)

@@ -624,12 +624,27 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
                    where: str, assumed: list[str]) -> None:
     """A static accelerometer reads about 1 g, whatever unit the file or ``--units``
     claims: a median |a| of 5-15 "g" is m/s^2 read as g, 500-1500 is mg read as g, and
-    0.07-0.14 with a m/s^2 unit is g read as m/s^2 (refused with the fix)."""
-    if not all(a in units for a in ("ax", "ay", "az")):
+    0.07-0.14 with a m/s^2 unit is g read as m/s^2 (refused with the fix). With one or
+    two axes the largest axis's median |a| is a lower bound of |a| (no axis at rest reads
+    more than 1 g): 5-15 and 500-1500 are refused the same way (the check needed all three
+    axes: ``t,ax,az`` in m/s^2 was read as 9.8 g). Unless ``--units`` says so, a level
+    above :data:`MAX_ACCEL_G` (raw counts: 16384 per g) or, on three axes, below
+    :data:`MIN_ACCEL_G` but not 0 (g read as mg; all-zero columns: not measured) is
+    refused too."""
+    axes = [a for a in ("ax", "ay", "az") if a in units]
+    if not axes:
         return
-    norm = np.sqrt(np.nansum(values[:, 3:6] ** 2, axis=1))
-    med = float(np.nanmedian(norm)) if len(norm) else math.nan
-    said = units["ax"] + (" (--units)" if options.accel_unit is not None else "")
+    cols = values[:, [CHANNELS.index(a) for a in axes]]
+    if len(axes) == 3:
+        level = float(np.nanmedian(np.sqrt(np.nansum(cols ** 2, axis=1)))) if len(cols) \
+            else math.nan
+    else:
+        level = float(np.nanmax(np.nanmedian(np.abs(cols), axis=0))) if len(cols) \
+            else math.nan
+    unit = units[axes[0]]
+    said = unit + (" (--units)" if options.accel_unit is not None else "")
+    what = ("the accelerometer reads" if len(axes) == 3
+            else f"the accelerometer's {' and '.join(axes)} read")
     # the gyro's unit in the fix: the user's --units; otherwise the user must say it (a
     # file whose accelerometer is not in the unit it claims may have its gyro in rad/s
     # too, which "dps" would read 57x low)
@@ -639,13 +654,27 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
                  f"{units.get('gx', 'dps')} now" + (", which nothing in the file states)"
                                                     if "gx" in assumed else ")"))
     for lo, hi, really in ((5.0, 15.0, "m/s2"), (500.0, 1500.0, "mg")):
-        if lo < med < hi:
-            raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, "
-                                 f"which is {really} read as {said}; give --units "
-                                 f"{gyro},{really}{gyro_hint}")
-    if 0.07 < med < 0.14 and units["ax"] in ("m/s2", "m/s^2"):
-        raise RecordingError(f"{where}: the accelerometer reads {med:.3g} g at rest, which "
-                             f"is g read as {said}; give --units {gyro},g{gyro_hint}")
+        if lo < level < hi:
+            raise RecordingError(f"{where}: {what} {level:.3g} g at rest, which is {really} "
+                                 f"read as {said}; give --units {gyro},{really}{gyro_hint}")
+    if len(axes) == 3 and 0.07 < level < 0.14 and unit in ("m/s2", "m/s^2"):
+        raise RecordingError(f"{where}: {what} {level:.3g} g at rest, which is g read as "
+                             f"{said}; give --units {gyro},g{gyro_hint}")
+    if options.accel_unit is None and (level > MAX_ACCEL_G
+                                       or (len(axes) == 3 and 0 < level < MIN_ACCEL_G)):
+        raise RecordingError(
+            f"{where}: {what} {level:.4g} g at rest in {unit}, "
+            + ("beyond any accelerometer's range (raw counts?)" if level > MAX_ACCEL_G
+               else "not 1 g (a unit 1000x off?)")
+            + f"; give --units {gyro},ACCEL with the accelerometer's unit (g, mg, m/s2), "
+            "or convert counts to a unit first")
+
+
+MAX_ACCEL_G = 32.0
+"""Largest level a static accelerometer's samples may read, g (the LSM6DS parts' widest
+full scale is 16 g; raw int16 counts read as g are in the thousands)."""
+MIN_ACCEL_G = 0.05
+"""Smallest |a| of a three-axis accelerometer at rest, g (free fall aside: 1 g)."""
 
 
 TIME_RATE_HZ = (1e-3, 1e6)
