@@ -531,3 +531,19 @@ def test_an_accelerometer_level_no_unit_explains_is_refused(
     path.write_text("\n".join(rows) + "\n")
     with pytest.raises(RecordingError, match=match):
         load_recording(path)
+
+
+def test_a_decimated_sample_counter_is_read_at_the_logged_rate(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A log of every 10th value of a sample counter (t at 100 Hz) was read at 1000 Hz
+    with 90 % of the samples lost and every Allan deviation NaN; a hole stays a hole."""
+    rng = np.random.default_rng(0)
+    keep = [k for k in range(3000) if not 1000 <= k < 1010]
+    rows = ["sample,t,gx [dps]"] + [f"{10 * k},{k / 100:.2f},{rng.normal(0, 0.5):.5f}"
+                                    for k in keep]
+    path = tmp_path / "dec.csv"
+    path.write_text("\n".join(rows) + "\n")
+    with caplog.at_level("WARNING"):
+        rec = load_recording(path)
+    assert rec.rate_hz == pytest.approx(100.0) and len(rec) == 2990
+    assert rec.lost_samples == 10 and "steps by multiples of 10" in caplog.text

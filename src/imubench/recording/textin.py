@@ -472,6 +472,11 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if index_col is not None:
         if not np.all(np.isfinite(index_col)):
             raise RecordingError(f"{where}: the index column has empty values")
+        stride = _index_stride(index_col)
+        if stride > 1:  # every stride-th value of a counter: a decimated log
+            notes.append(f"{where}: the index column steps by multiples of {stride} (a "
+                         f"counter logged every {stride}th sample); read as index / {stride}")
+            index_col = np.floor_divide(index_col - index_col[0], stride)
         tb = timebase_from_index(index_col, t_s, where, rate,
                                  np.asarray(raw.row_lines))
     elif t_s is not None:
@@ -540,6 +545,18 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred,
                     rate_stated=options.rate_hz is None and stated is not None
                     and "t" in where_col)
+
+
+def _index_stride(index: np.ndarray) -> int:
+    """The greatest common divisor of a sample-index column's increasing steps (1 for an
+    index of consecutive samples). A log that writes every 10th value of a sample
+    counter was read at 10x its rate with 90 % of the samples "lost", every Allan
+    deviation NaN."""
+    steps = np.diff(index)
+    steps = steps[steps > 0]
+    if not steps.size or not np.all(steps == np.round(steps)):
+        return 1
+    return int(np.gcd.reduce(steps.astype(np.int64)))
 
 
 def _stamps_against_stated(t_s: np.ndarray, at_stated: Timebase,
