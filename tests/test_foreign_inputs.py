@@ -547,3 +547,19 @@ def test_a_decimated_sample_counter_is_read_at_the_logged_rate(
         rec = load_recording(path)
     assert rec.rate_hz == pytest.approx(100.0) and len(rec) == 2990
     assert rec.lost_samples == 10 and "steps by multiples of 10" in caplog.text
+
+
+def test_a_units_row_under_the_header_is_read(tmp_path: Path) -> None:
+    """``t,gx`` then ``s,rad/s``: the units row was skipped as a damaged line and rad/s
+    read as dps (57x low). A row of words that are no units is still damage."""
+    rng = np.random.default_rng(2)
+    y = rng.normal(0.0, 0.01, 2000)  # rad/s
+    body = "\n".join(f"{k / 100:.2f},{v:.8f}" for k, v in enumerate(y))
+    path = tmp_path / "u.csv"
+    path.write_text("t,gx\ns,rad/s\n" + body + "\n")
+    rec = load_recording(path)
+    assert len(rec) == 2000 and rec.damage is None
+    np.testing.assert_allclose(rec.channel("gx"), np.degrees(np.round(y, 8)), rtol=1e-9)
+    path.write_text("t,gx\nfoo,bar\n" + body + "\n")
+    rec = load_recording(path)
+    assert rec.damage is not None and rec.metadata["units_assumed"] == ["gx"]

@@ -300,7 +300,7 @@ def test_absolute_unix_times_give_their_unit_by_magnitude(tmp_path: Path, t0: fl
     (9.81, ("dps", "g"), "m/s2 read as g (--units); give --units dps,m/s2"),
     # without --units the fix does not guess the gyro's unit (rad/s read as dps is 57x)
     (1000.0, None, "mg read as g; give --units GYRO,mg (GYRO: the gyroscope's unit, dps or "
-                   "rad/s; it is read as dps now)"),
+                   "rad/s; it is read as dps now, which nothing in the file states)"),
     (1.0, ("dps", "m/s2"), "g read as m/s2 (--units); give --units dps,g"),
 ])
 def test_accelerometer_unit_contradicted_by_gravity_is_refused(

@@ -42,7 +42,15 @@ import numpy as np
 
 from imubench.batch import CHANNELS, Batch, Gap
 from imubench.errors import RecordingError
-from imubench.recording.columns import OWN_NAMES, Column, is_euroc, is_ros_export, map_columns
+from imubench.recording.columns import (
+    OWN_NAMES,
+    TIME_UNIT_WORDS,
+    Column,
+    is_euroc,
+    is_ros_export,
+    map_columns,
+    unit_word,
+)
 from imubench.recording.options import (
     ACCEL_UNITS_G,
     GYRO_UNITS_DPS,
@@ -314,6 +322,15 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
     fields = _split(line, raw.delim)
     if len(fields) == raw.width + 1 and fields[-1] == "" and raw.header is not None:
         fields.pop()  # a trailing separator on the data lines only
+    if (raw.header is not None and not raw.n_rows and not raw.bad_lines
+            and len(fields) == raw.width and any(f.strip() for f in fields)
+            and all(_is_unit(f) for f in fields if f.strip())):
+        # a units row under the header (`t,gx` then `s,rad/s`): each unit joins its
+        # column's name, as if the header said `gx [rad/s]` (it was skipped as a damaged
+        # line and its units ignored: rad/s read as dps)
+        raw.header = [f"{h} [{u.strip()}]" if u.strip() and not re.search(r"[\[(]", h)
+                      else h for h, u in zip(raw.header, fields, strict=True)]
+        return
     if len(fields) != raw.width:
         raw.bad_lines.append(lineno)
         return
@@ -329,6 +346,14 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
             row.append(math.nan)
             raw.row_fail.setdefault(raw.n_rows, []).append(j)
     raw.add(row, lineno)
+
+
+def _is_unit(text: str) -> bool:
+    """Whether a cell of a units row names a unit imubench reads (gyro, accelerometer,
+    time or temperature)."""
+    u = unit_word(text.strip().strip("[]()"))
+    return (u in GYRO_UNITS_DPS or u in ACCEL_UNITS_G or u in TIME_UNIT_WORDS
+            or u in TEMP_UNITS or u.lower() in _TEMP_WORDS)
 
 
 def _pick(cols: list[Column], spec: str, where: str) -> int:
@@ -437,6 +462,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                 factor, unit = stated
             else:
                 assumed.append(ch)
+        elif (given is None and col.unit is None and not (ros or euroc)
+              and "odr_hz" not in raw.meta):
+            assumed.append(ch)  # imubench's names, but not its file: nothing states it
         values[:, i] = table[:, where_col[ch]] * factor
         used_units[ch] = unit
     _check_gravity(values, used_units, options, where, assumed)
