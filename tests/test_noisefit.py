@@ -392,19 +392,25 @@ def test_kalibr_values_hand_computed() -> None:
     assert k["markov_folded"] == {}
 
 
-def test_kalibr_folds_a_slow_markov_term_into_the_density() -> None:
+def test_kalibr_folds_a_slow_markov_term_into_the_random_walk() -> None:
     """Kalibr has no Gauss-Markov term: one too slow to count in N (tau_c 30 s) enters the
-    noise density as sigma sqrt(2 tau_c), the bound of its spectrum, instead of being
-    dropped (which wrote a density below the measured ADEV)."""
+    bias random walk as sigma sqrt(2 / tau_c), the walk it is over short times, whose
+    spectrum bounds it; the density stays the white level (folded into it as
+    sigma sqrt(2 tau_c) it was 10-27x the measured white level)."""
     params = {"gx": {"white": 0.004, "random_walk": 1e-4, "markov_sigma": 0.04,
                      "markov_tau": 30.0},
               "gy": {"white": 0.005, "random_walk": 2e-5},
               "az": {"white": 8e-5, "random_walk": 2e-6}}
     k = kalibr_imu(params, 10.0)
-    n = math.hypot(0.004, 0.04 * math.sqrt(2 * 30.0))
-    assert k["gyroscope_noise_density"] == pytest.approx(n * math.pi / 180)
-    assert k["markov_folded"] == {"gyroscope_noise_density": ["gx"]}
+    assert k["gyroscope_noise_density"] == pytest.approx(0.005 * math.pi / 180)
+    walk = math.hypot(1e-4, 0.04 * math.sqrt(2 / 30.0))
+    assert k["gyroscope_random_walk"] == pytest.approx(walk * math.pi / 180)
+    assert k["markov_folded"] == {"gyroscope_random_walk": ["gx"]}
     assert "holds the Gauss-Markov term of gx" in kalibr_yaml(k)
+    # the folded walk's spectrum bounds the Markov term's at every frequency
+    f = np.geomspace(1e-5, 5.0, 200)
+    markov = 2 * 0.04**2 * 30.0 / (1 + (2 * math.pi * f * 30.0) ** 2)
+    assert np.all((0.04 * math.sqrt(2 / 30.0)) ** 2 / (2 * math.pi * f) ** 2 >= markov)
 
 
 # ------------------------------------------------------------------ model selection (issue 14)

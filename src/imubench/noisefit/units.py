@@ -27,9 +27,9 @@ dps/sqrt(Hz)); their sum is what the -1/2 slope of the measured curve shows.
 Kalibr (``imu.yaml``, continuous-time densities in SI; Kalibr wiki "IMU Noise Model"): its
 white-noise density sigma has discrete std sigma/sqrt(dt) per sample and its bias random
 walk sigma_b a discrete std sigma_b sqrt(dt) per sample, which is exactly N and K here:
-gyroscope_noise_density = N pi/180 rad/s/sqrt(Hz) (N with a slower Gauss-Markov term
-folded in, :func:`kalibr_density`), gyroscope_random_walk = K pi/180
-rad/s^2/sqrt(Hz), accelerometer_noise_density = N g0 m/s^2/sqrt(Hz),
+gyroscope_noise_density = N pi/180 rad/s/sqrt(Hz), gyroscope_random_walk = K pi/180
+rad/s^2/sqrt(Hz) (K with a slower Gauss-Markov term folded in,
+:func:`kalibr_random_walk`), accelerometer_noise_density = N g0 m/s^2/sqrt(Hz),
 accelerometer_random_walk = K g0 m/s^3/sqrt(Hz), update_rate = the sample rate (Hz).
 """
 
@@ -213,19 +213,21 @@ def check_kalibr_request(inflate: float, channels: Iterable[str] | None = None) 
                        "was fitted; fit both sensors")
 
 
-def kalibr_density(params: Mapping[str, float]) -> float:
-    """The noise density written for Kalibr: :func:`white_equivalent` with a Gauss-Markov
-    term of any correlation time folded in as sigma sqrt(2 tau_c). Kalibr's model has
-    white noise and a bias random walk only; the Markov's spectrum 2 sigma^2 tau_c /
-    (1 + (2 pi f tau_c)^2) never exceeds 2 sigma^2 tau_c, so the folded density bounds it
-    at every frequency and a filter that reads the file never trusts the sensor more than
-    the data allow (Samsung S5 gyros, sigma 0.04 dps, tau_c 1.4 s, before such a term
-    counted in N: the white-only density was 4x below the measured ADEV at 1 s)."""
-    n = white_equivalent(params)
+def kalibr_random_walk(params: Mapping[str, float]) -> float:
+    """The bias random walk written for Kalibr: K with a Gauss-Markov term slower than
+    :data:`SHORT_MARKOV_S` (bias wander, not in N) folded in as sigma sqrt(2 / tau_c).
+    Kalibr's model has white noise and a bias random walk only. Over times short against
+    tau_c a Gauss-Markov process diffuses as a random walk of that coefficient, and its
+    spectrum 2 sigma^2 tau_c / (1 + (2 pi f tau_c)^2) never exceeds the random walk's
+    (2 sigma^2 / tau_c) / (2 pi f)^2: the folded walk bounds it at every frequency and
+    equals it in any filter's band (f >> 1 / (2 pi tau_c)). Folded into the density
+    instead, as sigma sqrt(2 tau_c), a tau_c of 16-200 s made the density 10-27x the
+    measured white level and left the walk 11x low."""
+    k = float(params.get("random_walk", 0.0))
     tau_c = float(params.get("markov_tau", 0.0))
     if tau_c > SHORT_MARKOV_S:
-        n = math.hypot(n, math.sqrt(2.0 * tau_c) * float(params.get("markov_sigma", 0.0)))
-    return n
+        k = math.hypot(k, float(params.get("markov_sigma", 0.0)) * math.sqrt(2.0 / tau_c))
+    return k
 
 
 def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: float,
@@ -263,9 +265,9 @@ def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: fl
         for ch in chans:
             if ch not in params_by_channel:
                 continue
-            v = (kalibr_density(params_by_channel[ch]) if term == WHITE_EQUIVALENT
+            v = (kalibr_random_walk(params_by_channel[ch]) if term == "random_walk"
                  else term_value(params_by_channel[ch], term))
-            if term == WHITE_EQUIVALENT and v > term_value(params_by_channel[ch], term):
+            if term == "random_walk" and v > term_value(params_by_channel[ch], term):
                 folded.setdefault(key, []).append(ch)
             if v <= 0.0 and term in limits.get(ch, {}):
                 values.append((float(limits[ch][term]), True, ch))
@@ -311,8 +313,8 @@ def kalibr_yaml(values: Mapping[str, Any]) -> str:
                      f"limit (never zero): {', '.join(limits)}")
     for key, chans in dict(values.get("markov_folded", {})).items():
         lines.append(f"# imubench: {key} holds the Gauss-Markov term of {', '.join(chans)} "
-                     "(Kalibr's model has none) as sigma sqrt(2 tau_c), which bounds its "
-                     "spectrum")
+                     "(Kalibr's model has none) as sigma sqrt(2 / tau_c), the random walk "
+                     "it is over times short against tau_c, which bounds its spectrum")
     for key in ("rostopic", "update_rate", "accelerometer_noise_density",
                 "accelerometer_random_walk", "gyroscope_noise_density", "gyroscope_random_walk"):
         if key not in values:
