@@ -704,3 +704,24 @@ def test_an_unidentified_filter_bandwidth_is_named_on_a_real_record(reference_di
     assert hi / lo > 10
     assert any(n.startswith("the output filter's bandwidth is not identified")
                for n in fit.notes), fit.notes
+
+
+def test_a_degenerate_profile_does_not_identify_a_setting() -> None:
+    """A profile interval of zero width ([1.991, 1.991] s for tau_c on the whole,
+    non-stationary CATS record) is the optimiser's, not the data's: the term is dropped
+    with that reason, not kept as perfectly identified; a real interval inside the
+    data's taus keeps it."""
+    from types import SimpleNamespace
+    from typing import Any, cast
+
+    from imubench.noisefit.fit import _extension_verdict
+
+    st = cast(Any, SimpleNamespace(tau_c_s=1.991))
+    pts = cast(Any, SimpleNamespace(tau_s=np.geomspace(1.0, 6.5e4, 17)))
+    ok, why, _ = _extension_verdict("markov", st, cast(Any, None),
+                                    {"markov_tau": (1.9905, 1.9915)}, pts,
+                                    np.zeros(0), 50.0, 0.0)
+    assert not ok and "a profile this narrow is the optimiser's" in why
+    ok, why, _ = _extension_verdict("markov", st, cast(Any, None),
+                                    {"markov_tau": (1.5, 2.8)}, pts, np.zeros(0), 50.0, 0.0)
+    assert ok and why.startswith("kept")

@@ -799,6 +799,12 @@ def _endpoint_ci(x: np.ndarray, theta: np.ndarray, j: int, pts: Points,
     return math.sqrt(max(lo, 0.0)), math.sqrt(max(hi, 0.0))
 
 
+DEGENERATE_PROFILE = 0.01
+"""A setting's profile interval narrower than this (relative) is degenerate: the whole
+74.5 h CATS record (non-stationary) gave tau_c 1.991 s [1.991, 1.991] and a bandwidth
+0.03392 Hz [0.03392, 0.03392], both kept as identified; the term is then dropped."""
+
+
 def _profile(st: Structure, kind: str, pts: Points, sigma: np.ndarray,
              chi2_min: float) -> tuple[tuple[float, float], list[Structure]]:
     """Profile 95 % interval of one nonlinear setting: chi-squared rise <= 3.84.
@@ -972,6 +978,9 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
     if kind == "markov":
         t0, t1 = float(pts.tau_s[0]), float(pts.tau_s[-1])
         where = f"tau_c {value:.3g} s, profile 95 % interval [{lo:.3g}, {hi:.3g}] s"
+        if hi / lo - 1.0 < DEGENERATE_PROFILE:
+            return False, (f"dropped, tau_c not identified ({where}: a profile this narrow "
+                           "is the optimiser's, not the data's)"), None
         if lo >= t0 and hi <= t1:
             return (True, f"kept, {head}, {where} within the data's taus "
                     f"[{t0:.3g}, {t1:.3g}] s", None)
@@ -979,6 +988,9 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
                        f"taus [{t0:.3g}, {t1:.3g}] s)"), None
     if kind == "filter":
         where = f"bandwidth {value:.3g} Hz, profile 95 % interval [{lo:.3g}, {hi:.3g}] Hz"
+        if hi / lo - 1.0 < DEGENERATE_PROFILE:
+            return False, (f"dropped, bandwidth not identified ({where}: a profile this "
+                           "narrow is the optimiser's, not the data's)"), None
         pinned = _filter_pinned(st, pts)
         if pinned and not pts.filter_bounded:
             return False, (f"dropped, bandwidth not identified ({value:.3g} Hz is the lowest "
