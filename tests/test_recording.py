@@ -920,3 +920,30 @@ def test_a_recording_in_segments_reads_whole_from_its_first_file(
     with caplog.at_level("WARNING"):
         assert len(load_recording(other)) == 512
     assert "not read as a segment of" in caplog.text
+
+
+def test_replace_text_on_a_full_disk_leaves_the_old_file_and_no_partial_one(
+        tmp_path: Path) -> None:
+    """A jig's result.json on a full disk was left cut at byte 8192 (invalid JSON) while
+    its junit.xml read as a pass: a small file is written whole or not at all."""
+    import shutil
+    import subprocess
+
+    from imubench.recording.commit import replace_text
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None or subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
+            capture_output=True).returncode:
+        pytest.skip("cannot mount a small tmpfs here (needs root and mount)")
+    try:
+        target = disk / "result.json"
+        replace_text(target, '{"verdict": "PASS"}\n')
+        (disk / "filler").write_bytes(b"\0" * (60 * 1024))
+        with pytest.raises(OSError):
+            replace_text(target, "x" * (200 * 1024))
+        assert target.read_text() == '{"verdict": "PASS"}\n'
+        assert sorted(p.name for p in disk.iterdir()) == ["filler", "result.json"]
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from imubench.jig.measurement import FAIL, INCONCLUSIVE, PASS, overall
+from imubench.recording.commit import replace_text
 
 FORMAT = "imubench-jig-result"
 EXIT_STATUS = {PASS: 0, FAIL: 1, INCONCLUSIVE: 3}
@@ -284,8 +285,9 @@ limits, FAIL when it lies wholly outside, INCONCLUSIVE otherwise.</p>
 
 
 def write_result(run_dir: Path, result: dict[str, Any]) -> Path:
+    """``result.json``, written whole or not at all (:func:`replace_text`)."""
     path = run_dir / "result.json"
-    path.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    replace_text(path, json.dumps(result, indent=1, allow_nan=False) + "\n")
     return path
 
 

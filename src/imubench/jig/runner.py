@@ -134,11 +134,18 @@ def run_jig(station_path: str | Path, report_dir: str | Path, *, dut: str | None
                           sensor=station.station.sensor, run_id=run_dir.name,
                           started_utc=started, finished_utc=_now(),
                           wall_time_s=time.monotonic() - t0)
-    write_result(run_dir, result)
-    write_report(run_dir, result, raw.get("artifacts", {}))
-    append_history(run_dir, {"run_id": run_dir.name, "verdict": result["verdict"],
-                             "finished_utc": result["finished_utc"],
-                             "station": result["station"]})
+    try:
+        write_result(run_dir, result)
+        write_report(run_dir, result, raw.get("artifacts", {}))
+        append_history(run_dir, {"run_id": run_dir.name, "verdict": result["verdict"],
+                                 "finished_utc": result["finished_utc"],
+                                 "station": result["station"]})
+    except OSError as exc:  # a full disk: no result may read as complete
+        _set_aside_junit(run_dir)
+        raise JigError(f"{run_dir}: cannot write the run's result ({exc.strerror}: "
+                       f"{exc.filename or run_dir}); the board's verdict "
+                       f"{result['verdict']} is not recorded, {INCOMPLETE_JUNIT} holds the "
+                       "tests' outcomes") from None
     topic = error = None
     if station.mqtt.broker:
         from imubench.jig.publish import publish_result

@@ -19,6 +19,7 @@ from imubench.jig.measurement import Measurement
 from imubench.jig.procedures import Procedures
 from imubench.jig.station import Station, load_station
 from imubench.jig.units import conversion_factor
+from imubench.recording.commit import replace_text
 
 T = TypeVar("T")
 MEASUREMENTS_FILE = "measurements.json"
@@ -160,7 +161,7 @@ def write_measurements(out_dir: str | Path, session: JigSession | None,
     data["tests"] = outcomes
     path = Path(out_dir) / MEASUREMENTS_FILE
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(plain(data), indent=1, allow_nan=False) + "\n")
+    replace_text(path, json.dumps(plain(data), indent=1, allow_nan=False) + "\n")
     return path
 
 

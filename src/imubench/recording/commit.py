@@ -6,7 +6,7 @@ file's size after each whole batch; on an error they call :func:`cut_back`, whic
 the buffer and cuts the file to that size (shrinking a file needs no free space), so
 the file holds whole batches only and the caller counts the failed batch, and nothing
 else, as not recorded. (Also :func:`need_parent`: the writers' one rule for where a new
-file may go.)
+file may go; and :func:`replace_text`, a small file written whole or not at all.)
 """
 
 from __future__ import annotations
@@ -51,3 +51,21 @@ def cut_back(path: Path, fh: IO[Any], size: int) -> None:
         log.error("%s: cannot cut the partial record off at byte %d: %s", path, size, exc)
     finally:
         os.close(fd)
+
+
+def replace_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` whole or not at all: into ``path.tmp``, flushed to disk,
+    then renamed over ``path`` (POSIX rename is atomic). On an error (a full disk) the
+    temporary file is removed and the OSError raised: a reader never finds a cut file
+    (a jig's ``result.json`` was left cut at byte 8192, invalid JSON)."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
