@@ -235,7 +235,13 @@ def test_a_live_acquisition_says_when_its_die_temperature_leaves_the_sweep(
     rec = load_recording(tmp_path / "a.imbr")
     hot = int(np.sum(rec.temp_c > 35.0))
     assert 0.8 * 104 < hot < 1.2 * 104
-    assert json.loads(stats.read_text())["calibration_extrapolated"] == hot
+    doc = json.loads(stats.read_text())
+    assert doc["calibration_extrapolated"] == hot
+    # the range reached outside, not the first batch's (89.9 to 91.1 on a ramp to 110)
+    lo, hi = doc["calibration_extrapolated_range_c"]["gyro"]
+    assert lo == pytest.approx(rec.temp_c[rec.temp_c > 35.0].min(), abs=1e-6)
+    assert hi == pytest.approx(rec.temp_c.max(), abs=1e-6)
+    assert f"outside it, it reached {lo:.1f} to {hi:.1f} degC" in err
 
 
 def test_the_temperature_polynomial_separates_a_drift_in_time_from_the_temperature() -> None:

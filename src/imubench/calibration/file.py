@@ -218,7 +218,8 @@ class Calibration:
         sensor ``name``'s temperature terms (see :meth:`SensorCalibration.outside_sweep`)."""
         sc = getattr(self, name)
         assert sc is not None and sc.temp_range_c is not None
-        return (f"{where}: die temperature {lo_c:.1f} to {hi_c:.1f} degC, outside the "
+        span = f"{lo_c:.1f}" if f"{lo_c:.1f}" == f"{hi_c:.1f}" else f"{lo_c:.1f} to {hi_c:.1f}"
+        return (f"{where}: die temperature {span} degC, outside the "
                 f"{sc.temp_range_c[0]:.1f} to {sc.temp_range_c[1]:.1f} degC the "
                 f"[{name}] temperature terms of {self._where()} were fitted over: "
                 "they are extrapolated there and may make the values worse")

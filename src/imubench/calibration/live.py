@@ -31,6 +31,8 @@ class LiveCalibration:
         self.samples_extrapolated = 0
         """Samples corrected with a temperature outside a sensor's sweep (+- margin)."""
         self._outside = {name: False for name in SENSORS}
+        self.extrapolated_range_c: dict[str, tuple[float, float]] = {}
+        """Per sensor, the lowest and highest die temperature outside its sweep so far."""
 
     def __call__(self, batch: Batch) -> Batch:
         out = self.calibration.apply(batch)
@@ -43,16 +45,25 @@ class LiveCalibration:
                 continue
             mask = sc.outside_sweep(batch.temp_c)
             beyond |= mask
-            if mask.any() and not self._outside[name]:
+            if mask.any():
                 t = batch.temp_c[mask]
-                self._warn(self.calibration.extrapolation_warning(
-                    name, float(t.min()), float(t.max()), self.where))
+                lo, hi = self.extrapolated_range_c.get(name, (np.inf, -np.inf))
+                self.extrapolated_range_c[name] = (min(lo, float(t.min())),
+                                                   max(hi, float(t.max())))
+            if mask.any() and not self._outside[name]:
+                # the first temperature outside: the range is said when it comes back
+                # (the first batch's alone read 89.9 to 91.1 degC on a ramp to 110)
+                t0 = float(batch.temp_c[int(np.argmax(mask))])
+                self._warn(self.calibration.extrapolation_warning(name, t0, t0, self.where)
+                           + " (from here on)")
                 self._outside[name] = True
             elif self._outside[name] and not mask[-1]:
                 assert sc.temp_range_c is not None
+                lo, hi = self.extrapolated_range_c[name]
                 self._warn(f"{self.where}: die temperature {batch.temp_c[-1]:.1f} degC, back "
                            f"within the [{name}] calibration's {sc.temp_range_c[0]:.1f} to "
-                           f"{sc.temp_range_c[1]:.1f} degC")
+                           f"{sc.temp_range_c[1]:.1f} degC; outside it, it reached "
+                           f"{lo:.1f} to {hi:.1f} degC")
                 self._outside[name] = False
         self.samples_extrapolated += int(beyond.sum())
         return out

@@ -94,6 +94,8 @@ def _stats(src: Source, pipeline: Pipeline, recorder: Recorder,
     stats["recording_lost"] = account.lost + recorder.not_recorded
     if live is not None:
         stats["calibration_extrapolated"] = live.samples_extrapolated
+        stats["calibration_extrapolated_range_c"] = {
+            name: list(r) for name, r in live.extrapolated_range_c.items()}
     return stats
 
 
