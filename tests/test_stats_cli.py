@@ -74,7 +74,7 @@ def test_time_deviation_is_in_degrees_and_gaps_are_terms(tmp_path: Path,
     ``gaps`` column counts the terms a missing sample removed."""
     p = tmp_path / "g.csv"
     y = np.random.default_rng(2).standard_normal(2000) * 0.01
-    p.write_text("t,gx\n" + "".join(f"{i / 100:.2f},{v:.5f}\n" for i, v in enumerate(y)
+    p.write_text("t,gx [dps]\n" + "".join(f"{i / 100:.2f},{v:.5f}\n" for i, v in enumerate(y)
                                     if i != 1000))
     out = tmp_path / "tdev.json"
     assert cli.main(["allan", str(p), "--column", "gx", "--stat", "tdev", "--taus", "1",
