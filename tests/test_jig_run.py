@@ -13,6 +13,7 @@ of CPU; the runs are deterministic (virtual clock, seeded noise).
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import json
 import os
 import select
@@ -27,6 +28,7 @@ import aiomqtt
 import pytest
 from lsm6ds_sim.model import load_model
 
+from imubench import __version__
 from imubench.calibration import Calibration
 from imubench.jig.publish import PAYLOAD_KEYS
 from imubench.tilt.budget import load_budget
@@ -124,6 +126,7 @@ def test_healthy_board_passes_is_kept_and_published(
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert f"published on imubench/{name}/dut/jig" in proc.stdout
     run, res = result_of(report, "SN-OK-1")
+    station_digest = hashlib.sha256(station.read_bytes()).hexdigest()
     assert res["verdict"] == "PASS" and res["exit_status"] == 0
     assert len(res["measurements"]) == 51 and not res["broken_tests"]
     assert res["fixture"].startswith("serial ") and res["source_time_s"] > 600
@@ -155,7 +158,13 @@ def test_healthy_board_passes_is_kept_and_published(
     assert jig(station2, report).returncode == 0
     runs = sorted(p for p in (report / "SN-OK-1").iterdir() if p.is_dir())
     assert len(runs) == 2 and (run / "result.json").read_text() == first
-    assert len((report / "SN-OK-1" / "history.jsonl").read_text().splitlines()) == 2
+    history = (report / "SN-OK-1" / "history.jsonl").read_text().splitlines()
+    assert len(history) == 2
+    # every record names the exact limits and software it was judged with
+    digest = hashlib.sha256(LIMITS.read_bytes()).hexdigest()
+    assert res["limits_sha256"] == digest and res["software"] == {"imubench": __version__}
+    assert res["station_sha256"] == station_digest
+    assert json.loads(history[0])["limits_sha256"] == digest
 
 
 def test_defective_board_fails_naming_each_measurement(tmp_path: Path) -> None:

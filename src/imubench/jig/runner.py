@@ -139,7 +139,9 @@ def run_jig(station_path: str | Path, report_dir: str | Path, *, dut: str | None
         write_report(run_dir, result, raw.get("artifacts", {}))
         append_history(run_dir, {"run_id": run_dir.name, "verdict": result["verdict"],
                                  "finished_utc": result["finished_utc"],
-                                 "station": result["station"]})
+                                 "station": result["station"],
+                                 "limits_sha256": result["limits_sha256"],
+                                 "software": result["software"]})
     except OSError as exc:  # a full disk: no result may read as complete
         _set_aside_junit(run_dir)
         raise JigError(f"{run_dir}: cannot write the run's result ({exc.strerror}: "

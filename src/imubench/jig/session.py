@@ -3,6 +3,7 @@ measurements recorded so far (the plugin's ``jig`` fixture is a :class:`JigSessi
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Callable
@@ -11,6 +12,7 @@ from typing import Any, TypeVar, cast
 
 import numpy as np
 
+from imubench import __version__
 from imubench.jig.dut import Dut, resolve_uri_paths
 from imubench.jig.errors import JigError, StationError
 from imubench.jig.fixtures.base import Fixture
@@ -135,7 +137,10 @@ class JigSession:
             "station": self.station.station.name,
             "sensor": self.station.station.sensor,
             "station_file": str(self.station.path),
+            "station_sha256": _sha256(self.station.path),
             "limits_file": str(self.limits.path),
+            "limits_sha256": _sha256(self.limits.path),
+            "software": {"imubench": __version__},
             "dut": {"uri": self.uri, "chip": self.dut.info.chip, "odr_hz": self.dut.info.odr_hz},
             "fixture": self.fixture.describe(),
             "source_time_s": self.dut.elapsed_s,
@@ -151,6 +156,12 @@ class JigSession:
             if self._server is not None:
                 self._server.stop()
             self.dut.close()
+
+
+def _sha256(path: Path | None) -> str | None:
+    """SHA-256 of a file the run used (the limits or station file as it was), None
+    without one: a result names the exact limits it was judged against."""
+    return None if path is None else hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def write_measurements(out_dir: str | Path, session: JigSession | None,
