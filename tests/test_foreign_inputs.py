@@ -563,3 +563,27 @@ def test_a_units_row_under_the_header_is_read(tmp_path: Path) -> None:
     path.write_text("t,gx\nfoo,bar\n" + body + "\n")
     rec = load_recording(path)
     assert rec.damage is not None and rec.metadata["units_assumed"] == ["gx"]
+
+
+@pytest.mark.parametrize("header", ["T,gyro_x [dps],ms", "T [°C],gyro_x [dps],time",
+                                    "time,T,gyro_x [dps]"])
+def test_a_capital_t_beside_a_time_column_is_the_temperature(tmp_path: Path,
+                                                              header: str) -> None:
+    """``T`` (a temperature in many loggers) was taken for the time: 3902 of 4000 lines
+    "damaged" and the ADEV printed from 98 samples, or the file refused because the time
+    column was in degC. Beside a time column (``ms`` alone is one), or with a temperature
+    unit, it is the temperature."""
+    rng = np.random.default_rng(5)
+    names = [h.strip() for h in header.split(",")]
+    rows = []
+    for k in range(2000):
+        cell = {"T": f"{25 + rng.normal(0, 0.01):.4f}",
+                "gyro_x [dps]": f"{rng.normal(0, 0.5):.6f}"}
+        t = {"ms": f"{10.0 * k:.1f}", "time": f"{k / 100:.2f}"}
+        rows.append(",".join(cell.get(n.split(" [")[0], t.get(n, "")) if n.startswith("T")
+                             else cell.get(n, t.get(n, "")) for n in names))
+    path = tmp_path / "T.csv"
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    rec = load_recording(path)
+    assert len(rec) == 2000 and rec.damage is None and rec.rate_hz == pytest.approx(100.0)
+    assert abs(float(np.nanmean(rec.channel("temp"))) - 25.0) < 0.01

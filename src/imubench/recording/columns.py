@@ -129,10 +129,15 @@ def map_columns(header: list[str]) -> list[Column]:
     taken: set[str] = set()
     names = [normalise(h) for h in header]
     stamp = any(n == "header_stamp" for n, _ in names)
-    for text, (name, unit) in zip(header, names, strict=True):
+    timelike = [k for k, (n, u) in enumerate(names)
+                if ALIASES.get(n) == "t" or u in TIME_UNIT_WORDS or n in _UNIT_NAMED_TIME]
+    for k, (text, (name, unit)) in enumerate(zip(header, names, strict=True)):
         channel = ALIASES.get(name)
         if channel == "t" and stamp and name != "header_stamp":
             channel = None
+        if channel == "t" and _capital_t(text) and (
+                unit in _TEMPERATURE_WORDS or (unit is None and any(j != k for j in timelike))):
+            channel = "temp"  # ``T``: a temperature beside a time column, or in degC
         if channel in taken:
             channel = None
         if channel is not None:
@@ -140,7 +145,18 @@ def map_columns(header: list[str]) -> list[Column]:
         cols.append(Column(text, name, channel, unit))
     if "t" not in taken:  # a column whose header states a time unit is the time
         for k, c in enumerate(cols):
-            if c.channel is None and c.unit in TIME_UNIT_WORDS:
-                cols[k] = Column(c.text, c.name, "t", c.unit)
+            if c.channel is None and (c.unit in TIME_UNIT_WORDS or c.name in _UNIT_NAMED_TIME):
+                cols[k] = Column(c.text, c.name, "t", c.unit or _UNIT_NAMED_TIME[c.name])
                 break
     return cols
+
+
+_UNIT_NAMED_TIME = {"ms": "ms", "millis": "ms", "us": "us", "micros": "us", "ns": "ns"}
+"""Header names that are a time unit alone (an Arduino log's ``ms`` or ``millis``)."""
+_TEMPERATURE_WORDS = frozenset({"degC", "°C", "C", "K", "degF", "F", "°F"})
+
+
+def _capital_t(text: str) -> bool:
+    """Whether a header is a capital ``T`` (with or without a unit): a temperature in
+    many loggers, where ``t`` is time."""
+    return re.sub(r"\s*[\[(].*$", "", text.strip().strip('"')) == "T"
