@@ -587,3 +587,19 @@ def test_a_capital_t_beside_a_time_column_is_the_temperature(tmp_path: Path,
     rec = load_recording(path)
     assert len(rec) == 2000 and rec.damage is None and rec.rate_hz == pytest.approx(100.0)
     assert abs(float(np.nanmean(rec.channel("temp"))) - 25.0) < 0.01
+
+
+@pytest.mark.parametrize("zone", ["+02:00", "+0200", "-05:30", "Z", ""])
+def test_iso_times_with_a_utc_offset_are_read(tmp_path: Path, zone: str) -> None:
+    """pandas writes a time-zone-aware index as ``2024-05-01 00:00:00.010000+00:00``:
+    such files were refused ("no readable data lines"). The offset is applied: the start
+    is the same instant in UTC whatever the zone it was written in."""
+    local = {"+02:00": 14, "+0200": 14, "-05:30": 6, "Z": 12, "": 12}[zone]
+    minute = 30 if zone == "-05:30" else 0
+    rows = [f"2024-05-01T{local:02d}:{minute:02d}:00.{k * 10000:06d}{zone},{k % 5}"
+            for k in range(100)]
+    path = tmp_path / "iso.csv"
+    path.write_text("time,gyro_x [dps]\n" + "\n".join(rows) + "\n")
+    rec = load_recording(path)
+    assert len(rec) == 100 and rec.rate_hz == pytest.approx(100.0)
+    assert rec.t_s[0] == pytest.approx(1714564800.0)  # 2024-05-01T12:00:00Z

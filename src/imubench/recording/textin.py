@@ -167,8 +167,10 @@ FORTRAN_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[dD][-+]?\d+$")
 DIGITS = re.compile(r"^\d+$")
 """The part after a decimal comma, read as a second field (``0,0123`` -> ``0``, ``0123``)."""
 
-ISO_TIME = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(\.\d+)?Z?$")
-"""A date and time as loggers and pandas write them (ISO 8601, UTC when no zone)."""
+ISO_TIME = re.compile(r"^(\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?)"
+                      r"(Z|[+-]\d{2}:?\d{2})?$")
+"""A date and time as loggers and pandas write them (ISO 8601: UTC when no zone, ``Z``,
+or an offset ``+02:00`` / ``+0200``, as pandas writes a time-zone-aware index)."""
 
 
 def _number(text: str) -> float:
@@ -183,8 +185,14 @@ def _number(text: str) -> float:
     except ValueError:
         if FORTRAN_NUMBER.match(text):
             value = float(text.replace("D", "E").replace("d", "e"))
-        elif ISO_TIME.match(text):
-            return float(np.datetime64(text.rstrip("Z"), "ns").astype(np.int64)) * 1e-9
+        elif m := ISO_TIME.match(text):
+            utc = float(np.datetime64(m.group(1), "ns").astype(np.int64)) * 1e-9
+            zone = m.group(2) or "Z"
+            if zone != "Z":  # local time = UTC + offset
+                sign = -1.0 if zone[0] == "-" else 1.0
+                digits = zone[1:].replace(":", "")
+                utc -= sign * (int(digits[:2]) * 3600 + int(digits[2:]) * 60)
+            return utc
         else:
             raise
     if not math.isfinite(value):
