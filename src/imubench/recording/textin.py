@@ -28,6 +28,7 @@ exports, Stable32 / allantools one- and two-column files (``.gz`` for all).
 
 from __future__ import annotations
 
+import csv
 import gzip
 import json
 import math
@@ -144,10 +145,19 @@ def _split(line: str, delim: str | None) -> list[str]:
             else:
                 fields.append(f.strip('"'))
         return fields
-    fields = [f.strip().strip('"').strip() for f in line.split(delim)]
+    parts = next(csv.reader([line], delimiter=delim)) if '"' in line else line.split(delim)
+    fields = [f.strip().strip('"').strip() for f in parts]
     if delim in (";", "\t"):
-        fields = [f.replace(",", ".") for f in fields]
-    return fields
+        return [f.replace(".", "").replace(",", ".") if _THOUSANDS_POINT.match(f)
+                else f.replace(",", ".") for f in fields]
+    return [f.replace(",", "") if _THOUSANDS_COMMA.match(f) else f for f in fields]
+
+
+_THOUSANDS_POINT = re.compile(r"^[-+]?\d{1,3}(\.\d{3})+,\d*$")
+"""``-1.234,567``: thousands points and a decimal comma (a ``;`` or tab export)."""
+_THOUSANDS_COMMA = re.compile(r"^[-+]?\d{1,3}(,\d{3})+(\.\d*)?$")
+"""``"1,234.5"``: thousands commas in a quoted field of a comma-separated file (read
+split at the comma, the line was damaged: every value of 1000 and over was dropped)."""
 
 
 def _is_number(text: str) -> bool:
