@@ -947,3 +947,31 @@ def test_replace_text_on_a_full_disk_leaves_the_old_file_and_no_partial_one(
         assert sorted(p.name for p in disk.iterdir()) == ["filler", "result.json"]
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+def test_hdf5_units_missing_datasets_and_transposed_ones_are_named(tmp_path: Path) -> None:
+    """An imubench-format HDF5 file whose /gyro_dps states units rad/s was read as dps
+    (57x low); a missing dataset read as "damaged or not HDF5", a transposed one as
+    "damaged"."""
+    import h5py
+
+    path = tmp_path / "r.h5"
+    with open_writer(path, meta(storage="raw_int16")) as w:
+        for b in make_batches(n=500, lost=0):
+            w.write(b)
+    assert len(load_recording(path)) == 500
+    with h5py.File(path, "r+") as f:
+        f["gyro_dps"].attrs["units"] = "rad/s"
+    with pytest.raises(RecordingError, match=r"/gyro_dps states units 'rad/s'"):
+        load_recording(path)
+    with h5py.File(path, "r+") as f:
+        f["gyro_dps"].attrs["units"] = "dps"
+        data = f["accel_g"][()]
+        del f["accel_g"]
+        f["accel_g"] = data.T
+    with pytest.raises(RecordingError, match=r"/accel_g is \(3, 500\), transposed"):
+        load_recording(path)
+    with h5py.File(path, "r+") as f:
+        del f["accel_g"]
+    with pytest.raises(RecordingError, match=r"no dataset /accel_g: an imubench HDF5"):
+        load_recording(path)

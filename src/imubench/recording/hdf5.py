@@ -219,6 +219,17 @@ def read_hdf5(path: str | Path) -> tuple[dict[str, Any], Batch, list[Gap], bool]
                     continue
                 v = _get_attr(value)
                 meta[key] = json.loads(v) if key in json_keys else v
+            missing = [name for name in _SERIES if name not in f]
+            if missing:
+                raise RecordingError(
+                    f"{path}: no dataset {', '.join('/' + m for m in missing)}: an "
+                    f"imubench HDF5 recording has {', '.join('/' + n for n in _SERIES)}")
+            for name, (_, units, _) in _SERIES.items():
+                stated = _get_attr(f[name].attrs.get("units", units))
+                if stated != units:  # a unit other than the name's is never read as it
+                    raise RecordingError(
+                        f"{path}: dataset /{name} states units {stated!r}; an imubench "
+                        f"recording holds {units!r} there (convert the values first)")
             cols = {name: np.asarray(f[name][()]) for name in _SERIES}
             raw = np.asarray(f["raw"][()]) if "raw" in f else None
             complete = bool(f.attrs.get("complete", False))
@@ -236,6 +247,11 @@ def read_hdf5(path: str | Path) -> tuple[dict[str, Any], Batch, list[Gap], bool]
     n = len(cols["index"])
     shapes = {name: (n, *tail) for name, (_, _, tail) in _SERIES.items()}
     bad = [name for name, c in cols.items() if c.shape != shapes[name]]
+    flipped = [name for name in bad if cols[name].shape == shapes[name][::-1]]
+    if flipped:  # MATLAB writes column-major: a 3 x N dataset
+        raise RecordingError(f"{path}: dataset /{flipped[0]} is {cols[flipped[0]].shape}, "
+                             f"transposed: one row per sample, {shapes[flipped[0]]}, is "
+                             "needed (MATLAB's h5write stores a matrix transposed)")
     if bad or (raw is not None and raw.shape != (n, len(CHANNELS))):
         raise RecordingError(f"{path}: dataset /{(bad or ['raw'])[0]} does not have one "
                              f"row per sample ({n}); damaged")
