@@ -808,5 +808,25 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
             f"{where}: column t steps by {step:.6g}: {1 / step:.6g} Hz if in seconds (as "
             f"imubench writes it), {1 / (step * scale):.6g} Hz if in {unit}; give "
             f"--time-unit {unit} or --time-unit s (or --rate HZ)")
-    return (f"{unit} (detected)" if unit != "d" else "days (MJD, detected)",
-            scale if unit != "d" else SECONDS_PER_DAY)
+    if unit == "d":
+        return "days (MJD, detected)", SECONDS_PER_DAY
+    return f"{unit} (detected{_other_reading(t_raw, unit, scale)})", scale
+
+
+def _other_reading(t_raw: np.ndarray, unit: str, scale: float) -> str:
+    """``; 0.1 Hz if in s: --time-unit s`` for a time unit told from the stamps' spacing
+    (:func:`time_unit_from_spacing` takes the unit that gives 7 Hz to 7 kHz): a 0.1 Hz
+    drift log in seconds reads as 100 Hz in ms, an 8 kHz one in ms as 8 Hz in s; the
+    neighbouring reading is named so that a user can tell."""
+    step = increasing_step(t_raw)
+    units = list(TIME_UNITS_S)
+    if step is None or unit not in units:
+        return ""
+    i = units.index(unit)
+    out = []
+    for j in (i - 1, i + 1):
+        if 0 <= j < len(units):
+            rate = 1.0 / (step * TIME_UNITS_S[units[j]])
+            if TIME_RATE_HZ[0] <= rate <= TIME_RATE_HZ[1]:
+                out.append(f"{rate:.4g} Hz if in {units[j]}: --time-unit {units[j]}")
+    return "; " + ", ".join(out) if out else ""
