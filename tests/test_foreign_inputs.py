@@ -626,3 +626,22 @@ def test_thousands_separators_are_read(tmp_path: Path, style: str) -> None:
     rec = load_recording(path)
     assert len(rec) == 3000 and rec.damage is None
     np.testing.assert_allclose(rec.channel("gx"), np.round(y, 3) * 1e-3, atol=1e-9)
+
+
+@pytest.mark.parametrize(("header", "channel", "factor"), [
+    ("t,ax_g", "ax", 1.0), ("t,acc_x_mps2", "ax", 1 / 9.80665),
+    ("t,gx_rads", "gx", 180 / np.pi), ("t,gyro_x_dps", "gx", 1.0),
+    ("t,gyro_x_radps", "gx", 180 / np.pi), ("t_sec,gx [deg/sec]", "gx", 1.0),
+    ("t,gx [rad/sec]", "gx", 180 / np.pi), ("t,gx [º/s]", "gx", 1.0),
+    ("t,gx [mrad/s]", "gx", 0.18 / np.pi), ("t,az [ms^-2]", "az", 1 / 9.80665),
+    ("t,az [cm/s^2]", "az", 0.01 / 9.80665)])
+def test_unit_suffixes_and_spellings_are_read(tmp_path: Path, header: str, channel: str,
+                                              factor: float) -> None:
+    """Units in a name's suffix (``ax_g``, ``gyro_x_radps``, ``t_sec``) and spellings
+    such as ``deg/sec``, ``º/s``, ``mrad/s``, ``ms^-2``, ``cm/s^2`` were refused."""
+    v = np.array([0.3, 0.1, 0.2, 0.4] * 50)
+    path = tmp_path / "u.csv"
+    path.write_text(header + "\n" + "\n".join(f"{k / 100:.2f},{x}" for k, x in enumerate(v))
+                    + "\n")
+    rec = load_recording(path)
+    np.testing.assert_allclose(rec.channel(channel), v * factor, rtol=1e-12)

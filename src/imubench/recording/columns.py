@@ -29,7 +29,13 @@ _ACCEL_STEMS = ("a", "acc", "accel", "accelerometer", "acceleration", "linear_ac
 _TIME_NAMES = ("t", "time", "timestamp", "stamp", "time_s", "t_s", "header_stamp",
                "seconds", "sec", "time_stamp", "elapsed", "elapsed_time", "sample_time",
                "zeit")
-_TIME_SUFFIXES = {"_ms": "ms", "_us": "us", "_ns": "ns", "_s": "s", "_min": "min", "_h": "h"}
+_TIME_SUFFIXES = {"_ms": "ms", "_us": "us", "_ns": "ns", "_s": "s", "_sec": "s",
+                  "_min": "min", "_h": "h"}
+_VALUE_SUFFIXES = {"_dps": "dps", "_degs": "dps", "_deg_s": "dps", "_mdps": "mdps",
+                   "_rads": "rad/s", "_radps": "rad/s", "_rad_s": "rad/s",
+                   "_g": "g", "_mg": "mg", "_mps2": "m/s2", "_ms2": "m/s2", "_m_s2": "m/s2"}
+"""Unit suffixes of a gyro or accelerometer column's name (``gyro_x_dps``, ``ax_g``,
+``acc_x_mps2``): the unit, and the name without it."""
 
 
 def _aliases() -> dict[str, str]:
@@ -68,6 +74,12 @@ _UNIT_WORDS = {
     "s": "s", "sec": "s", "ms": "ms", "us": "us", "µs": "us", "ns": "ns", "min": "min",
     "h": "h",
     "degc": "degC", "°c": "degC", "c": "degC",
+    # spellings seen in loggers' exports
+    "deg/sec": "dps", "º/s": "dps", "degrees/s": "dps", "deg s-1": "dps",
+    "rad/sec": "rad/s", "mrad/s": "mrad/s", "mrad/sec": "mrad/s",
+    "ms^-2": "m/s2", "ms-2": "m/s2", "m.s^-2": "m/s2", "m.s-2": "m/s2", "mps2": "m/s2",
+    "cm/s^2": "cm/s2", "cm/s2": "cm/s2", "cm/s²": "cm/s2", "gal": "cm/s2",
+    "radps": "rad/s",
 }
 
 
@@ -108,6 +120,11 @@ def normalise(text: str) -> tuple[str, str | None]:
             if s.endswith(suffix) and ALIASES.get(s) == "t":
                 unit = u
                 break
+    if unit is None:
+        for suffix, u in _VALUE_SUFFIXES.items():
+            stem = s[: -len(suffix)]
+            if s.endswith(suffix) and ALIASES.get(stem, "t") not in ("t", "temp", "index"):
+                return stem, u
     return s, unit
 
 
