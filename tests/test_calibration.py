@@ -359,3 +359,25 @@ def test_capture_mean_with_a_hole_in_the_middle_has_a_finite_standard_error() ->
         assert m.n == 6040 and np.isfinite(m.stderr) and np.isfinite(m.edf)
         ratios.append(m.stderr / (0.01 / np.sqrt(m.n)))
     assert 0.8 < float(np.median(ratios)) < 1.25, ratios
+
+
+def test_run_check_refuses_a_calibration_for_another_chip_or_range(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``run --check`` said "configuration is valid" for a calibration of another chip
+    or full scale, which ``run`` then refused at its start."""
+    from imubench.cli import main
+
+    cal = Calibration({**PROV, "chip": "lsm6dsl"}, gyro=_sensor("dps", full_scale=250.0))
+    path = cal.save(tmp_path / "cal.toml").path
+    assert path is not None
+    for uri, words in (("sim://lsm6dsm?odr_hz=104", "lsm6dsm"),
+                       ("sim://lsm6dsl?odr_hz=104&fs_dps=500", "500 dps"),
+                       ("sim://lsm6dsl?odr_hz=104", None)):
+        cfg = tmp_path / "run.toml"
+        cfg.write_text(f'[source]\nuri = "{uri}"\n[calibration]\nfile = "{path}"\n')
+        code = main(["run", "--config", str(cfg), "--check"])
+        out = capsys.readouterr()
+        if words is None:
+            assert code == 0 and "configuration is valid" in out.out
+        else:
+            assert code == 2 and words in out.err, out.err

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-from imubench.config import load_config, quickstart_file, reference_markdown
+from imubench.config import Config, load_config, quickstart_file, reference_markdown
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +34,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _check_calibrations(config: Config) -> None:
+    """Each sensor's calibration file against its source's chip and full scales, as the
+    start does (``--check`` passed a calibration for another chip that ``run`` then
+    refused); no device is opened."""
+    from imubench.calibration import Calibration
+    from imubench.sources.registry import open_source
+
+    for spec in config.sensor_specs():
+        if spec.calibration is None:
+            continue
+        info = open_source(spec.uri).info
+        Calibration.load(spec.calibration).check_data(
+            info.chip, info.fs_dps, info.fs_g, None, f"sensor {spec.name}: source {spec.uri}")
+
+
 def run(args: argparse.Namespace) -> int:
     if args.config_reference:
         print(reference_markdown())
@@ -44,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     source = args.config if args.config is not None else quickstart_file()
     config = load_config(source)
     if args.check:
+        _check_calibrations(config)
         print(f"{args.config or 'shipped quick start'}: configuration is valid")
         return 0
     log.info("configuration %s", args.config or "shipped quick start")
