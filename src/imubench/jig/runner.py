@@ -135,13 +135,20 @@ def run_jig(station_path: str | Path, report_dir: str | Path, *, dut: str | None
                           started_utc=started, finished_utc=_now(),
                           wall_time_s=time.monotonic() - t0)
     try:
+        # the verdict first, then the report: a SIGINT or SIGTERM while the plots are
+        # drawn left result.json without its history line and no report
         write_result(run_dir, result)
-        write_report(run_dir, result, raw.get("artifacts", {}))
         append_history(run_dir, {"run_id": run_dir.name, "verdict": result["verdict"],
                                  "finished_utc": result["finished_utc"],
                                  "station": result["station"],
                                  "limits_sha256": result["limits_sha256"],
                                  "software": result["software"]})
+        try:
+            write_report(run_dir, result, raw.get("artifacts", {}))
+        except KeyboardInterrupt:
+            result["report"] = None  # stopped while drawing: the verdict stands
+            write_result(run_dir, result)
+            raise
     except OSError as exc:  # a full disk: no result may read as complete
         _set_aside_junit(run_dir)
         raise JigError(f"{run_dir}: cannot write the run's result ({exc.strerror}: "
