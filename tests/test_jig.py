@@ -111,6 +111,9 @@ def test_station_errors_name_file_and_key(tmp_path: Path) -> None:
     p.write_text("[station]\nname = 'a/b'\n")
     with pytest.raises(JigError, match=r"key station\.name.*'/'"):
         load_station(p)
+    p.write_text("[capture]\nsettle_s = \"2\"\n")  # a string is no number (was 2 s)
+    with pytest.raises(JigError, match=r"key capture\.settle_s"):
+        load_station(p)
     p.write_text("[dut]\nuri = 'i2c:///dev/i2c-1'\n[fixture]\nkind = 'sim'\n")
     with pytest.raises(JigError, match="the DUT must be sim://"):
         load_station(p)

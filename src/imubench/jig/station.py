@@ -19,7 +19,10 @@ CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """A station file's table: unknown keys refused, and values of the type they are
+    (strict: ``settle_s = "2"``, a string, was taken as 2 s)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class StationSection(_Section):
