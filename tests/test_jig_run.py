@@ -444,3 +444,19 @@ def test_a_board_that_resets_itself_fails_on_the_session_losses(tmp_path: Path) 
     assert "fifo.session_lost_samples" in failing(res)
     m = next(m for m in res["measurements"] if m["name"] == "fifo.session_lost_samples")
     assert m["value"] > 0 and "chip reset" in m["method"]
+
+
+def test_a_frozen_output_is_named(tmp_path: Path) -> None:
+    """The output frozen on every axis for 30 s of the static capture read as 30 % less
+    noise (PASS) and FAILed only through ARW and bias instability; a freeze during the
+    rate table gave gain errors of -37 %, or passed. A capture with eight or more
+    samples repeating on every axis is named as frozen."""
+    station = write_station(tmp_path, "frozen", capture=FAST.format(static_s=60.0))
+    station.write_text(station.read_text().replace(
+        "clock=virtual&", "clock=virtual&stuck_output_at_s=15&stuck_output_for_s=30&"))
+    proc = jig(station, tmp_path / "reports", "--serial", "SN-FROZEN")
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
+    _, res = result_of(tmp_path / "reports", "SN-FROZEN")
+    why = res["broken_reasons"]["suite/test_3_static.py::test_zero_rate_level[gx]"]
+    assert "static +Z up: the output did not change on any axis for" in why
+    assert "a frozen output" in why

@@ -97,6 +97,16 @@ class Capture:
     def channel(self, name: str) -> np.ndarray:
         return self.values[:, CHANNELS.index(name)]
 
+    def frozen_run(self) -> int:
+        """The longest run of consecutive samples that repeat the one before on every
+        channel at once: a frozen output (noise moves each axis by an LSB or more
+        between samples, so six axes repeating together even twice is rare)."""
+        same = np.all(self.values[1:] == self.values[:-1], axis=1)
+        if not same.any():
+            return 0
+        edges = np.diff(np.r_[0, same.astype(np.int8), 0])
+        return int((np.nonzero(edges < 0)[0] - np.nonzero(edges > 0)[0]).max())
+
 
 DUT_IO_TIMEOUT_S = 10.0
 """A board that answers no transaction for this long (source time) has gone: its tests fail

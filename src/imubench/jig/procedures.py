@@ -90,11 +90,20 @@ def point(label: str, cap: Capture, force: np.ndarray, rate: np.ndarray) -> Poin
         raise CalibrationError(
             f"{label}: the output was clipped at its full scale ({', '.join(clipped)} at "
             "the register's limit): lower the rate or the force, or raise the full scale")
+    frozen = cap.frozen_run()
+    if frozen >= FROZEN_SAMPLES:  # its mean would be one sample's, its noise none
+        raise CalibrationError(
+            f"{label}: the output did not change on any axis for {frozen} samples "
+            f"({frozen / cap.odr_hz:.3g} s): a frozen output")
     means = tuple(capture_mean(cap.channel(ch), cap.odr_hz, float(cap.lsb[i]),
                                f"{label} {ch}") for i, ch in enumerate(CHANNELS))
     return Point(label, cap, means, np.asarray(force, float), np.asarray(rate, float))
 
 
+FROZEN_SAMPLES = 8
+"""Consecutive samples repeating the one before on all six axes that make a capture's
+output frozen (a board whose output froze for 6 s got gain errors of -37 % or passed,
+and a 30 s freeze in the static capture read as 30 % less noise)."""
 RATE_HEADROOM = 0.9
 """Share of the gyro output's range (int16 counts x sensitivity) a station rate may use:
 the rest is left for the zero-rate level and a gain error."""
