@@ -227,7 +227,15 @@ def test_tangent_method_on_single_terms() -> None:
     y = simulate(NoiseModel.single_term("gx", flicker=0.002), n, RATE, 2, channels=["gx"])["gx"]
     t = fit_channel(y, RATE, method="tangent")
     assert t.params["flicker"] == pytest.approx(0.002, rel=0.25)
-    assert t.method == "tangent" and t.present == ("white", "flicker", "random_walk")
+    assert t.method == "tangent" and "flicker" in t.present
+    # white noise alone shows neither a floor nor a +1/2 slope: flicker and random walk
+    # are absent with upper limits (they were read off the falling curve as present)
+    y = simulate(NoiseModel.single_term("gx", white=0.004), 360_000, RATE, 4,
+                 channels=["gx"])["gx"]
+    t = fit_channel(y, RATE, method="tangent")
+    assert t.present == ("white",), t.notes
+    assert t.params["flicker"] == 0.0 and t.ci["flicker"][0] == 0.0
+    assert t.params["random_walk"] == 0.0 and t.ci["random_walk"][1] > 0.0
 
 
 # ------------------------------------------------------------------ identification

@@ -62,20 +62,47 @@ def tangent_readings(tau_s: np.ndarray, dev: np.ndarray
 
 def fit_tangent(y: np.ndarray, rate_hz: float, *, channel: str = "gx",
                 taus: Sequence[float] | None = None) -> ChannelFit:
-    """N, B, K by the tangent method (module docstring); other terms are reported 0."""
+    """N, B, K by the tangent method (module docstring); other terms are reported 0.
+
+    A term is present only where the curve shows it, by the rule of the live readouts
+    (:func:`imubench.fleet.readouts.read_terms`): N needs a point of slope within 0.2 of
+    -1/2, K one of +1/2 with a significant rise, B a floor the curve rises from
+    significantly, or a flat floor (local slope within 0.2 of 0) before the last point.
+    Otherwise the term is absent with the reading as its upper limit (the
+    other terms only add to the curve): on white noise alone the rule read flicker and
+    random walk, with intervals excluding 0, off a curve still falling at -0.6."""
+    from imubench.fleet.readouts import SLOPE_TOLERANCE, read_terms
+
     arr = check_series(y, rate_hz, channel)
     pts = avar_points(arr, rate_hz, taus, channel)
     tau = pts.tau_s
+    dev = np.sqrt(pts.avar)
+    bounds = [_read(dev, pts.edf, i)[1] for i in range(tau.size)]
+    shown = read_terms(tau.tolist(), dev.tolist(), [b[0] for b in bounds],
+                       [b[1] for b in bounds])
     params = dict.fromkeys(PARAM_KEYS, 0.0)
     params["filter_order"] = 1
     ci: dict[str, tuple[float, float]] = {}
     notes = []
-    for key, (values, i) in tangent_readings(tau, np.sqrt(pts.avar)).items():
-        params[key], ci[key] = _read(values, pts.edf, i)
-        notes.append(f"{key} read at tau = {tau[i]:.4g} s")
-    return ChannelFit(channel, float(rate_hz), "tangent", params, ci,
-                      ("white", "flicker", "random_walk"), pts.tau_s, pts.avar, pts.edf,
-                      float(np.nanmean(arr)), notes=tuple(notes))
+    present = []
+    for (key, (values, i)), term in zip(tangent_readings(tau, dev).items(), ("N", "B", "K"),
+                                        strict=True):
+        value, interval = _read(values, pts.edf, i)
+        reading = shown[term]
+        flat = (term == "B" and i < tau.size - 1
+                and abs(float(local_slopes(tau, dev)[i])) <= SLOPE_TOLERANCE)
+        if reading["kind"] == "value" or flat:  # B: a flat floor is read, rise or not
+            params[key], ci[key] = value, interval
+            present.append(key)
+            notes.append(f"{key} read at tau = {tau[i]:.4g} s")
+        else:
+            limit = (float(reading["value"]) if reading["kind"] == "upper"
+                     and reading["value"] is not None else interval[1])
+            ci[key] = (0.0, limit)
+            notes.append(f"{key} not read: {reading['note']}; upper limit {limit:.4g}")
+    return ChannelFit(channel, float(rate_hz), "tangent", params, ci, tuple(present),
+                      pts.tau_s, pts.avar, pts.edf, float(np.nanmean(arr)),
+                      notes=tuple(notes))
 
 
 __all__ = ["FLICKER_FLOOR", "fit_tangent", "tangent_readings"]
