@@ -537,6 +537,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                              f"({100.0 * (own.rate_hz / stated[0] - 1.0):+.3g} %): read "
                              "at the stamps' rate (--rate overrides)")
                 tb, stated = own, None
+        _check_even_spacing(t_s, tb, where)
         if rate is None and not TIME_RATE_HZ[0] <= tb.rate_hz <= TIME_RATE_HZ[1]:
             raise RecordingError(
                 f"{where}: the time column gives {tb.rate_hz:.4g} Hz with t in "
@@ -591,6 +592,32 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred,
                     rate_stated=options.rate_hz is None and stated is not None
                     and "t" in where_col)
+
+
+UNEVEN_SHARE = 0.02
+"""Share of rows that may fall on a sample already taken before the stamps are called
+unevenly spaced (:func:`_check_even_spacing`)."""
+
+
+def _check_even_spacing(t_s: np.ndarray, tb: Timebase, where: str) -> None:
+    """RecordingError when the stamps lie on no grid of one period: more than
+    :data:`UNEVEN_SHARE` of the rows fall on a sample another row already holds. Stamps
+    jittered around a grid keep every row; intervals that vary at random (a phone's
+    sensor events, 10 +- 2 ms) wander off any grid, and were read with 9 % of the rows
+    dropped as "damaged" and 5 % of the samples as holes, the Allan deviation computed
+    on what was left."""
+    finite = int(np.isfinite(t_s).sum())
+    shared = finite - int(tb.keep.sum())
+    if finite and shared > UNEVEN_SHARE * finite:
+        dt = np.diff(t_s[np.isfinite(t_s)])
+        dt = dt[dt > 0]
+        spread = float(np.std(dt) / np.median(dt)) if dt.size else math.nan
+        raise RecordingError(
+            f"{where}: the time stamps are not evenly spaced: {shared} of {finite} rows "
+            f"fall on a sample another row holds at {tb.rate_hz:.6g} Hz (intervals vary by "
+            f"{100 * spread:.0f} %); the Allan statistics need evenly spaced samples: "
+            "resample them, or read the rows in order at a nominal rate with --rate HZ "
+            "--columns t=-")
 
 
 def _index_stride(index: np.ndarray) -> int:
