@@ -664,3 +664,21 @@ def test_unevenly_spaced_stamps_are_refused_and_jitter_is_not(tmp_path: Path) ->
         f"{a:.6f},{b:.6f}" for a, b in zip(t, y, strict=True)) + "\n")
     rec = load_recording(path)
     assert len(rec) == 6000 and rec.lost_samples == 0 and rec.damage is None
+
+
+@pytest.mark.parametrize(("data", "hint"), [
+    ("time,gyro_x [dps]\n" + "".join(f"0,{k:03d},0,{k % 7}\n" for k in range(50)),
+     "decimal commas in a comma-separated file"),
+    (("time,gyro_x [dps]\n" + "".join(f"{k / 100:.2f},{k % 7}\n" for k in range(50)))
+     .encode("utf-16-le"), "UTF-16 text without a byte-order mark")])
+def test_an_unreadable_file_says_what_it_probably_is(tmp_path: Path, data: str | bytes,
+                                                     hint: str) -> None:
+    """Decimal commas in a comma-separated file and UTF-16 without a byte-order mark read
+    as "no readable data lines" or "not a recording", with no hint."""
+    path = tmp_path / "x.csv"
+    if isinstance(data, bytes):
+        path.write_bytes(data)
+    else:
+        path.write_text(data)
+    with pytest.raises(RecordingError, match=hint):
+        load_recording(path)

@@ -366,6 +366,29 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
     raw.add(row, lineno)
 
 
+_DECIMAL_COMMA_CELL = re.compile(r'(^|,)"?[-+]?\d+,\d+"?(,|$)')
+
+
+def _unreadable_hint(path: Path, raw: _Raw) -> str:
+    """What a file no line of which could be read probably is, for the message: UTF-16
+    text without a byte-order mark (every other byte NUL), or decimal commas in a
+    comma-separated file (``0,000,0,6272``: the fields cannot be told apart)."""
+    try:
+        with open_text(path, "latin-1") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return ""
+    if head.count("\0") > len(head) // 4:
+        return ("; the bytes alternate with NULs: UTF-16 text without a byte-order mark? "
+                "save it as UTF-8")
+    lines = [ln for ln in head.splitlines()[1:20] if ln.strip()]
+    if raw.delim == "," and lines and all(_DECIMAL_COMMA_CELL.search(ln) for ln in lines):
+        return ("; decimal commas in a comma-separated file? save it with ';' between "
+                "fields (a comma in a number is then read as a decimal point) or with '.' "
+                "as the decimal mark")
+    return ""
+
+
 def _is_unit(text: str) -> bool:
     """Whether a cell of a units row names a unit imubench reads (gyro, accelerometer,
     time or temperature)."""
@@ -403,11 +426,12 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         what = "no readable data lines" if raw.header is not None or raw.bad_lines else (
             "no data")
         raise RecordingError(f"{where}: {what}; expected a header such as "
-                             "t,gx,gy,gz,ax,ay,az,temp and one sample per line")
+                             "t,gx,gy,gz,ax,ay,az,temp and one sample per line"
+                             + _unreadable_hint(path, raw))
     unreadable = len(raw.bad_lines) + whole_bad
     if unreadable > MOSTLY_BAD * n_data and unreadable > 10:
         raise RecordingError(f"{where}: {unreadable} of {n_data} data lines cannot be read; "
-                             "not a recording")
+                             "not a recording" + _unreadable_hint(path, raw))
     table = raw.table()
     notes: list[str] = []
     if raw.encoding != "utf-8-sig":
