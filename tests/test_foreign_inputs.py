@@ -682,3 +682,13 @@ def test_an_unreadable_file_says_what_it_probably_is(tmp_path: Path, data: str |
         path.write_text(data)
     with pytest.raises(RecordingError, match=hint):
         load_recording(path)
+
+
+def test_a_logger_restart_is_named_where_it_happens(tmp_path: Path) -> None:
+    """A log whose time restarts at 0 halfway had its first half dropped as "damaged"."""
+    rows = [f"{(k % 5000) / 100:.2f},{k % 7}" for k in range(10000)]
+    path = tmp_path / "r.csv"
+    path.write_text("t,gyro_x [dps]\n" + "\n".join(rows) + "\n")
+    with pytest.raises(RecordingError, match=r"r\.csv:5002: the time column goes back "
+                                             r"\(49\.99 -> 0 s\)"):
+        load_recording(path)

@@ -561,7 +561,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                              f"({100.0 * (own.rate_hz / stated[0] - 1.0):+.3g} %): read "
                              "at the stamps' rate (--rate overrides)")
                 tb, stated = own, None
-        _check_even_spacing(t_s, tb, where)
+        _check_even_spacing(t_s, tb, where, np.asarray(raw.row_lines))
         if rate is None and not TIME_RATE_HZ[0] <= tb.rate_hz <= TIME_RATE_HZ[1]:
             raise RecordingError(
                 f"{where}: the time column gives {tb.rate_hz:.4g} Hz with t in "
@@ -618,12 +618,15 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                     and "t" in where_col)
 
 
+RESTART_PERIODS = 10.0
+"""A step back in the time column longer than this many periods is a restart."""
 UNEVEN_SHARE = 0.02
 """Share of rows that may fall on a sample already taken before the stamps are called
 unevenly spaced (:func:`_check_even_spacing`)."""
 
 
-def _check_even_spacing(t_s: np.ndarray, tb: Timebase, where: str) -> None:
+def _check_even_spacing(t_s: np.ndarray, tb: Timebase, where: str,
+                        lines: np.ndarray) -> None:
     """RecordingError when the stamps lie on no grid of one period: more than
     :data:`UNEVEN_SHARE` of the rows fall on a sample another row already holds. Stamps
     jittered around a grid keep every row; intervals that vary at random (a phone's
@@ -633,6 +636,13 @@ def _check_even_spacing(t_s: np.ndarray, tb: Timebase, where: str) -> None:
     finite = int(np.isfinite(t_s).sum())
     shared = finite - int(tb.keep.sum())
     if finite and shared > UNEVEN_SHARE * finite:
+        back = np.nonzero(np.diff(t_s) < -RESTART_PERIODS / tb.rate_hz)[0]
+        if back.size:  # a restart, not jitter: say where (half the file was "damage")
+            i = int(back[0])
+            raise RecordingError(
+                f"{where}:{int(lines[i + 1])}: the time column goes back ({t_s[i]:.6g} -> "
+                f"{t_s[i + 1]:.6g} s) and counts up again ({back.size} such step(s)): a "
+                "logger that restarted, or files joined; split the file there")
         dt = np.diff(t_s[np.isfinite(t_s)])
         dt = dt[dt > 0]
         spread = float(np.std(dt) / np.median(dt)) if dt.size else math.nan
