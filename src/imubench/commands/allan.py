@@ -147,6 +147,16 @@ def format_table(res: Any, unit: str) -> str:
     return "\n".join(lines)
 
 
+def holes_note(data: np.ndarray) -> str | None:
+    """``N of M samples missing (...)`` when the series has holes (NaN), else None: the
+    table's ``gaps`` column alone did not say how much of the record was there."""
+    missing = int(np.count_nonzero(~np.isfinite(data)))
+    if not missing:
+        return None
+    return (f"{missing} of {len(data)} samples missing ({100.0 * missing / len(data):.3g} %): "
+            "the terms that span them are skipped (the gaps column)")
+
+
 def analyse(args: argparse.Namespace, data: np.ndarray, rec_rate: float | None,
             on_progress: Any = None) -> Any:
     """The statistic the options ask for, of one series (``rec_rate``: the recording's
@@ -181,6 +191,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         write_json(with_units(res.to_dict(), channel, unit, args.data_type), args.json)
     # the table goes to stderr when stdout carries the JSON (docs/cli.md)
-    print(format_table(res, unit),
-          file=sys.stderr if args.json == "-" else sys.stdout)
+    out = sys.stderr if args.json == "-" else sys.stdout
+    print(format_table(res, unit), file=out)
+    note = holes_note(data)
+    if note is not None:
+        print(f"# note: {args.input} {channel}: {note}", file=out)
     return 0
