@@ -79,9 +79,9 @@ def test_time_deviation_is_in_degrees_and_gaps_are_terms(tmp_path: Path,
     out = tmp_path / "tdev.json"
     assert cli.main(["allan", str(p), "--column", "gx", "--stat", "tdev", "--taus", "1",
                  "--json", str(out)]) == 0
-    out = capsys.readouterr().out
-    assert "dev in deg" in out
-    assert "gx: 1 of 2000 samples missing (0.05 %)" in out  # the table alone did not say
+    printed = capsys.readouterr().out
+    assert "dev in deg" in printed
+    assert "gx: 1 of 2000 samples missing (0.05 %)" in printed  # the table alone did not say
     doc = json.loads(out.read_text())
     assert doc["units"]["dev"] == "deg" and doc["units"]["drift"] == "dps/s"
     assert doc["units"]["gaps"].startswith("terms") and doc["gaps"][0] > 1
