@@ -692,3 +692,14 @@ def test_a_logger_restart_is_named_where_it_happens(tmp_path: Path) -> None:
     with pytest.raises(RecordingError, match=r"r\.csv:5002: the time column goes back "
                                              r"\(49\.99 -> 0 s\)"):
         load_recording(path)
+
+
+def test_empty_cells_are_lost_samples_of_their_channel_and_said(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    rows = [f"{k / 100:.2f},{'' if k == 7 else k % 5},{k % 3}" for k in range(300)]
+    path = tmp_path / "e.csv"
+    path.write_text("t,gyro_x [dps],gyro_y [dps]\n" + "\n".join(rows) + "\n")
+    with caplog.at_level("WARNING"):
+        rec = load_recording(path)
+    assert np.isnan(rec.channel("gx")[7]) and rec.channel("gy")[7] == 7 % 3
+    assert "empty cells (gx 1)" in caplog.text

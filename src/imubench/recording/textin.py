@@ -509,6 +509,12 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
             assumed.append(ch)  # imubench's names, but not its file: nothing states it
         values[:, i] = table[:, where_col[ch]] * factor
         used_units[ch] = unit
+    empty = {ch: int(np.count_nonzero(np.isnan(values[:, CHANNELS.index(ch)])))
+             for ch in used_units}
+    if any(empty.values()):
+        notes.append(f"{where}: empty cells ("
+                     + ", ".join(f"{ch} {k}" for ch, k in empty.items() if k)
+                     + "): read as that channel's lost samples, the others' kept")
     _check_gravity(values, used_units, options, where, assumed)
     temp = (_in_degc(table[:, where_col["temp"]], cols[where_col["temp"]], where)
             if "temp" in where_col else np.full(len(table), np.nan))
