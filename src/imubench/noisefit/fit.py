@@ -1228,11 +1228,14 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
             params["ramp"] = -params["ramp"]
             lo, hi = ci["ramp"]
             ci["ramp"] = (-hi, -lo)
-    # upper limits for the base terms judged absent (fit with them included)
+    # upper limits for the base terms judged absent: fitted with them included, weighted
+    # by that model's own variances and correlation (weighted by the reduced model's, a
+    # random walk's long-tau rise looked far more certain than it is: every one of 11
+    # undetected K of 1e-4 beside flicker got an upper limit below 1e-4)
     absent = [t for t in BASE_TERMS if AMPLITUDE_KEY[t] not in present]
     if absent:
         withall = replace(st, terms=tuple(dict.fromkeys((*st.terms, *absent))))
-        sol_all = _solve(design(withall, pts), pts.avar, sol.sigma)
+        sol_all, _ = _fit_gls(withall, pts)
         se_all = np.sqrt(np.maximum(np.diag(sol_all.cov_theta), 0.0))
         for term in absent:
             j = withall.terms.index(term)
