@@ -1278,6 +1278,12 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
                          f"{', '.join(shaped) or 'the filtered terms'} hold at the fitted "
                          f"{st.bandwidth_hz:.3g} Hz only, and a small change of the record "
                          "can move them beyond (the white-equivalent N is robust)")
+    if "bandwidth_hz" in present and AMPLITUDE_KEY["quantization"] in present:
+        notes.append(f"quantization is fitted through the output filter ({st.bandwidth_hz:.3g}"
+                     " Hz): it is the angle quantization at the filter's input, not the IEEE "
+                     "952 Q read off the curve (sqrt(3) Q / tau0 is not the measured ADEV at "
+                     "tau0); a rate LSB rounded after the filter is white noise of "
+                     "LSB / sqrt(12 rate)")
     if AMPLITUDE_KEY["resonance"] in present and _resonance_edge(st, pts):
         # a width at the search's edge: the height and width are not identified, so no
         # interval is stated for them (the ADIS16405 gz peak was printed as 0.1715 [0.137,
