@@ -176,7 +176,7 @@ def test_psd_figure_amplitude_units_model_and_range(sim: dict[str, np.ndarray]) 
         bands = {ch: band_psd(sim[ch], RATE) for ch in chans}
         fig = psd_figure("t", fits, bands, sensor)
         ax = fig.axes[0]
-        assert ax.get_ylabel() == f"amplitude spectral density ({unit})"
+        assert ax.get_ylabel() == f"two-sided amplitude spectral density ({unit})"
         assert "unit" not in ax.get_ylabel() and ax.get_xlabel() == "frequency (Hz)"
         scale = 1e3 if sensor == "gyro" else 1e6
         asd = np.concatenate([np.sqrt(b.psd) * scale for b in bands.values()])

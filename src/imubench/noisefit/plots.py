@@ -302,7 +302,7 @@ def psd_figure(title: str, fits: dict[str, ChannelFit], bands: dict[str, BandPSD
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel(f"amplitude spectral density ({style.asd_unit})")
+    ax.set_ylabel(f"two-sided amplitude spectral density ({style.asd_unit})")
     ax.grid(True, which="both", alpha=0.25)
     ax.set_title(title, fontsize=9)
     legend = _legend(ax, chans, [
