@@ -703,3 +703,36 @@ def test_empty_cells_are_lost_samples_of_their_channel_and_said(
         rec = load_recording(path)
     assert np.isnan(rec.channel("gx")[7]) and rec.channel("gy")[7] == 7 % 3
     assert "empty cells (gx 1)" in caplog.text
+
+
+def test_missing_value_cells_interleaved_sensors_and_unreadable_columns(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``NaN`` in an accelerometer column on every other line dropped those lines from
+    the gyro, read at half its rate; interleaved gyro and accelerometer lines gave every
+    deviation NaN with exit status 0; 98 % unreadable cells kept 48 of 3000 lines at
+    3.2 Hz; a capital T that does not increase (a temperature) was read as the time."""
+    rng = np.random.default_rng(9)
+    y = rng.normal(0, 0.5, 3000)
+    path = tmp_path / "n.csv"
+    path.write_text("time [s],gyro_x [dps],acc_z [g],acc_x [g]\n" + "\n".join(
+        f"{k / 100:.2f},{y[k]:.5f},{'NaN' if k % 2 else '1.0'},0.0" for k in range(3000)))
+    with caplog.at_level("WARNING"):
+        rec = load_recording(path)
+    assert rec.rate_hz == pytest.approx(100.0) and len(rec) == 3000
+    assert np.isfinite(rec.channel("gx")).all() and "az" not in rec.channels
+    assert "az left out: no value on most lines (1500 of 3000)" in caplog.text
+    path.write_text("time [s],gyro_x [dps],acc_z [g]\n" + "\n".join(
+        f"{k / 200:.3f}," + (f"{y[k // 2]:.5f}," if k % 2 == 0 else ",1.0")
+        for k in range(6000)))
+    with pytest.raises(RecordingError, match="gyro lines and accelerometer lines interleaved"):
+        load_recording(path)
+    path.write_text("time [s],gyro_x [dps]\n" + "\n".join(
+        f"{k / 100:.2f},{'abc' if k % 50 else y[k]}" for k in range(3000)))
+    with pytest.raises(RecordingError, match=r"2940 of 3000 data lines hold a value that is "
+                                             r"no number in a column read \(gyro_x \[dps\]\)"):
+        load_recording(path)
+    path.write_text("# fs: 100\ngyro_x [dps],T\n" + "\n".join(
+        f"{y[k]:.5f},{25 + rng.normal(0, 0.05):.3f}" for k in range(3000)))
+    rec = load_recording(path)
+    assert len(rec) == 3000 and rec.rate_hz == 100.0
+    assert abs(float(np.nanmean(rec.channel("temp"))) - 25.0) < 0.01

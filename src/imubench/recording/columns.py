@@ -152,7 +152,7 @@ def map_columns(header: list[str]) -> list[Column]:
         channel = ALIASES.get(name)
         if channel == "t" and stamp and name != "header_stamp":
             channel = None
-        if channel == "t" and _capital_t(text) and (
+        if channel == "t" and capital_t(text) and (
                 unit in _TEMPERATURE_WORDS or (unit is None and any(j != k for j in timelike))):
             channel = "temp"  # ``T``: a temperature beside a time column, or in degC
         if channel in taken:
@@ -173,7 +173,7 @@ _UNIT_NAMED_TIME = {"ms": "ms", "millis": "ms", "us": "us", "micros": "us", "ns"
 _TEMPERATURE_WORDS = frozenset({"degC", "°C", "C", "K", "degF", "F", "°F"})
 
 
-def _capital_t(text: str) -> bool:
+def capital_t(text: str) -> bool:
     """Whether a header is a capital ``T`` (with or without a unit): a temperature in
     many loggers, where ``t`` is time."""
     return re.sub(r"\s*[\[(].*$", "", text.strip().strip('"')) == "T"

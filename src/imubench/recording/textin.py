@@ -47,6 +47,7 @@ from imubench.recording.columns import (
     OWN_NAMES,
     TIME_UNIT_WORDS,
     Column,
+    capital_t,
     is_euroc,
     is_ros_export,
     map_columns,
@@ -183,12 +184,22 @@ ISO_TIME = re.compile(r"^(\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?)"
 or an offset ``+02:00`` / ``+0200``, as pandas writes a time-zone-aware index)."""
 
 
+SPARSE_SHARE = 0.5
+"""A channel missing on at least this share of the lines is left out (or, all of them
+being so, the file refused): interleaved gyro and accelerometer lines read as half-empty
+channels gave every deviation NaN with exit status 0."""
+MISSING_CELLS = frozenset({"", "nan", "NaN", "NAN", "-", "n/a", "N/A", "NA", "null", "None"})
+"""Cells that mark a missing value: a lost sample of that channel only (a ``NaN`` in an
+unused accelerometer column on every other line dropped those lines from the gyro, which
+then read at half its rate)."""
+
+
 def _number(text: str) -> float:
-    """The field's value: NaN for an empty field (a hole); an ISO 8601 date and time
-    (``2024-05-01 12:00:00.010``, UTC) as Unix seconds; ValueError for text that is no
-    finite number (an ``inf`` cell is a damaged one, not a value that every command
-    later refuses without saying where)."""
-    if text == "":
+    """The field's value: NaN for a missing one (:data:`MISSING_CELLS`: a hole); an ISO
+    8601 date and time (``2024-05-01 12:00:00.010``, UTC) as Unix seconds; ValueError for
+    text that is no finite number (an ``inf`` cell is a damaged one, not a value that
+    every command later refuses without saying where)."""
+    if text in MISSING_CELLS:
         return math.nan
     try:
         value = float(text)
@@ -473,6 +484,15 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                              "them with --columns gx=NAME,...,az=NAME (and t=NAME)")
     used = set(where_col.values())
     failed = sorted(i for i, js in raw.row_fail.items() if used.intersection(js))
+    if len(failed) > MOSTLY_BAD * len(table) and len(failed) > 10:
+        # refused like lines of the wrong width: what is left is no record of the data
+        # (98 % unreadable cells kept 48 of 3000 lines, read at 3.2 Hz, exit 0)
+        first = raw.row_lines[failed[0]]
+        bad_cols = sorted({cols[j].text.strip() for i in failed[:50]
+                           for j in raw.row_fail[i] if j in used})
+        raise RecordingError(
+            f"{where}:{first}: {len(failed)} of {len(table)} data lines hold a value that "
+            f"is no number in a column read ({', '.join(bad_cols)}); not a recording")
     if failed:
         good = np.ones(len(table), dtype=bool)
         good[failed] = False
@@ -482,6 +502,14 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         if not len(table):
             raise RecordingError(f"{where}: no readable data lines (first unreadable: line "
                                  f"{raw.bad_lines[0]})")
+    k_t = where_col.get("t")
+    if (k_t is not None and "temp" not in where_col and "t" not in options.columns
+            and capital_t(cols[k_t].text) and len(table) > 2
+            and np.mean(np.diff(table[:, k_t]) > 0) < 0.9):
+        # a capital T that does not increase is a temperature, not the time (it was read
+        # as the time: 5985 of 6000 lines dropped)
+        where_col["temp"] = where_col.pop("t")
+        cols[k_t] = Column(cols[k_t].text, cols[k_t].name, "temp", cols[k_t].unit)
     ros, euroc = (raw.header is not None and is_ros_export(raw.header),
                   raw.header is not None and is_euroc(raw.header))
     values = np.full((len(table), len(CHANNELS)), np.nan)
@@ -511,9 +539,25 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         used_units[ch] = unit
     empty = {ch: int(np.count_nonzero(np.isnan(values[:, CHANNELS.index(ch)])))
              for ch in used_units}
-    if any(empty.values()):
+    sparse = [ch for ch, k in empty.items() if k >= SPARSE_SHARE * len(values)]
+    if sparse and len(sparse) == len(empty):
+        missing = np.isnan(values[:, [CHANNELS.index(ch) for ch in sparse]])
+        interleaved = bool(np.all(missing.any(axis=1)) and not np.all(missing.all(axis=1)))
+        raise RecordingError(
+            f"{where}: every channel is missing on most lines ("
+            + ", ".join(f"{ch} {empty[ch]} of {len(values)}" for ch in sparse) + ")"
+            + ("; the sensors take turns line by line (gyro lines and accelerometer lines "
+               "interleaved): write one file per sensor" if interleaved else
+               "; not a recording"))
+    for ch in sparse:  # a column mostly empty: left out, the others read whole
+        values[:, CHANNELS.index(ch)] = np.nan
+        used_units.pop(ch)
+    if sparse:
+        notes.append(f"{where}: {', '.join(sparse)} left out: no value on most lines ("
+                     + ", ".join(f"{empty[ch]} of {len(values)}" for ch in sparse) + ")")
+    if any(empty[ch] for ch in used_units):
         notes.append(f"{where}: empty cells ("
-                     + ", ".join(f"{ch} {k}" for ch, k in empty.items() if k)
+                     + ", ".join(f"{ch} {empty[ch]}" for ch in used_units if empty[ch])
                      + "): read as that channel's lost samples, the others' kept")
     _check_gravity(values, used_units, options, where, assumed)
     temp = (_in_degc(table[:, where_col["temp"]], cols[where_col["temp"]], where)
