@@ -920,6 +920,27 @@ def test_a_recording_in_segments_reads_whole_from_its_first_file(
     with caplog.at_level("WARNING"):
         assert len(load_recording(other)) == 512
     assert "not read as a segment of" in caplog.text
+    # a leftover segment of another run (another ODR) is not joined either
+    caplog.clear()
+    stale = segment_path(base, 2)
+    with open_writer(stale, meta(storage="raw_int16", odr_hz=416.0, segment=2,
+                                 previous_segment=str(base))) as w:
+        w.write(later)
+    with caplog.at_level("WARNING"):
+        assert len(load_recording(base)) == 512
+    assert "its odr_hz is 416.0" in caplog.text
+    # a missing segment 2 is said when a segment 3 lies beside the first
+    caplog.clear()
+    stale.rename(segment_path(base, 3))
+    with caplog.at_level("WARNING"):
+        assert len(load_recording(base)) == 512
+    assert f"run.part2{suffix} is missing, so the later segment(s) run.part3{suffix}" \
+        in caplog.text
+    # a batch over the folder analyses a joined recording once, not its parts again
+    from imubench.batchrun.runner import expand_inputs
+
+    segment_path(base, 3).rename(segment_path(base, 2))
+    assert segment_path(base, 2) not in expand_inputs(tmp_path)
 
 
 def test_replace_text_on_a_full_disk_leaves_the_old_file_and_no_partial_one(

@@ -22,6 +22,7 @@ from typing import Any
 
 from imubench.errors import USER_ERRORS, ImubenchError
 from imubench.progress import progress
+from imubench.recording import segment_path
 from imubench.recording.rosin import is_ros2_bag
 
 RECORDING_SUFFIXES: tuple[str, ...] = (".imbr", ".csv", ".csv.gz", ".mcap", ".h5", ".hdf5")
@@ -89,6 +90,15 @@ def expand_inputs(spec: str | Path) -> list[Path]:
                        if (p.is_file() and _is_recording(p)) or is_ros2_bag(p))
     else:
         paths = [Path(text)]
+    # a later segment is read with its first (imubench.recording, "Segments"): analysed
+    # again on its own it made a second report of the same samples
+    later = set()
+    for p in paths:
+        k = 2
+        while (seg := segment_path(p, k)).exists():
+            later.add(seg)
+            k += 1
+    paths = [p for p in paths if p not in later]
     if not paths:
         raise BatchError(f"{text}: no recordings ({', '.join(RECORDING_SUFFIXES)}) found")
     names: dict[str, Path] = {}

@@ -319,19 +319,24 @@ def _with_segments(first: Recording, kind: str, opts: InputOptions) -> Recording
     while (nxt := segment_path(first.path, len(parts) + 1)).exists():
         rec = _load(nxt, kind, opts)[0]
         previous = Path(str(rec.metadata.get("previous_segment") or "")).name
-        if previous != parts[-1].path.name:
-            log.warning("%s: not read as a segment of %s: its header names %r as the "
-                        "segment before it", nxt, first.path, previous or None)
+        why = _not_a_continuation(parts[-1], rec, previous)
+        if why is not None:
+            log.warning("%s: not read as a segment of %s: %s", nxt, first.path, why)
             break
         if len(rec) and len(parts[-1]) and rec.index[0] <= parts[-1].index[-1]:
             raise RecordingError(
                 f"{nxt}: its first sample {int(rec.index[0])} does not follow "
                 f"{parts[-1].path.name}'s last {int(parts[-1].index[-1])}")
         parts.append(rec)
+    later = [segment_path(first.path, k) for k in range(len(parts) + 2, len(parts) + 6)]
+    if any(p.exists() for p in later):
+        log.warning("%s: %s is missing, so the later segment(s) %s are not read with it",
+                    first.path, segment_path(first.path, len(parts) + 1).name,
+                    ", ".join(p.name for p in later if p.exists()))
     if len(parts) == 1:
         return first
-    log.info("%s: read with its %d later segment(s): %s", first.path, len(parts) - 1,
-             ", ".join(p.path.name for p in parts[1:]))
+    log.warning("%s: read with its %d later segment(s): %s", first.path, len(parts) - 1,
+                ", ".join(p.path.name for p in parts[1:]))
     raws = [p.raw for p in parts]
     damage = "; ".join(f"{p.path.name}: {p.damage}" for p in parts if p.damage)
     meta = {**first.metadata, "segments": [p.path.name for p in parts]}
@@ -343,6 +348,28 @@ def _with_segments(first: Recording, kind: str, opts: InputOptions) -> Recording
         np.concatenate([p.temp_c for p in parts]),
         None if any(r is None for r in raws) else np.concatenate(raws),  # type: ignore[arg-type]
         [g for p in parts for g in p.gaps], damage or None, parts[-1].complete)
+
+
+SEGMENT_KEYS = ("odr_hz", "chip", "source_uri", "gyro_sensitivity_dps",
+                "accel_sensitivity_g")
+"""Header keys a segment must share with the one before it (when both state them)."""
+
+
+def _not_a_continuation(before: Recording, rec: Recording, previous: str) -> str | None:
+    """Why ``rec`` does not continue ``before`` (None: it does): its header names another
+    segment before it, states another ODR, chip, source or scale, or its time stamps go
+    back (a leftover ``NAME.part2.imbr`` of an older run at 416 Hz was joined to a new
+    104 Hz recording, its gap record rewritten)."""
+    if previous != before.path.name:
+        return f"its header names {previous or None!r} as the segment before it"
+    for key in SEGMENT_KEYS:
+        a, b = before.metadata.get(key), rec.metadata.get(key)
+        if a is not None and b is not None and a != b:
+            return f"its {key} is {b!r}, {before.path.name}'s {a!r}"
+    if len(before) and len(rec) and rec.t_s[0] < before.t_s[-1]:
+        return (f"its time stamps start at {rec.t_s[0]:.6g} s, before {before.path.name} "
+                f"ends ({before.t_s[-1]:.6g} s)")
+    return None
 
 
 def _load(path: Path, kind: str, opts: InputOptions) -> tuple[Recording, str, bool]:
