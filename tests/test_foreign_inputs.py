@@ -463,6 +463,10 @@ def test_a_stated_rate_is_checked_against_the_time_stamps(
         load_recording(_stamped(tmp_path / "b.csv", "# sample_rate: 200", 100.0))
     with pytest.raises(RecordingError, match=r"states 200 Hz but the time stamps give 100 Hz"):
         load_recording(_stamped(tmp_path / "c.csv", "# odr_hz: 200", 100.0, index=True))
+    # a file under 10 s is judged too (it was read at twice its stamps' rate)
+    with pytest.raises(RecordingError, match=r"states 200 Hz but the time stamps give 100 Hz"):
+        load_recording(_stamped(tmp_path / "s.csv", "# odr_hz: 200", 100.0, n=900,
+                                index=True))
     # stamps on the stated rate: read as before, no warning about them
     caplog.clear()
     rec = load_recording(_stamped(tmp_path / "d.csv", "# odr_hz: 100", 100.0))

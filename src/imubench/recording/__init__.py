@@ -220,15 +220,22 @@ def measured_rate(index: np.ndarray, t_s: np.ndarray, nominal_hz: float) -> floa
     return rate if abs(rate / nominal_hz - 1.0) > MEASURED_RATE_TOLERANCE else None
 
 
-def _stamps_rate(index: np.ndarray, t_s: np.ndarray, strict: bool = False) -> float | None:
+COARSE_SPAN_S = 1.0
+"""Shortest span of time stamps a gross contradiction (beyond GIVEN_RATE_TOLERANCE) of a
+stated rate is judged over: a 9 s file at twice its stamps' rate was read without a word,
+the 10 s needed to measure a clock's few percent applying to it too."""
+
+
+def _stamps_rate(index: np.ndarray, t_s: np.ndarray, strict: bool = False,
+                 min_span_s: float = MEASURED_RATE_MIN_SPAN_S) -> float | None:
     """The median over k of ``(index[k + n/2] - index[k]) / (t[k + n/2] - t[k])`` (see
-    :func:`measured_rate`); None over less than :data:`MEASURED_RATE_MIN_SPAN_S`, where
-    those spans do not all increase, or (``strict``) where two stamps repeat (rounded
-    coarser than a period: the stamps have no rate of their own)."""
+    :func:`measured_rate`); None over less than ``min_span_s``, where those spans do not
+    all increase, or (``strict``) where two stamps repeat (rounded coarser than a period:
+    the stamps have no rate of their own)."""
     ok = np.isfinite(t_s)
     i, t = index[ok].astype(np.float64), t_s[ok]
     h = len(t) // 2
-    if h < 1 or t[-1] - t[0] < MEASURED_RATE_MIN_SPAN_S:
+    if h < 1 or t[-1] - t[0] < min_span_s:
         return None
     if strict and not np.all(np.diff(t) > 0):
         return None
@@ -242,11 +249,11 @@ def _stamps_rate(index: np.ndarray, t_s: np.ndarray, strict: bool = False) -> fl
 
 def _check_given_rate(rec: Recording, given_hz: float, where: str) -> None:
     """RecordingError when ``--rate`` contradicts the rate the recording's own time stamps
-    show (over at least :data:`MEASURED_RATE_MIN_SPAN_S`) by more than
+    show (over at least :data:`COARSE_SPAN_S`) by more than
     :data:`GIVEN_RATE_TOLERANCE`: ``--rate 52`` on imubench's own 104 Hz files was taken
     without a word, every tau twice as long, and ``convert --rate`` wrote it into the
     copy's header for good (a foreign CSV's time column was already checked)."""
-    own = _stamps_rate(rec.index, rec.t_s, strict=True)
+    own = _stamps_rate(rec.index, rec.t_s, strict=True, min_span_s=COARSE_SPAN_S)
     if own is not None and abs(given_hz / own - 1.0) > GIVEN_RATE_TOLERANCE:
         raise RecordingError(
             f"{where}: --rate {given_hz:g} Hz contradicts the recording's time stamps, which "
@@ -268,8 +275,11 @@ def _with_measured_rate(rec: Recording, kind: str) -> Recording:
     measured); beyond, RecordingError naming both."""
     nominal = float(rec.metadata["odr_hz"])
     rate = measured_rate(rec.index, rec.t_s, nominal)
-    if rate is None:
-        return rec
+    if rate is None:  # under 10 s: only a gross contradiction is judged
+        coarse = _stamps_rate(rec.index, rec.t_s, min_span_s=COARSE_SPAN_S)
+        if coarse is None or abs(coarse / nominal - 1.0) <= GIVEN_RATE_TOLERANCE:
+            return rec
+        rate = coarse
     off = rate / nominal - 1.0
     own = kind in ("native", "hdf5") or (kind == "csv" and "chip" in rec.metadata)
     limit = CHIP_CLOCK_MAX_OFF if own else GIVEN_RATE_TOLERANCE
