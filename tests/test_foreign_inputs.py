@@ -740,3 +740,20 @@ def test_missing_value_cells_interleaved_sensors_and_unreadable_columns(
     rec = load_recording(path)
     assert len(rec) == 3000 and rec.rate_hz == 100.0
     assert abs(float(np.nanmean(rec.channel("temp"))) - 25.0) < 0.01
+
+
+def test_a_stream_that_lost_most_samples_is_not_read_at_a_fraction_of_its_rate(
+        tmp_path: Path) -> None:
+    """60 % of a 100 Hz stream lost at random: the median spacing is two periods, and the
+    file was read at 50 Hz with 508 lines "damaged". It is refused, naming the 100 Hz
+    grid; with --rate 100 every row is read at its own sample."""
+    rng = np.random.default_rng(10)
+    kept = np.sort(rng.choice(6000, 2400, replace=False))
+    path = tmp_path / "lossy.csv"
+    path.write_text("time [s],gyro_x [dps]\n" + "\n".join(
+        f"{k / 100:.2f},{rng.normal(0, 0.5):.5f}" for k in kept) + "\n")
+    with pytest.raises(RecordingError, match=r"grid of 100 Hz with most samples missing: "
+                                             r"give --rate 100"):
+        load_recording(path)
+    rec = load_recording(path, InputOptions(rate_hz=100.0))
+    assert len(rec) == 2400 and rec.lost_samples == int(kept[-1] - kept[0] + 1 - 2400)

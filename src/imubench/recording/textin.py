@@ -696,12 +696,31 @@ def _check_even_spacing(t_s: np.ndarray, tb: Timebase, where: str,
         dt = np.diff(t_s[np.isfinite(t_s)])
         dt = dt[dt > 0]
         spread = float(np.std(dt) / np.median(dt)) if dt.size else math.nan
+        finer = _finer_grid(t_s, tb.rate_hz)
         raise RecordingError(
             f"{where}: the time stamps are not evenly spaced: {shared} of {finite} rows "
             f"fall on a sample another row holds at {tb.rate_hz:.6g} Hz (intervals vary by "
-            f"{100 * spread:.0f} %); the Allan statistics need evenly spaced samples: "
-            "resample them, or read the rows in order at a nominal rate with --rate HZ "
-            "--columns t=-")
+            f"{100 * spread:.0f} %)"
+            + (f"; they lie on a grid of {finer:.6g} Hz with most samples missing: give "
+               f"--rate {finer:.6g} if that is the rate" if finer is not None else
+               "; the Allan statistics need evenly spaced samples: resample them, or read "
+               "the rows in order at a nominal rate with --rate HZ --columns t=-"))
+
+
+def _finer_grid(t_s: np.ndarray, rate_hz: float) -> float | None:
+    """``k x rate_hz`` (k = 2, 3, 4) when every stamp lies within a quarter period of that
+    grid: stamps of a stream that lost more than half its samples at random, whose
+    median spacing is two or three periods (read at half the rate, the odd steps fell
+    between the samples)."""
+    t = t_s[np.isfinite(t_s)]
+    if t.size < 3:
+        return None
+    for k in (2, 3, 4):
+        period = 1.0 / (k * rate_hz)
+        phase = (t - t[0]) / period
+        if np.all(np.abs(phase - np.round(phase)) < 0.25):
+            return k * rate_hz
+    return None
 
 
 def _index_stride(index: np.ndarray) -> int:
