@@ -719,7 +719,8 @@ def _finer_grid(t_s: np.ndarray, rate_hz: float) -> float | None:
         period = 1.0 / (k * rate_hz)
         phase = (t - t[0]) / period
         if np.all(np.abs(phase - np.round(phase)) < 0.25):
-            return k * rate_hz
+            slope = np.polyfit(np.round(phase), t, 1)[0]  # that grid's own period
+            return float(1.0 / slope)
     return None
 
 
