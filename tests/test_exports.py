@@ -276,3 +276,17 @@ def test_stable32_export_counts_and_places_the_gaps_at_either_end(tmp_path: Path
     assert back.metadata["start_utc"] == head["start_utc"]
     assert back.t_s[0] == 0.0 and back.t_s[1] == pytest.approx(1 / RATE_HZ, rel=1e-4)
     np.testing.assert_array_equal(back.channel("gx"), src.channel("gx"))
+
+
+def test_a_stable32_export_of_unix_stamped_data_keeps_its_start(tmp_path: Path) -> None:
+    """A CSV of Unix-second stamps converted to .dat said "states no start", its MJD tags
+    from 2000-01-01; the first stamp is its start."""
+    from imubench.cli import main
+
+    src = tmp_path / "u.csv"
+    src.write_text("timestamp,gyro_x [dps]\n" + "\n".join(
+        f"{1700000000 + k / 100:.2f},{k % 5}" for k in range(3000)) + "\n")
+    out = tmp_path / "u.dat"
+    assert main(["convert", str(src), str(out), "--channel", "gx"]) == 0
+    text = out.read_text()
+    assert '# start_utc: "2023-11-14T22:13:20' in text

@@ -81,11 +81,16 @@ def write_stable32(rec: Recording, channel: str, path: str | Path) -> str:
         meta["calibration"] = {k: cal.get(k) for k in ("applied", "path", "sha256")}
     if rec.damage:
         meta["damage"] = rec.damage
-    start = _start_mjd(rec.metadata.get("start_utc"))
+    # the recording's start, else its first stamp when the stamps are Unix seconds (a
+    # CSV of Unix or ISO times: the .dat said "states no start", tags from 2000-01-01)
+    stated = rec.metadata.get("start_utc") or (iso_utc(float(rec.t_s[0])) if len(rec)
+                                               else None)
+    start = _start_mjd(stated)
     first = int(rec.index[0]) if len(rec) else 0
     if start is not None:
-        meta["start_utc"] = rec.metadata["start_utc"]
-        if first:  # the time of the first line (a reader starts there)
+        meta["start_utc"] = stated
+        if first and rec.metadata.get("start_utc"):  # the first line's time (a reader
+            # starts there); a start read off the first stamp is that line's already
             meta["start_utc"] = iso_utc((start - MJD_OF_UNIX_EPOCH) * SECONDS_PER_DAY
                                         + first / rate) or meta["start_utc"]
     layout = "one value per line"
