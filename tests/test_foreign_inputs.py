@@ -520,12 +520,13 @@ def test_an_unread_comment_is_named_when_the_rate_is_assumed(
     ("t,az", 9.80665, r"az read 9\.81 g at rest, which is m/s2 read as g"),
     ("t,ax,ay,az", 16384.0, r"reads 1\.638e\+04 g at rest in g, beyond any "
                             r"accelerometer's range \(raw counts\?\)"),
-    ("t,ax [mg],ay [mg],az [mg]", 1.0, r"reads 0\.001 g at rest in mg, not 1 g")])
+    ("t,ax,ay,az", 0.001, r"reads 0\.001 g at rest in g, not 1 g")])
 def test_an_accelerometer_level_no_unit_explains_is_refused(
         tmp_path: Path, header: str, level: float, match: str) -> None:
     """The gravity check needed all three axes (``t,ax,az`` in m/s^2 read as 9.8 g), and
-    raw counts (16384 per g under ``ax,ay,az``) or g under a ``[mg]`` header were read
-    without a word."""
+    raw counts (16384 per g under ``ax,ay,az``) or a level 1000x off under names whose
+    unit nothing states were read without a word. (A stated unit may hold gravity-free
+    linear acceleration: test below.)"""
     n = header.count(",")
     rng = np.random.default_rng(0)
     rows = [header] + [f"{k / 100:.2f}," + ",".join(
@@ -757,3 +758,14 @@ def test_a_stream_that_lost_most_samples_is_not_read_at_a_fraction_of_its_rate(
         load_recording(path)
     rec = load_recording(path, InputOptions(rate_hz=100.0))
     assert len(rec) == 2400 and rec.lost_samples == int(kept[-1] - kept[0] + 1 - 2400)
+
+
+def test_linear_acceleration_in_a_stated_unit_is_read(tmp_path: Path) -> None:
+    """A phone's gravity-free "linear acceleration" (or a drop test) in m/s^2, the unit in
+    the header, reads near 0 g: it was refused as "a unit 1000x off"."""
+    rng = np.random.default_rng(11)
+    rows = [f"{k / 100:.2f}," + ",".join(f"{rng.normal(0, 0.02):.5f}" for _ in range(3))
+            for k in range(500)]
+    path = tmp_path / "lin.csv"
+    path.write_text("t,ax [m/s^2],ay [m/s^2],az [m/s^2]\n" + "\n".join(rows) + "\n")
+    assert len(load_recording(path)) == 500

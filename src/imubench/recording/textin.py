@@ -822,9 +822,10 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
     two axes the largest axis's median |a| is a lower bound of |a| (no axis at rest reads
     more than 1 g): 5-15 and 500-1500 are refused the same way (the check needed all three
     axes: ``t,ax,az`` in m/s^2 was read as 9.8 g). Unless ``--units`` says so, a level
-    above :data:`MAX_ACCEL_G` (raw counts: 16384 per g) or, on three axes, below
-    :data:`MIN_ACCEL_G` but not 0 (g read as mg; all-zero columns: not measured) is
-    refused too."""
+    above :data:`MAX_ACCEL_G` (raw counts: 16384 per g) is refused too, and, on three
+    axes whose unit nothing states, one below :data:`MIN_ACCEL_G` but not 0 (a unit
+    1000x off; all-zero columns: not measured; a stated unit may hold gravity-free
+    "linear acceleration" or a drop test)."""
     axes = [a for a in ("ax", "ay", "az") if a in units]
     if not axes:
         return
@@ -854,8 +855,9 @@ def _check_gravity(values: np.ndarray, units: dict[str, str], options: InputOpti
     if len(axes) == 3 and 0.07 < level < 0.14 and unit in ("m/s2", "m/s^2"):
         raise RecordingError(f"{where}: {what} {level:.3g} g at rest, which is g read as "
                              f"{said}; give --units {gyro},g{gyro_hint}")
-    if options.accel_unit is None and (level > MAX_ACCEL_G
-                                       or (len(axes) == 3 and 0 < level < MIN_ACCEL_G)):
+    stated = not any(a in assumed for a in axes)  # by the header or a metadata line
+    if options.accel_unit is None and (level > MAX_ACCEL_G or (
+            len(axes) == 3 and 0 < level < MIN_ACCEL_G and not stated)):
         raise RecordingError(
             f"{where}: {what} {level:.4g} g at rest in {unit}, "
             + ("beyond any accelerometer's range (raw counts?)" if level > MAX_ACCEL_G
