@@ -490,6 +490,7 @@ def test_a_chip_clock_30_percent_slow_is_measured_in_a_native_file(tmp_path: Pat
 
 @pytest.mark.parametrize("line", [
     "# Fs=100", "# fs = 100", "# odr_hz=100", "# sample rate = 100 Hz", "# rate 100",
+    "% Fs = 100;", "# fs: 100 # Hz", "# rate: 100 S/s", "# rate: 100 samples/s",
     "# rate_hz 100", "% fs: 100", "# Sample Rate (Hz): 100", "# tau: 0.01",
     "# period: 0.01", "# interval: 10 ms", "# rate: 100000 mHz", "# rate: 0.0001 MHz"])
 def test_rate_lines_in_other_forms_are_read(tmp_path: Path, line: str) -> None:
@@ -639,7 +640,8 @@ def test_thousands_separators_are_read(tmp_path: Path, style: str) -> None:
     ("t,gyro_x_radps", "gx", 180 / np.pi), ("t_sec,gx [deg/sec]", "gx", 1.0),
     ("t,gx [rad/sec]", "gx", 180 / np.pi), ("t,gx [º/s]", "gx", 1.0),
     ("t,gx [mrad/s]", "gx", 0.18 / np.pi), ("t,az [ms^-2]", "az", 1 / 9.80665),
-    ("t,az [cm/s^2]", "az", 0.01 / 9.80665)])
+    ("t,az [cm/s^2]", "az", 0.01 / 9.80665), ("t,gx [°/sec]", "gx", 1.0),
+    ("t,gx [rpm]", "gx", 6.0), ("t,az [mm/s^2]", "az", 0.001 / 9.80665)])
 def test_unit_suffixes_and_spellings_are_read(tmp_path: Path, header: str, channel: str,
                                               factor: float) -> None:
     """Units in a name's suffix (``ax_g``, ``gyro_x_radps``, ``t_sec``) and spellings
@@ -769,3 +771,12 @@ def test_linear_acceleration_in_a_stated_unit_is_read(tmp_path: Path) -> None:
     path = tmp_path / "lin.csv"
     path.write_text("t,ax [m/s^2],ay [m/s^2],az [m/s^2]\n" + "\n".join(rows) + "\n")
     assert len(load_recording(path)) == 500
+
+
+def test_a_units_row_in_brackets_is_read(tmp_path: Path) -> None:
+    """``[s],[rad/s]`` under the header made the names ``Time [[s]]`` (no channel found)."""
+    path = tmp_path / "ub.csv"
+    path.write_text("Time,GyroX\n[s],[rad/s]\n" + "\n".join(
+        f"{k / 100:.2f},{(k % 3) * 0.1:.1f}" for k in range(300)) + "\n")
+    rec = load_recording(path)
+    assert rec.channel("gx")[1] == pytest.approx(np.degrees(0.1))

@@ -79,7 +79,8 @@ _UNIT_WORDS = {
     "rad/sec": "rad/s", "mrad/s": "mrad/s", "mrad/sec": "mrad/s",
     "ms^-2": "m/s2", "ms-2": "m/s2", "m.s^-2": "m/s2", "m.s-2": "m/s2", "mps2": "m/s2",
     "cm/s^2": "cm/s2", "cm/s2": "cm/s2", "cm/s²": "cm/s2", "gal": "cm/s2",
-    "radps": "rad/s",
+    "radps": "rad/s", "°/sec": "dps", "º/sec": "dps", "rpm": "rpm",
+    "mm/s^2": "mm/s2", "mm/s2": "mm/s2", "mm/s²": "mm/s2",
 }
 
 

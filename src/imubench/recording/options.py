@@ -34,12 +34,13 @@ TIME_UNITS_S: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 """Seconds per unit of the time column."""
 GYRO_UNITS_DPS: dict[str, float] = {
     "dps": 1.0, "deg/s": 1.0, "mdps": 1e-3, "rad/s": 180.0 / math.pi, "deg/h": 1.0 / 3600.0,
-    "mrad/s": 0.18 / math.pi,
+    "mrad/s": 0.18 / math.pi, "rpm": 6.0,
 }
 """dps per unit of a gyro column."""
 ACCEL_UNITS_G: dict[str, float] = {
     "g": 1.0, "mg": 1e-3, "ug": 1e-6, "m/s2": 1.0 / STANDARD_GRAVITY_M_S2,
     "m/s^2": 1.0 / STANDARD_GRAVITY_M_S2, "cm/s2": 0.01 / STANDARD_GRAVITY_M_S2,
+    "mm/s2": 0.001 / STANDARD_GRAVITY_M_S2,
 }
 """g per unit of an accelerometer column."""
 TARGETS: tuple[str, ...] = ("t", "index", *CHANNELS, "temp")

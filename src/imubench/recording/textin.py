@@ -357,8 +357,9 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
         # a units row under the header (`t,gx` then `s,rad/s`): each unit joins its
         # column's name, as if the header said `gx [rad/s]` (it was skipped as a damaged
         # line and its units ignored: rad/s read as dps)
-        raw.header = [f"{h} [{u.strip()}]" if u.strip() and not re.search(r"[\[(]", h)
-                      else h for h, u in zip(raw.header, fields, strict=True)]
+        raw.header = [f"{h} [{u.strip().strip('[]()').strip()}]"
+                      if u.strip() and not re.search(r"[\[(]", h) else h
+                      for h, u in zip(raw.header, fields, strict=True)]
         return
     if len(fields) != raw.width:
         raw.bad_lines.append(lineno)

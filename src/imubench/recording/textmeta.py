@@ -35,7 +35,8 @@ PERIOD_KEYS_S = frozenset({
 UNIT_KEYS = frozenset({"unit", "units"})
 """Metadata keys stating the unit of a headerless file's values."""
 
-_RATE_UNITS = {"": 1.0, "hz": 1.0, "khz": 1e3, "mHz": 1e-3, "MHz": 1e6}
+_RATE_UNITS = {"": 1.0, "hz": 1.0, "khz": 1e3, "mHz": 1e-3, "MHz": 1e6, "s/s": 1.0,
+               "sps": 1.0, "samples/s": 1.0, "sa/s": 1.0, "/s": 1.0}
 """Rate units (lower case but for mHz and MHz, told apart by their case: ``# rate: 500 mHz``
 was read as 500 MHz)."""
 RATE_MAX_HZ = 1e6
@@ -89,7 +90,8 @@ def _quantity(value: Any, key: str, units: Mapping[str, float], where: str) -> f
     if isinstance(value, int | float):
         number, unit = float(value), ""
     else:
-        m = _VALUE.match(str(value))
+        text = str(value).split("#")[0].strip().rstrip(";").strip()  # `100; % Hz`, `100 # Hz`
+        m = _VALUE.match(text)
         if not m:
             raise RecordingError(f"{where}: metadata {key} {value!r} is not a number")
         unit = (m.group(2) or "").strip()
