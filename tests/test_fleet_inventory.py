@@ -129,3 +129,25 @@ def test_the_daemons_nested_snapshot_health() -> None:
     # the rest of the nested object, flattened, shown as published
     assert v["extra"] == {"health.produced": 5000, "health.lag.engine": 0,
                           "health.source.overruns": 0, "health.recording.segments": 1}
+
+
+@pytest.mark.parametrize("junk", [
+    b'{"statistics":{"oadev":{"gx":{"tau_s":["x","y","z"],"dev":[1,2,3],"units":"dps"}}}}',
+    b'{"statistics":{"oadev":{"gx":{"tau_s":[1,2,3],"dev":[[1],2,3],"units":"dps"}}}}',
+    b'{"statistics":{"oadev":{"gx":{"tau_s":[1,2,3],"dev":{"a":1},"units":"dps"}}}}',
+    b'{"samples":NaN,"statistics":{}}', b'{"samples":1e400}'])
+def test_a_malformed_snapshot_is_refused_and_the_views_stay_valid_json(junk: bytes) -> None:
+    """Anyone may publish on the broker: a snapshot with text in a curve ended the
+    view's listener for good (every sensor stale, ``fleet status`` exit 70), and one
+    with NaN made ``/api/fleet`` answer 500. Such a message is refused, named in the
+    sensor's errors, and the sensor keeps its last good snapshot."""
+    inv = Inventory()
+    inv.apply(T + "/status", online(), 1.0)
+    inv.apply(T + "/allan", snapshot(1000, "2026-11-23T10:00:10+00:00"), 1.0)
+    inv.apply(T + "/allan", junk, 2.0)
+    (view,) = inv.views(2.0)
+    json.dumps(view, allow_nan=False)  # valid JSON for the page and the event stream
+    assert view["snapshot_time"] == "2026-11-23T10:00:10+00:00"  # the last good one
+    assert view["errors"]
+    s = inv.sensors["lab1/imu0"]
+    assert s.errors and s.curves["oadev"]["gx"]["tau_s"] == [0.01, 0.02, 0.04]

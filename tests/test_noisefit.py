@@ -226,8 +226,13 @@ def test_tangent_method_on_single_terms() -> None:
     assert lo < t.params["white"] < hi
     y = simulate(NoiseModel.single_term("gx", flicker=0.002), n, RATE, 2, channels=["gx"])["gx"]
     t = fit_channel(y, RATE, method="tangent")
-    assert t.params["flicker"] == pytest.approx(0.002, rel=0.25)
-    assert t.method == "tangent" and "flicker" in t.present
+    # pure flicker: read where the curve rises significantly after its floor, else
+    # bounded from above (the live view's rule), the bound above the truth and near it
+    assert t.method == "tangent"
+    if "flicker" in t.present:
+        assert t.params["flicker"] == pytest.approx(0.002, rel=0.25)
+    else:
+        assert 0.002 <= t.ci["flicker"][1] <= 0.002 * 1.4
     # white noise alone shows neither a floor nor a +1/2 slope: flicker and random walk
     # are absent with upper limits (they were read off the falling curve as present)
     y = simulate(NoiseModel.single_term("gx", white=0.004), 360_000, RATE, 4,

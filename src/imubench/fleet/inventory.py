@@ -29,6 +29,7 @@ import datetime as dt
 import itertools
 import json
 import logging
+import math
 import statistics as pystats
 from collections import deque
 from dataclasses import dataclass, field
@@ -71,7 +72,7 @@ snapshots over their time stamps, once they span :data:`MIN_ODR_SPAN_S`)."""
 
 _ALLAN_KEYS = {"time", "station", "sensor", "statistic", "memory", "channels", "statistics"}
 _STATUS_IDENTITY = {"state", "station", "sensor", "client_id"}
-_CURVE_FIELDS = ("tau_s", "dev", "ci_low", "ci_high")
+_CURVE_FIELDS = ("tau_s", "dev", "ci_low", "ci_high", "alpha")
 _ODR_WINDOW = 11
 """Snapshots over which the measured ODR is taken (first to last)."""
 MIN_ODR_SPAN_S = 5.0
@@ -270,6 +271,11 @@ class Inventory:
                 if not isinstance(c, dict) or not isinstance(c.get("tau_s"), list):
                     self._error(s, f"allan statistics.{stat}.{ch} has no tau_s list")
                     return
+                bad = [f for f in _CURVE_FIELDS if not _numbers(c.get(f))]
+                if bad:  # someone else's payload: never let it into the views
+                    self._error(s, f"allan statistics.{stat}.{ch}.{bad[0]} is not a list of "
+                                   "finite numbers")
+                    return
                 curves[stat][ch] = {f: list(c.get(f) or []) for f in _CURVE_FIELDS}
                 curves[stat][ch]["units"] = c.get("units")
         s.allan = {k: v for k, v in doc.items() if k not in ("channels", "statistics")}
@@ -310,7 +316,8 @@ class Inventory:
         rows = []
         for key, label, unit, paths in HEALTH_FIELDS:
             value = _first(paths, s.status, s.allan or {})
-            if value is _MISSING and key == "measured_odr_hz":
+            if value in (_MISSING, None) and key == "measured_odr_hz":
+                # the SensorTile publishes null (its firmware's clock is not measured)
                 value = s.measured_odr_hz()
             if value is _MISSING or value is None:
                 continue
@@ -395,11 +402,32 @@ def _flatten(doc: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
 
 
 def _json_object(payload: bytes) -> dict[str, Any] | None:
+    """The payload as a JSON object, None when it is none: NaN, Infinity and numbers that
+    overflow to them are refused (one such snapshot made ``/api/fleet`` answer 500 and the
+    browser's event stream fail to parse, until the view restarted)."""
     try:
-        doc = json.loads(payload)
-    except (UnicodeDecodeError, ValueError):
+        doc = json.loads(payload, parse_constant=_no_constant, parse_float=_finite_float)
+    except (UnicodeDecodeError, ValueError, RecursionError):
         return None
     return doc if isinstance(doc, dict) else None
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not JSON")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text} overflows")
+    return value
+
+
+def _numbers(values: Any) -> bool:
+    """Whether a curve field is absent or a list of numbers (None allowed: no value)."""
+    return values is None or (isinstance(values, list) and all(
+        v is None or (isinstance(v, int | float) and not isinstance(v, bool))
+        for v in values))
 
 
 def _parse_time(text: Any) -> float | None:

@@ -86,7 +86,16 @@ class BrokerListener:
                         payload = msg.payload
                         data = (bytes(payload) if isinstance(payload, bytes | bytearray)
                                 else b"" if payload is None else str(payload).encode())
-                        if self.inventory.apply(str(msg.topic), data, time.monotonic()):
+                        try:
+                            changed = self.inventory.apply(str(msg.topic), data,
+                                                           time.monotonic())
+                        except Exception:  # anyone may publish anything
+                            # one message must never end the listener (a malformed
+                            # payload stopped every view for good, silently)
+                            log.exception("broker %s: message on %s not taken", self.url,
+                                          msg.topic)
+                            continue
+                        if changed:
                             self._changed()
                     raise aiomqtt.MqttError("message stream ended")
             except aiomqtt.MqttError as exc:

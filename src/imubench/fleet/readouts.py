@@ -135,7 +135,7 @@ def channel_readouts(channel: str, curve: Mapping[str, Any]) -> list[dict[str, A
     "tau_s"}]`` with values in datasheet units when ``units`` is the model unit of the
     channel (dps for gyro, g for accel), else in the curve's own units."""
     terms = read_terms(curve.get("tau_s") or [], curve.get("dev") or [],
-                       curve.get("ci_low"), curve.get("ci_high"))
+                       curve.get("ci_low"), curve.get("ci_high"), curve.get("alpha"))
     units = str(curve.get("units"))
     table = (_GYRO_UNITS if channel in GYRO and units == "dps"
              else _ACCEL_UNITS if channel in ACCEL and units == "g" else None)

@@ -67,11 +67,11 @@ def fit_tangent(y: np.ndarray, rate_hz: float, *, channel: str = "gx",
     A term is present only where the curve shows it, by the rule of the live readouts
     (:func:`imubench.fleet.readouts.read_terms`): N needs a point of slope within 0.2 of
     -1/2, K one of +1/2 with a significant rise, B a floor the curve rises from
-    significantly, or a flat floor (local slope within 0.2 of 0) before the last point.
-    Otherwise the term is absent with the reading as its upper limit (the
+    significantly (without a rise the minimum holds the white noise and random walk
+    too: B is at most it). Otherwise the term is absent with the reading as its upper limit (the
     other terms only add to the curve): on white noise alone the rule read flicker and
     random walk, with intervals excluding 0, off a curve still falling at -0.6."""
-    from imubench.fleet.readouts import SLOPE_TOLERANCE, read_terms
+    from imubench.fleet.readouts import read_terms
 
     arr = check_series(y, rate_hz, channel)
     pts = avar_points(arr, rate_hz, taus, channel)
@@ -79,7 +79,7 @@ def fit_tangent(y: np.ndarray, rate_hz: float, *, channel: str = "gx",
     dev = np.sqrt(pts.avar)
     bounds = [_read(dev, pts.edf, i)[1] for i in range(tau.size)]
     shown = read_terms(tau.tolist(), dev.tolist(), [b[0] for b in bounds],
-                       [b[1] for b in bounds])
+                       [b[1] for b in bounds])  # the live view's rule, exactly
     params = dict.fromkeys(PARAM_KEYS, 0.0)
     params["filter_order"] = 1
     ci: dict[str, tuple[float, float]] = {}
@@ -89,9 +89,7 @@ def fit_tangent(y: np.ndarray, rate_hz: float, *, channel: str = "gx",
                                         strict=True):
         value, interval = _read(values, pts.edf, i)
         reading = shown[term]
-        flat = (term == "B" and i < tau.size - 1
-                and abs(float(local_slopes(tau, dev)[i])) <= SLOPE_TOLERANCE)
-        if reading["kind"] == "value" or flat:  # B: a flat floor is read, rise or not
+        if reading["kind"] == "value":
             params[key], ci[key] = value, interval
             present.append(key)
             notes.append(f"{key} read at tau = {tau[i]:.4g} s")
