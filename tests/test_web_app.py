@@ -174,6 +174,33 @@ def test_basic_auth_on_every_route(private_mosquitto: Any) -> None:
     asyncio.run(main())
 
 
+def test_a_view_without_a_password_answers_to_loopback_names_only(
+        private_mosquitto: Any) -> None:
+    """DNS rebinding: a page on another site that points its own name at 127.0.0.1 could
+    read the fleet (hosts, pids, recording paths) from a view without a password; such a
+    Host is refused."""
+    from imubench.web.app import host_name
+
+    assert [host_name(h) for h in (b"[::1]:8080", b"localhost:80", b"Evil.example")] == \
+        ["::1", "localhost", "evil.example"]
+    broker = private_mosquitto()
+
+    async def main() -> None:
+        async with live_view(broker.port) as (_, base):
+            port = base.rstrip("/").rsplit(":", 1)[1]
+            for host, want in ((f"attacker.example:{port}", 421), ("localhost", 200),
+                               (f"127.0.0.1:{port}", 200)):
+                req = urllib.request.Request(base + "api/fleet", headers={"Host": host})
+                try:
+                    status = (await asyncio.to_thread(urllib.request.urlopen, req, None,
+                                                      5)).status
+                except urllib.error.HTTPError as exc:
+                    status = exc.code
+                assert status == want, host
+
+    asyncio.run(main())
+
+
 @pytest.mark.parametrize("listen", ["0.0.0.0:8080", "192.168.1.5:80", "[::]:8080"])
 def test_non_loopback_needs_a_password(listen: str) -> None:
     host, _ = parse_listen(listen)

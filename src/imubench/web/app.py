@@ -94,13 +94,48 @@ class BasicAuth:
         await response(scope, receive, send)
 
 
+LOCAL_NAMES = frozenset({"localhost", "127.0.0.1", "::1"})
+"""Host names a view without a password answers to (its own loopback address)."""
+
+
+def host_name(header: bytes) -> str:
+    """The name in an HTTP ``Host`` header, without its port (``[::1]:8080`` -> ``::1``)."""
+    text = header.decode("latin-1").strip().lower()
+    if text.startswith("["):
+        return text[1:text.find("]")] if "]" in text else text
+    return text.rsplit(":", 1)[0] if text.count(":") == 1 else text
+
+
+class LocalHostOnly:
+    """ASGI middleware for a view without a password (it listens on loopback only):
+    requests whose ``Host`` is not a loopback name are refused (421). A web page on
+    another site could otherwise rebind its own name to 127.0.0.1 (DNS rebinding) and
+    read the fleet's hosts, pids, recording paths and source URIs."""
+
+    def __init__(self, app: ASGIApp, names: frozenset[str]) -> None:
+        self.app = app
+        self.names = names
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http":
+            host = next((v for k, v in scope.get("headers", []) if k == b"host"), b"")
+            if host_name(host) not in self.names:
+                await Response("this view answers to its loopback address only\n",
+                               status_code=421)(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+
 def _sse(event: str, data: Any) -> str:
     return f"event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
 
 
 def create_app(inventory: Inventory, listener: BrokerListener, notifier: Notifier, *,
-               auth: tuple[str, str] | None = None) -> ASGIApp:
-    """The view's ASGI application over ``inventory`` (fed by ``listener``)."""
+               auth: tuple[str, str] | None = None, listen_host: str = "127.0.0.1"
+               ) -> ASGIApp:
+    """The view's ASGI application over ``inventory`` (fed by ``listener``); without
+    ``auth`` it answers only to loopback names (:class:`LocalHostOnly`; ``listen_host``,
+    the address it listens on, is one too)."""
 
     async def page(request: Request) -> Response:
         return FileResponse(STATIC_DIR / "index.html",
@@ -144,6 +179,8 @@ def create_app(inventory: Inventory, listener: BrokerListener, notifier: Notifie
     ])
     if auth is not None:
         app = BasicAuth(app, *auth)
+    else:
+        app = LocalHostOnly(app, LOCAL_NAMES | {listen_host.lower()})
     return app
 
 
@@ -156,4 +193,4 @@ async def refresh_loop(inventory: Inventory, notifier: Notifier) -> None:
 
 
 __all__ = ["HEARTBEAT_S", "MIN_PUSH_INTERVAL_S", "REFRESH_S", "STATIC_DIR", "BasicAuth",
-           "Notifier", "create_app", "refresh_loop"]
+           "LocalHostOnly", "Notifier", "create_app", "host_name", "refresh_loop"]

@@ -82,7 +82,8 @@ class LiveView:
             username=options.mqtt_username, password=options.mqtt_password,
             tls_ca=options.tls_ca, on_change=self.notifier.notify)
         auth = None if options.password is None else (options.user, options.password)
-        self.app = create_app(self.inventory, self.listener, self.notifier, auth=auth)
+        self.app = create_app(self.inventory, self.listener, self.notifier, auth=auth,
+                              listen_host=self.host)
         self._server: _Server | None = None
         self._tasks: list[asyncio.Task[None]] = []
 
