@@ -151,3 +151,25 @@ def test_a_malformed_snapshot_is_refused_and_the_views_stay_valid_json(junk: byt
     assert view["errors"]
     s = inv.sensors["lab1/imu0"]
     assert s.errors and s.curves["oadev"]["gx"]["tau_s"] == [0.01, 0.02, 0.04]
+
+
+def test_a_node_restarted_without_a_sensor_shows_it_offline_and_a_slow_cadence_is_kept(
+        ) -> None:
+    """A node that restarted with sensors s0 and s2 only left s1 "stale" for good with the
+    dead process's pid; a daemon publishing every 10 s was flagged stale between its
+    first two snapshots (a 1 s cadence assumed)."""
+    inv = Inventory()
+    node = "imubench/lab1/node/rig/status"
+    inv.apply(node, json.dumps({"state": "online", "node": "rig",
+                                "sensors": ["s0", "s1"]}).encode(), 0.0)
+    for name in ("s0", "s1"):
+        inv.apply(f"imubench/lab1/{name}/status", json.dumps(
+            {"state": "online", "node": "rig", "publish_interval_s": 10.0}).encode(), 0.0)
+        inv.apply(f"imubench/lab1/{name}/allan", snapshot(1000, "2026-11-23T10:00:10+00:00"),
+                  0.0)
+    assert {v["sensor"]: v["state"] for v in inv.views(8.0)} == {"s0": "online",
+                                                                  "s1": "online"}
+    inv.apply(node, json.dumps({"state": "online", "node": "rig",
+                                "sensors": ["s0"]}).encode(), 9.0)
+    assert {v["sensor"]: v["state"] for v in inv.views(9.0)} == {"s0": "online",
+                                                                  "s1": "offline"}

@@ -352,7 +352,8 @@ class SensorRun:
 
     def status_detail(self) -> dict[str, Any]:
         """What the sensor's retained status carries besides its identity."""
-        detail: dict[str, Any] = {"phase": self.phase, "source": self.spec.uri}
+        detail: dict[str, Any] = {"phase": self.phase, "source": self.spec.uri,
+                                  "publish_interval_s": self.cfg.mqtt.publish_interval_s}
         if self.pipeline is not None:
             info = self.pipeline.info
             detail.update(chip=info.chip, odr_hz=info.odr_hz, source=info.uri)

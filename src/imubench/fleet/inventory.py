@@ -140,7 +140,10 @@ class SensorState:
             return "offline"
         if self.allan_at is None:
             return "waiting"
-        interval = self.interval_s() or 1.0
+        stated = self.status.get("publish_interval_s")  # the daemon's own cadence
+        interval = (self.interval_s() or (float(stated) if isinstance(stated, int | float)
+                                          and not isinstance(stated, bool) and stated > 0
+                                          else 1.0))
         if now - self.allan_at > max(min_stale_s, stale_factor * interval):
             return "stale"
         return "online"
@@ -161,6 +164,8 @@ class Inventory:
         self.removed: dict[str, int] = {}
         self.nodes: dict[str, bool] = {}
         """``station/node`` -> online, from the nodes' retained statuses."""
+        self.node_sensors: dict[str, list[Any] | None] = {}
+        """The sensors each node's online status lists (None: it lists none)."""
         self.version = 0
         self.messages = 0
 
@@ -221,12 +226,20 @@ class Inventory:
             self.nodes.pop(key, None)
         else:
             self.nodes[key] = online
+        listed = doc.get("sensors") if online and payload.strip() != b"offline" \
+            and isinstance(doc, dict) else None
+        self.node_sensors[key] = listed if isinstance(listed, list) else None
         changed = False
         for s in self.sensors.values():
-            if s.station == station and s.node == node and s.node_online != online:
-                if online is False and s.online is not False:
+            if s.station != station or s.node != node:
+                continue
+            # a node that restarted without some of its sensors: those are offline (they
+            # stayed "stale" with the dead process's pid)
+            mine = online if not isinstance(listed, list) or s.sensor in listed else False
+            if s.node_online != mine:
+                if mine is False and s.online is not False:
                     s.offline_at = _utc_now()
-                s.node_online = online
+                s.node_online = mine
                 self._touch(s)
                 changed = True
         return changed
@@ -252,6 +265,9 @@ class Inventory:
         s.status = doc
         node = s.node
         s.node_online = None if node is None else self.nodes.get(f"{s.station}/{node}")
+        listed = None if node is None else self.node_sensors.get(f"{s.station}/{node}")
+        if s.node_online and listed is not None and s.sensor not in listed:
+            s.node_online = False  # the node runs without it now
 
     def _apply_allan(self, s: SensorState, payload: bytes, now: float) -> None:
         doc = _json_object(payload)
