@@ -173,3 +173,18 @@ def test_a_node_restarted_without_a_sensor_shows_it_offline_and_a_slow_cadence_i
                                 "sensors": ["s0"]}).encode(), 9.0)
     assert {v["sensor"]: v["state"] for v in inv.views(9.0)} == {"s0": "online",
                                                                   "s1": "offline"}
+
+
+def test_snapshots_whose_sample_count_stands_still_are_stalled() -> None:
+    """A source frozen for a minute (a stalled bus) kept arriving snapshots with the same
+    sample count and showed "online" with its nominal ODR."""
+    inv = Inventory()
+    inv.apply(T + "/status", online(), 0.0)
+    for k in range(6):
+        inv.apply(T + "/allan", snapshot(1000 + 104 * min(k, 1),
+                                         f"2026-11-23T10:00:{10 + k:02d}+00:00"), float(k))
+    (view,) = inv.views(5.0)
+    assert view["state"] == "stalled"
+    inv.apply(T + "/allan", snapshot(2000, "2026-11-23T10:00:16+00:00"), 6.0)
+    (view,) = inv.views(6.0)
+    assert view["state"] == "online"

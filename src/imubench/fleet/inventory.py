@@ -108,6 +108,8 @@ class SensorState:
         default_factory=lambda: deque(maxlen=_ODR_WINDOW))
     version: int = 0
     shown_state: str = ""
+    samples_since: tuple[int, float] | None = None
+    """The snapshots' sample count and when it was first seen (monotonic s)."""
 
     @property
     def key(self) -> str:
@@ -144,8 +146,12 @@ class SensorState:
         interval = (self.interval_s() or (float(stated) if isinstance(stated, int | float)
                                           and not isinstance(stated, bool) and stated > 0
                                           else 1.0))
-        if now - self.allan_at > max(min_stale_s, stale_factor * interval):
+        late = max(min_stale_s, stale_factor * interval)
+        if now - self.allan_at > late:
             return "stale"
+        if (self.samples_since is not None and len(self.receipts) >= 2
+                and self.allan_at - self.samples_since[1] > late):
+            return "stalled"  # snapshots arrive, samples do not (a frozen source)
         return "online"
 
 
@@ -301,6 +307,9 @@ class Inventory:
         s.receipts.append(now)
         t = _parse_time(doc.get("time"))
         samples = doc.get("samples")
+        if isinstance(samples, int) and (s.samples_since is None
+                                         or s.samples_since[0] != samples):
+            s.samples_since = (samples, now)
         if t is not None and isinstance(samples, int):
             if s.rate_points and (t <= s.rate_points[-1][0] or samples < s.rate_points[-1][1]):
                 s.rate_points.clear()  # daemon restarted or clock stepped back
