@@ -5,7 +5,8 @@
 Subscribes to ``imubench/+/+/status`` (retained: the fleet's inventory, online or
 offline), ``/allan`` and ``/jig`` for ``--wait-s`` seconds, then prints one line per
 sensor: state (``online``: snapshots arriving; ``waiting``: online status but no snapshot
-within the wait; ``offline``: the retained status or the last will says so), chip,
+within the wait; ``stalled``: snapshots whose sample count stands still; ``offline``:
+the retained status, the last will or its node's status says so), chip,
 ODR, samples, lost samples, the measured ODR (over the snapshots seen), the host and
 process, and any further status fields. Exit status 0, or 2 when the broker cannot be
 reached. See docs/fleet.md.
