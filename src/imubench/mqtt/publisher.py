@@ -240,6 +240,8 @@ class MqttPublisher:
         self._connected = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self.dropped_snapshots = 0
+        self._last_ack: float | None = None
+        """Monotonic time of the last snapshot the broker acknowledged."""
         self.max_payload_bytes = max_payload_bytes
         """Snapshots larger than this (the broker's packet limit less the topic and the
         header) are not sent: the broker would close the connection on each attempt."""
@@ -401,7 +403,7 @@ class MqttPublisher:
             self._task = asyncio.current_task()  # so that close() waits for this loop
         backoff = self._reconnect_min_s
         failures = 0
-        down_since: float | None = None  # monotonic time of the first failed attempt
+        down_since: float | None = None  # the last acknowledged snapshot before an outage
         while not self._closing.is_set():
             try:
                 async with self._client() as client:
@@ -434,8 +436,9 @@ class MqttPublisher:
             except aiomqtt.MqttError as exc:
                 self.last_error = str(exc)
                 failures += 1
-                if down_since is None:
-                    down_since = time.monotonic()
+                if down_since is None:  # from the last snapshot the broker took: a hung
+                    # broker is noticed only a keep-alive later ("back after 0 s" after 55 s)
+                    down_since = min(time.monotonic(), self._last_ack or time.monotonic())
                 wait_s = random.uniform(backoff / 2, backoff)
                 level = logging.WARNING if failures == 1 else logging.DEBUG
                 log.log(
@@ -503,6 +506,7 @@ class MqttPublisher:
                     if self._buffer and self._buffer[0] is head:  # not trimmed meanwhile
                         self._buffer.popleft()
                     self.published_snapshots += 1
+                    self._last_ack = time.monotonic()
                     if self._status_dirty:
                         break  # a drop happened meanwhile: tell the status first
                 if self._status_dirty:
