@@ -43,8 +43,12 @@ from imubench.recording.options import InputOptions, input_options
 
 
 # -- common -------------------------------------------------------------------------------
-def _check_options(args: argparse.Namespace, single_only: Sequence[tuple[str, str]]) -> Path:
-    """The output directory; BatchError for options that name one file's outputs."""
+def _check_options(args: argparse.Namespace, single_only: Sequence[tuple[str, str]],
+                   spec: Path) -> Path:
+    """The output directory; BatchError for options that name one file's outputs, and
+    first for a ``spec`` that names no recording (a glob that matches nothing was told
+    it needs --out-dir)."""
+    expand_inputs(spec)
     for attr, flag in single_only:
         if getattr(args, attr) not in (None, [], False):
             raise BatchError(f"{flag} names one recording's output; with a directory or glob "
@@ -169,7 +173,7 @@ def allan_rows(rec: Path, channel: str, doc: dict[str, Any]) -> Iterable[dict[st
 
 
 def run_allan_batch(args: argparse.Namespace) -> int:
-    out_dir = _check_options(args, (("json", "--json"),))
+    out_dir = _check_options(args, (("json", "--json"),), args.input)
     outcomes = _run("allan", args, args.input,
                     functools.partial(allan_plan, args.column, input_options(args)),
                     functools.partial(allan_work, args))
@@ -224,7 +228,7 @@ def fit_rows(rec: Path, result: Any) -> Iterable[dict[str, Any]]:
 def run_fit_batch(args: argparse.Namespace) -> int:
 
     out_dir = _check_options(args, (("output", "-o"), ("json", "--json"),
-                                    ("kalibr", "--kalibr")))
+                                    ("kalibr", "--kalibr")), args.recording)
     options = input_options(args)
     outcomes = _run("fit", args, args.recording,
                     functools.partial(fit_plan, args.channels, options),
@@ -280,7 +284,7 @@ def gap_rows(rec: Path, doc: dict[str, Any]) -> Iterable[dict[str, Any]]:
 def run_gap_batch(args: argparse.Namespace) -> int:
     from imubench.commands.gap import gap_units
 
-    out_dir = _check_options(args, (("json", "--json"), ("holdout", "--holdout")))
+    out_dir = _check_options(args, (("json", "--json"), ("holdout", "--holdout")), args.real)
     if args.jobs is not None:
         raise BatchError("--jobs runs one recording's channels in local processes; drop it "
                          "for a batch, which runs its channels as tasks, in this process or "
