@@ -270,9 +270,18 @@ function updateSummary() {
 }
 
 const source = new EventSource("events");
+let opened = false;
 source.addEventListener("open", () => {
   const link = document.getElementById("link");
   link.dataset.live = "true"; link.textContent = "live";
+  // a new stream sends the whole fleet again, and no "remove" for sensors that went
+  // while it was down (a restarted view server): drop the old cards first
+  if (opened) {
+    for (const c of cards.values()) c.root.remove();
+    cards.clear();
+    updateSummary();
+  }
+  opened = true;
 });
 source.addEventListener("error", () => {
   const link = document.getElementById("link");
