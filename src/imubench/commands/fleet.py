@@ -82,7 +82,7 @@ async def collect(broker: str, wait_s: float, connect_timeout_s: float, *,
                   tls_ca: str | None = None) -> tuple[Inventory, BrokerListener]:
     """Subscribe to every sensor for ``wait_s`` after the subscription is acknowledged."""
     inventory = Inventory()
-    listener = BrokerListener(parse_broker_url(broker), inventory, username=username,
+    listener = BrokerListener(parse_broker_url(broker, "--broker"), inventory, username=username,
                               password=password, tls_ca=tls_ca, reconnect_max_s=1.0)
     task = asyncio.create_task(listener.run())
     try:

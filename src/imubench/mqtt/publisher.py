@@ -60,23 +60,29 @@ class BrokerAddress:
     tls: bool
 
 
-def parse_broker_url(url: str) -> BrokerAddress:
+def parse_broker_url(url: str, option: str = "mqtt.broker") -> BrokerAddress:
     """Parse ``mqtt://host[:port]`` (default port 1883) or ``mqtts://host[:port]`` (8883, TLS).
 
-    Raises ``MqttError`` naming the URL and the accepted forms.
+    Raises ``MqttError`` naming ``option`` (the setting or flag that gave it), the URL and
+    the accepted forms (``embedded`` only where the daemon's configuration is read).
     """
-    forms = "use mqtt://HOST[:PORT] or mqtts://HOST[:PORT] (TLS), or 'embedded'"
+    if option != "mqtt.broker" and url == "embedded":
+        raise MqttError(f"{option} 'embedded': give the URL of the broker to listen to (a "
+                        "daemon with its embedded broker prints it, e.g. "
+                        "mqtt://127.0.0.1:1884)")
+    forms = ("use mqtt://HOST[:PORT] or mqtts://HOST[:PORT] (TLS)"
+             + (", or 'embedded'" if option == "mqtt.broker" else ""))
     try:
         parts = urlsplit(url)
         port = parts.port
     except ValueError as exc:
-        raise MqttError(f"mqtt.broker {url!r} is not a valid URL ({exc}); {forms}") from None
+        raise MqttError(f"{option} {url!r} is not a valid URL ({exc}); {forms}") from None
     if parts.scheme not in ("mqtt", "mqtts"):
-        raise MqttError(f"mqtt.broker {url!r} has scheme {parts.scheme!r}; {forms}")
+        raise MqttError(f"{option} {url!r} has scheme {parts.scheme!r}; {forms}")
     if not parts.hostname:
-        raise MqttError(f"mqtt.broker {url!r} has no host name; {forms}")
+        raise MqttError(f"{option} {url!r} has no host name; {forms}")
     if parts.path not in ("", "/") or parts.query or parts.fragment:
-        raise MqttError(f"mqtt.broker {url!r} has a path or query, not allowed; {forms}")
+        raise MqttError(f"{option} {url!r} has a path or query, not allowed; {forms}")
     tls = parts.scheme == "mqtts"
     return BrokerAddress(parts.hostname, port or (8883 if tls else 1883), tls)
 

@@ -78,7 +78,7 @@ class LiveView:
                                    stale_factor=options.stale_factor)
         self.notifier = Notifier()
         self.listener = BrokerListener(
-            parse_broker_url(options.broker), self.inventory,
+            parse_broker_url(options.broker, "--broker"), self.inventory,
             username=options.mqtt_username, password=options.mqtt_password,
             tls_ca=options.tls_ca, on_change=self.notifier.notify)
         auth = None if options.password is None else (options.user, options.password)
