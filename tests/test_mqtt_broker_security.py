@@ -145,3 +145,43 @@ def test_malformed_packets_fuzz_no_traceback_no_hang(
             assert await _drain(sub) == [("after/fuzz", b"ok")]
 
     asyncio.run(still_serves())
+
+
+def test_the_standalone_broker_grants_publish_rights_from_its_command_line() -> None:
+    """``python -m imubench.mqtt.broker --user bench:PW`` gave that user no publish
+    right and no way to grant one: a daemon pointed at it had every snapshot denied."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "imubench.mqtt.broker", "--port", str(port), "--exact-port",
+         "--user", "bench:pw", "--publish", "bench:imubench/#"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:  # listening (anonymous CONNECTs are refused)
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                time.sleep(0.1)
+
+        async def main() -> list[tuple[str, bytes]]:
+            async with aiomqtt.Client("127.0.0.1", port, username="bench",
+                                      password="pw") as sub:
+                await sub.subscribe("#")
+                await sub.publish("imubench/s/i/allan", b"{}", qos=1)
+                await sub.publish("elsewhere/x", b"{}", qos=1)
+                return await _drain(sub)
+
+        got = asyncio.run(main())
+        assert ("imubench/s/i/allan", b"{}") in got and not any(t == "elsewhere/x"
+                                                                  for t, _ in got)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)

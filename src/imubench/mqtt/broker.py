@@ -761,6 +761,14 @@ def main(argv: list[str] | None = None) -> int:
         help="accepted credentials (repeatable); anonymous clients are then "
         "refused unless --allow-anonymous",
     )
+    parser.add_argument(
+        "--publish",
+        action="append",
+        default=[],
+        metavar="NAME:FILTER",
+        help="topic filter user NAME may publish to (repeatable, e.g. bench:imubench/#); "
+        "with --user and no --publish for a user, that user may only subscribe",
+    )
     parser.add_argument("--allow-anonymous", action="store_true")
     parser.add_argument(
         "--max-queued",
@@ -777,6 +785,12 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"--user {entry!r}: expected NAME:PASSWORD")
         users = users or {}
         users[name] = password
+    rights: dict[str, list[str]] = {}
+    for entry in args.publish:
+        name, sep, topic_filter = entry.partition(":")
+        if not sep or not name or not topic_filter or name not in (users or {}):
+            parser.error(f"--publish {entry!r}: expected NAME:FILTER for a --user NAME")
+        rights.setdefault(name, []).append(topic_filter)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
@@ -786,6 +800,7 @@ def main(argv: list[str] | None = None) -> int:
         args.port,
         find_free_port=not args.exact_port,
         users=users,
+        publish_rights=rights or None,
         allow_anonymous=args.allow_anonymous or None,
         max_queued=args.max_queued,
     )
