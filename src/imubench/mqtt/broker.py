@@ -795,15 +795,18 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
-    broker = EmbeddedBroker(
-        args.host,
-        args.port,
-        find_free_port=not args.exact_port,
-        users=users,
-        publish_rights=rights or None,
-        allow_anonymous=args.allow_anonymous or None,
-        max_queued=args.max_queued,
-    )
+    try:
+        broker = EmbeddedBroker(
+            args.host,
+            args.port,
+            find_free_port=not args.exact_port,
+            users=users,
+            publish_rights=rights or None,
+            allow_anonymous=args.allow_anonymous or None,
+            max_queued=args.max_queued,
+        )
+    except MqttError as exc:  # one line, in this command's words (not the daemon's keys)
+        parser.error(str(exc).replace("mqtt.username and mqtt.password", "--user NAME:PASSWORD"))
 
     async def serve() -> None:
         host, port = await broker.start()
