@@ -105,3 +105,25 @@ def test_fleet_status_unreachable_broker() -> None:
     assert proc.returncode == 2
     assert "imubench fleet: error: broker mqtt://127.0.0.1:" in proc.stderr
     assert "did not answer within 1 s" in proc.stderr
+
+
+def test_fleet_status_says_at_once_that_the_broker_refused_its_credentials(
+        tmp_path: Path) -> None:
+    """A wrong password waited the whole connect timeout, then said the broker "did not
+    answer" (it had answered at once: not authorized)."""
+    import mqtt_fixtures
+
+    from imubench.mqtt.broker import EmbeddedBroker
+
+    broker = EmbeddedBroker(mqtt_fixtures.LOCALHOST, 0, users={"bench": "right"})
+    host, port = broker.start_in_thread()
+    try:
+        pw = tmp_path / "pw"
+        pw.write_text("wrong\n")
+        t0 = time.monotonic()
+        proc = fleet_status(f"mqtt://{host}:{port}", "--mqtt-username", "bench",
+                            "--mqtt-password-file", str(pw), "--connect-timeout-s", "20")
+        assert proc.returncode == 2 and "refused the connection" in proc.stderr, proc.stderr
+        assert time.monotonic() - t0 < 15.0
+    finally:
+        broker.stop_thread()

@@ -86,18 +86,28 @@ async def collect(broker: str, wait_s: float, connect_timeout_s: float, *,
                               password=password, tls_ca=tls_ca, reconnect_max_s=1.0)
     task = asyncio.create_task(listener.run())
     try:
-        try:
-            await asyncio.wait_for(listener.subscribed.wait(), connect_timeout_s)
-        except TimeoutError:
-            raise FleetError(f"broker {listener.url} did not answer within "
-                             f"{connect_timeout_s:g} s ({listener.last_error or 'no reply'})"
-                             ) from None
+        deadline = time.monotonic() + connect_timeout_s
+        while not listener.subscribed.is_set():
+            error = listener.last_error or ""
+            if any(code in error for code in REFUSED_CODES):  # an answer: say it now
+                raise FleetError(f"broker {listener.url} refused the connection ({error}); "
+                                 "check --mqtt-username and --mqtt-password-file")
+            if time.monotonic() > deadline:
+                raise FleetError(f"broker {listener.url} did not answer within "
+                                 f"{connect_timeout_s:g} s ({error or 'no reply'})")
+            await asyncio.sleep(0.05)
         await asyncio.sleep(wait_s)
     finally:
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
     return inventory, listener
+
+
+REFUSED_CODES = ("[code:134]", "[code:135]", "[code:4]", "[code:5]", "Not authorized",
+                 "Bad user name or password")
+"""A broker's refusal in a connection error: the credentials (it waited the whole timeout
+and then said the broker "did not answer")."""
 
 
 COLUMNS: tuple[tuple[str, str], ...] = (
