@@ -227,8 +227,9 @@ def test_cli_refuses_an_exposed_view_without_password(tmp_path: Any) -> None:
     assert proc.returncode == 2
     assert "imubench view: error: listening on 0.0.0.0 exposes the view" in proc.stderr
     empty = tmp_path / "pw"
-    empty.write_text("")
-    proc = subprocess.run([sys.executable, "-m", "imubench.cli", "view", "--listen",
-                           "0.0.0.0:0", "--password-file", str(empty)],
-                          capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 2 and "is empty" in proc.stderr
+    for text in ("", "   \n"):  # blanks only were taken as a password
+        empty.write_text(text)
+        proc = subprocess.run([sys.executable, "-m", "imubench.cli", "view", "--listen",
+                               "0.0.0.0:0", "--password-file", str(empty)],
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 2 and "line 1 is empty or blank" in proc.stderr

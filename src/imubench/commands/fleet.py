@@ -37,8 +37,9 @@ def read_secret(path: Path, option: str) -> str:
     except OSError as exc:
         raise FleetError(f"{option} {path}: cannot read ({exc.strerror})") from None
     secret = text.splitlines()[0] if text else ""
-    if not secret:
-        raise FleetError(f"{option} {path}: the file is empty; put the password on line 1")
+    if not secret.strip():  # blanks only: a password anyone could guess
+        raise FleetError(f"{option} {path}: line 1 is empty or blank; put the password on "
+                         "line 1")
     return secret
 
 
