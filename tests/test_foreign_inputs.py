@@ -780,3 +780,12 @@ def test_a_units_row_in_brackets_is_read(tmp_path: Path) -> None:
         f"{k / 100:.2f},{(k % 3) * 0.1:.1f}" for k in range(300)) + "\n")
     rec = load_recording(path)
     assert rec.channel("gx")[1] == pytest.approx(np.degrees(0.1))
+
+
+def test_columns_names_a_header_column_without_its_unit(tmp_path: Path) -> None:
+    """``--columns gx=GyroX`` needed the header's full text ``GyroX [dps]``."""
+    path = tmp_path / "c.csv"
+    path.write_text("t,GyroX [dps],Other\n" + "\n".join(f"{k / 100:.2f},{k % 5},1"
+                                                         for k in range(200)) + "\n")
+    rec = load_recording(path, InputOptions(columns={"gx": "GyroX"}))
+    assert rec.channel("gx")[3] == 3.0

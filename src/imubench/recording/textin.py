@@ -51,6 +51,7 @@ from imubench.recording.columns import (
     is_euroc,
     is_ros_export,
     map_columns,
+    normalise,
     unit_word,
 )
 from imubench.recording.options import (
@@ -418,8 +419,8 @@ def _pick(cols: list[Column], spec: str, where: str) -> int:
                                  f"{len(cols)}")
         return k
     for k, c in enumerate(cols):
-        if spec in (c.text.strip(), c.name):
-            return k
+        if spec in (c.text.strip(), c.name) or normalise(spec)[0] == c.name:
+            return k  # the name as in the header, with or without its unit
     raise RecordingError(f"{where}: --columns names {spec!r}; the columns are "
                          f"{', '.join(c.text for c in cols)}")
 
@@ -596,7 +597,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         stride = _index_stride(index_col)
         if stride > 1:  # every stride-th value of a counter: a decimated log
             notes.append(f"{where}: the index column steps by multiples of {stride} (a "
-                         f"counter logged every {stride}th sample); read as index / {stride}")
+                         f"counter logged one sample in {stride}); read as index / {stride}")
             index_col = np.floor_divide(index_col - index_col[0], stride)
         tb = timebase_from_index(index_col, t_s, where, rate,
                                  np.asarray(raw.row_lines))
@@ -802,7 +803,7 @@ def _channel_unit(ch: str, col: Column, options: InputOptions, si_format: bool,
     if col.unit is not None:
         if col.unit not in table:
             raise RecordingError(f"{where}: column {col.text.strip()!r} is in {col.unit!r}, "
-                                 f"not a {'gyro' if gyro else 'accelerometer'} unit "
+                                 f"not {'a gyro' if gyro else 'an accelerometer'} unit "
                                  f"({', '.join(table)}); give --units")
         return table[col.unit], col.unit
     if si_format:

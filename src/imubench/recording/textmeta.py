@@ -145,9 +145,9 @@ def stated_unit(meta: Mapping[str, Any], channel: str, where: str) -> tuple[floa
         text = str(value).strip()
         unit = unit_word(text)
         if unit not in table:
-            kind = "gyro" if channel.startswith("g") else "accelerometer"
+            kind = "a gyro" if channel.startswith("g") else "an accelerometer"
             raise RecordingError(
-                f"{where}: metadata {key} {text!r} is not a {kind} unit ({', '.join(table)}) "
+                f"{where}: metadata {key} {text!r} is not {kind} unit ({', '.join(table)}) "
                 f"for channel {channel}; give --units GYRO,ACCEL")
         return table[unit], unit
     return None
