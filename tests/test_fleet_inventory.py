@@ -188,3 +188,10 @@ def test_snapshots_whose_sample_count_stands_still_are_stalled() -> None:
     inv.apply(T + "/allan", snapshot(2000, "2026-11-23T10:00:16+00:00"), 6.0)
     (view,) = inv.views(6.0)
     assert view["state"] == "online"
+
+
+def test_a_jig_result_alone_is_not_waiting() -> None:
+    inv = Inventory()
+    inv.apply("imubench/rig/dut/jig", json.dumps({"verdict": "PASS"}).encode(), 0.0)
+    (view,) = inv.views(1.0)
+    assert view["state"] == "jig"

@@ -140,8 +140,8 @@ class SensorState:
     def state(self, now: float, min_stale_s: float, stale_factor: float) -> str:
         if self.online is False or self.node_online is False:
             return "offline"
-        if self.allan_at is None:
-            return "waiting"
+        if self.allan_at is None:  # a jig's result alone (no daemon status): not waiting
+            return "jig" if self.online is None and self.jig is not None else "waiting"
         stated = self.status.get("publish_interval_s")  # the daemon's own cadence
         interval = (self.interval_s() or (float(stated) if isinstance(stated, int | float)
                                           and not isinstance(stated, bool) and stated > 0
