@@ -166,7 +166,7 @@ function renderHealth(card) {
                              ? ` (status: ${view.status_state})` : ""));
   const link = view.status_state === null ? "no retained status seen"
     : view.status_state === "offline"
-      ? `disconnected${view.offline_at ? " since " + view.offline_at : ""}`
+      ? `disconnected${view.offline_at ? " (seen offline by this view at " + view.offline_at + ")" : ""}`
       : "connected (retained online status)";
   row("broker link", link);
   for (const h of view.health) row(h.label, fmtNumber(h.value, h.unit));
