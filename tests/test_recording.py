@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +32,25 @@ def make_batches(n: int = 1000, hole_at: int = 400, lost: int = 7, seed: int = 0
         gaps = (Gap(hole_at + lost, lost, "fifo overrun"),) if here else ()
         out.append(Batch(idx[sl], idx[sl] / 104.0, raw[sl] * SENS, temp[sl], raw[sl], gaps))
     return out
+
+
+@contextlib.contextmanager
+def small_tmpfs(tmp_path: Path, size: str = "64k") -> Iterator[Path]:
+    """A tmpfs of ``size`` mounted in ``tmp_path`` (a disk that fills); the test is
+    skipped where mounting is not allowed (needs root and mount)."""
+    import shutil
+    import subprocess
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None or subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(disk)],
+            capture_output=True).returncode:
+        pytest.skip("cannot mount a small tmpfs here (needs root and mount)")
+    try:
+        yield disk
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
 
 
 def meta(**kw: object) -> dict[str, object]:
@@ -253,16 +274,7 @@ def test_full_disk_cuts_the_failed_batch_off_and_keeps_whole_ones(tmp_path: Path
     """A batch that hits a full disk is taken back whole: the file reads without damage,
     holds exactly the batches the writer reported written, and every sample is either
     in the file or in the batch that failed."""
-    import shutil
-    import subprocess
-
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    if os.geteuid() != 0 or shutil.which("mount") is None or subprocess.run(
-            ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
-            capture_output=True).returncode:
-        pytest.skip("cannot mount a small tmpfs here (needs root and mount)")
-    try:
+    with small_tmpfs(tmp_path) as disk:
         path = disk / f"r{suffix}"
         batches = make_batches(n=20000, hole_at=5000, lost=9)
         written = 0
@@ -279,8 +291,6 @@ def test_full_disk_cuts_the_failed_batch_off_and_keeps_whole_ones(tmp_path: Path
         assert rec.damage is None
         assert len(rec.index) == written
         np.testing.assert_array_equal(rec.index, Batch.concat(batches).index[:written])
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
 
 
 @pytest.mark.parametrize(("t0", "step", "rate"), [(1.7e9, 0.2, 5.0), (1.7e12, 1000 / 104, 104.0),
@@ -947,18 +957,9 @@ def test_replace_text_on_a_full_disk_leaves_the_old_file_and_no_partial_one(
         tmp_path: Path) -> None:
     """A jig's result.json on a full disk was left cut at byte 8192 (invalid JSON) while
     its junit.xml read as a pass: a small file is written whole or not at all."""
-    import shutil
-    import subprocess
-
     from imubench.recording.commit import replace_text
 
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    if os.geteuid() != 0 or shutil.which("mount") is None or subprocess.run(
-            ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
-            capture_output=True).returncode:
-        pytest.skip("cannot mount a small tmpfs here (needs root and mount)")
-    try:
+    with small_tmpfs(tmp_path) as disk:
         target = disk / "result.json"
         replace_text(target, '{"verdict": "PASS"}\n')
         (disk / "filler").write_bytes(b"\0" * (60 * 1024))
@@ -966,8 +967,6 @@ def test_replace_text_on_a_full_disk_leaves_the_old_file_and_no_partial_one(
             replace_text(target, "x" * (200 * 1024))
         assert target.read_text() == '{"verdict": "PASS"}\n'
         assert sorted(p.name for p in disk.iterdir()) == ["filler", "result.json"]
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
 
 
 def test_hdf5_units_missing_datasets_and_transposed_ones_are_named(tmp_path: Path) -> None:
