@@ -792,8 +792,13 @@ _LONG_QUOTED = re.compile(r"'([^'\n]{100})[^'\n]+'")
 
 def _one_line(line: str) -> str:
     """Whitespace folded; a quoted value longer than 100 characters (echoed by a check
-    deeper down) cut to its first 100, so a line stays readable."""
-    return _LONG_QUOTED.sub(lambda m: f"'{m.group(1)}...'", " ".join(line.split()))
+    deeper down) cut to its first 100, so a line stays readable. A "quoted run" that holds
+    ``: `` is the message between two quoted values, never cut (with a long temporary
+    path the fix itself, "only used with an mqtts:// broker", was cut away)."""
+    def cut(m: re.Match[str]) -> str:
+        return m.group(0) if ": " in m.group(0) else f"'{m.group(1)}...'"
+
+    return _LONG_QUOTED.sub(cut, " ".join(line.split()))
 
 
 def format_validation_error(exc: ValidationError, origin: str, text: str = "") -> str:
