@@ -291,3 +291,16 @@ def test_a_sim_model_resonance_above_the_sources_nyquist_is_refused_at_load(
     assert "Nyquist frequency 52 Hz" in msg, msg
     ok = write(tmp_path, '[source]\nuri = "sim://lsm6dsl?odr_hz=208&model=m.toml"\n')
     assert load_config(ok).source.uri.endswith("model=m.toml")
+
+
+def test_a_long_path_never_cuts_the_fix_out_of_an_error(tmp_path: Path) -> None:
+    """With a temporary path a few characters longer, the shortening of long quoted
+    values took the text between two of them for one and cut the fix away."""
+    deep = tmp_path / ("d" * 60) / ("e" * 40)
+    deep.mkdir(parents=True)
+    ca = deep / "ca.pem"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1",
+                    "-subj", "/CN=imubench-test", "-keyout", str(deep / "k.pem"),
+                    "-out", str(ca)], check=True, capture_output=True, timeout=60)
+    msg = refused(write(deep, f'[mqtt]\nbroker = "mqtt://127.0.0.1:8883"\ntls_ca = "{ca}"\n'))
+    assert "only used with an mqtts:// broker" in msg, msg
