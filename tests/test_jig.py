@@ -301,8 +301,8 @@ def test_arw_and_noise_density_are_the_white_term_beside_flicker() -> None:
         lsb = np.array([8.75e-3] * 3 + [6.1e-5] * 3)
         cap = Capture("static", 104.0, 0, values, np.full(6240, 25.0), 0.0, (), lsb,
                       np.zeros(len(CHANNELS), np.int64))
-        arw = angle_random_walk(cap, "gx", 0.95)
         nd = noise_density(cap, "gx", 0.95)
+        arw = angle_random_walk(nd)
         covered_arw += arw.ci[0] <= 0.24 <= arw.ci[1]
         covered_nd += nd.ci[0] <= 0.004 <= nd.ci[1]
         assert arw.value == pytest.approx(60.0 * nd.value)

@@ -318,28 +318,28 @@ class SensorPhysics:
             self._buf_dt = dt_s
         if self._buf_pos >= len(self._buf) and n >= self.noise_block:
             # the next block would be exactly these n samples: served without a copy
-            first = self.samples_generated
-            t = self._t_base_s + (np.arange(first, first + n) - self._k_base) * dt_s
-            out = np.empty((n, len(cols)))
-            for j, (_, cn) in enumerate(noisy):
-                out[:, j] = cn.generate(n, dt_s, t)
-            return cols, out
+            return cols, self._noise_block(noisy, self.samples_generated, n, dt_s)
         out = np.empty((n, len(cols)))
         done = 0
         while done < n:
             if self._buf_pos >= len(self._buf):
                 k = max(self.noise_block, n - done)
                 first = self.samples_generated + done + (len(self._buf) - self._buf_pos)
-                t = self._t_base_s + (np.arange(first, first + k) - self._k_base) * dt_s
-                buf = np.empty((k, len(cols)))
-                for j, (_, cn) in enumerate(noisy):
-                    buf[:, j] = cn.generate(k, dt_s, t)
-                self._buf, self._buf_pos = buf, 0
+                self._buf, self._buf_pos = self._noise_block(noisy, first, k, dt_s), 0
             take = min(n - done, len(self._buf) - self._buf_pos)
             out[done : done + take] = self._buf[self._buf_pos : self._buf_pos + take]
             self._buf_pos += take
             done += take
         return cols, out
+
+    def _noise_block(self, noisy: list[tuple[int, ChannelNoise]], first: int, k: int,
+                     dt_s: float) -> np.ndarray:
+        """(k, len(noisy)) noise of samples ``first ..`` of each noisy channel."""
+        t = self._t_base_s + (np.arange(first, first + k) - self._k_base) * dt_s
+        block = np.empty((k, len(noisy)))
+        for j, (_, cn) in enumerate(noisy):
+            block[:, j] = cn.generate(k, dt_s, t)
+        return block
 
     def _times(self, n: int, dt_s: float) -> np.ndarray:
         if self._dt_s != dt_s:

@@ -117,11 +117,11 @@ def noise_density(cap: Capture, ch: str, confidence: float) -> Value:
                  f"{confidence:.0%} interval")
 
 
-def angle_random_walk(cap: Capture, ch: str, confidence: float) -> Value:
-    """ARW (deg/sqrt(h)) of gyro channel ``ch``: 60 x the white density N in dps/sqrt(Hz)
-    (:func:`noise_density`; IEEE 952: the -1/2 line read at 1 s, which is N, not the
-    curve's value there)."""
-    v = noise_density(cap, ch, confidence).scaled(60.0)
+def angle_random_walk(density: Value) -> Value:
+    """ARW (deg/sqrt(h)) from a gyro channel's white density N in dps/sqrt(Hz)
+    (:func:`noise_density`): 60 N (IEEE 952: the -1/2 line read at 1 s, which is N, not
+    the curve's value there)."""
+    v = density.scaled(60.0)
     return Value(v.value, v.ci, v.method + "; x 60 (deg/sqrt(h) per dps/sqrt(Hz))")
 
 

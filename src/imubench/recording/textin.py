@@ -746,19 +746,30 @@ def _stamps_against_stated(t_s: np.ndarray, at_stated: Timebase,
     8000 rows at 100.1 Hz under ``# odr_hz: 104``, every ADEV from 1 s NaN). Up to
     :data:`GIVEN_RATE_TOLERANCE` off (an oscillator's tolerance) the stamps' rate is
     used; beyond, which of the two is wrong cannot be told, and the file is refused."""
-    try:
-        own = timebase_from_times(t_s, where)
-    except RecordingError:
-        return None  # no rate of their own: the stated one decides
-    span = int(own.index[-1]) if own.index.size else 0
-    if not (abs(own.rate_hz / at_stated.rate_hz - 1.0) * span > 0.5
-            and at_stated.keep.sum() <= own.keep.sum()):
+    own = _contradicting_stamps(t_s, at_stated, where)
+    if own is None:
         return None
     if abs(own.rate_hz / stated[0] - 1.0) > GIVEN_RATE_TOLERANCE:
         raise RecordingError(
             f"{where}: the file states {stated[0]:.6g} Hz (# {stated[1]}) but its time "
             f"stamps give {own.rate_hz:.6g} Hz; give --rate HZ with the right one")
     return own
+
+
+def _contradicting_stamps(t_s: np.ndarray, given: Timebase, where: str) -> Timebase | None:
+    """The time stamps' own timebase (least squares) when it contradicts ``given`` (the
+    stamps read at a given or stated rate) by enough to move a stamp half a sample over
+    the record, unless the given rate keeps more of the stamps; None otherwise, or when
+    the stamps give no rate of their own (the given one decides)."""
+    try:
+        own = timebase_from_times(t_s, where)
+    except RecordingError:
+        return None
+    span = int(own.index[-1]) if own.index.size else 0
+    if (abs(own.rate_hz / given.rate_hz - 1.0) * span > 0.5
+            and given.keep.sum() <= own.keep.sum()):
+        return own
+    return None
 
 
 def _check_given_rate(t_s: np.ndarray, given: Timebase, where: str) -> None:
@@ -768,16 +779,12 @@ def _check_given_rate(t_s: np.ndarray, given: Timebase, where: str) -> None:
     read at it, the rows would slip off their samples (stamps 100 Hz apart at --rate 50
     put every second row on the sample before it, half the file skipped as damaged; at
     --rate 100.5, 2000 rows left 10 holes)."""
-    try:
-        own = timebase_from_times(t_s, where)
-    except RecordingError:
-        return  # the stamps give no rate of their own: --rate decides
-    span = int(own.index[-1]) if own.index.size else 0
-    if (abs(own.rate_hz / given.rate_hz - 1.0) * span > 0.5
-            and given.keep.sum() <= own.keep.sum()):
+    own = _contradicting_stamps(t_s, given, where)
+    if own is not None:
         raise RecordingError(
             f"{where}: --rate {given.rate_hz:g} Hz contradicts the time column, which "
-            f"gives {own.rate_hz:.8g} Hz (least squares; over its {span + 1} samples the "
+            f"gives {own.rate_hz:.8g} Hz (least squares; over its {int(own.index[-1]) + 1} "
+            "samples the "
             "difference slips rows off their samples); drop --rate to read the file at its "
             "own rate")
 
@@ -945,10 +952,10 @@ def _time_unit(col: Column, options: InputOptions, ros: bool, t_raw: np.ndarray,
             f"--time-unit {unit} or --time-unit s (or --rate HZ)")
     if unit == "d":
         return "days (MJD, detected)", SECONDS_PER_DAY
-    return f"{unit} (detected{_other_reading(t_raw, unit, scale)})", scale
+    return f"{unit} (detected{_other_reading(t_raw, unit)})", scale
 
 
-def _other_reading(t_raw: np.ndarray, unit: str, scale: float) -> str:
+def _other_reading(t_raw: np.ndarray, unit: str) -> str:
     """``; 0.1 Hz if in s: --time-unit s`` for a time unit told from the stamps' spacing
     (:func:`time_unit_from_spacing` takes the unit that gives 7 Hz to 7 kHz): a 0.1 Hz
     drift log in seconds reads as 100 Hz in ms, an 8 kHz one in ms as 8 Hz in s; the

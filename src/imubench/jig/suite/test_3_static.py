@@ -61,16 +61,23 @@ def test_zero_rate_level(static: Point, jig: JigSession, measure: Measure, ch: s
     measure(f"zero_rate_level.{ch}", v.value, v.ci, method=v.method)
 
 
+def _density(static: Point, jig: JigSession, ch: str) -> analysis.Value:
+    """The white density of ``ch`` (unit/sqrt(Hz)), fitted once per run: noise density
+    and ARW are both read off it."""
+    return jig.cached(f"white_density.{ch}",
+                      lambda: analysis.noise_density(static.capture, ch, jig.confidence))
+
+
 @pytest.mark.parametrize("ch", CHANNELS)
 def test_noise_density(static: Point, jig: JigSession, measure: Measure, ch: str) -> None:
-    v = analysis.noise_density(static.capture, ch, jig.confidence)
+    v = _density(static, jig, ch)
     v = v.scaled(analysis.SCALE[f"{_sensor(ch)}_density"])
     measure(f"noise_density.{ch}", v.value, v.ci, method=v.method)
 
 
 @pytest.mark.parametrize("ch", GYRO)
 def test_angle_random_walk(static: Point, jig: JigSession, measure: Measure, ch: str) -> None:
-    v = analysis.angle_random_walk(static.capture, ch, jig.confidence)
+    v = analysis.angle_random_walk(_density(static, jig, ch))
     measure(f"angle_random_walk.{ch}", v.value, v.ci, method=v.method)
 
 
