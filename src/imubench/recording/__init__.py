@@ -338,10 +338,11 @@ def _with_segments(first: Recording, kind: str, opts: InputOptions) -> Recording
                 f"{nxt}: its first sample {int(rec.index[0])} does not follow "
                 f"{parts[-1].path.name}'s last {int(parts[-1].index[-1])}")
         parts.append(rec)
+    nxt = segment_path(first.path, len(parts) + 1)
     later = [segment_path(first.path, k) for k in range(len(parts) + 2, len(parts) + 6)]
-    if any(p.exists() for p in later):
+    if not nxt.exists() and any(p.exists() for p in later):  # (one refused was said)
         log.warning("%s: %s is missing, so the later segment(s) %s are not read with it",
-                    first.path, segment_path(first.path, len(parts) + 1).name,
+                    first.path, nxt.name,
                     ", ".join(p.name for p in later if p.exists()))
     if len(parts) == 1:
         return first
