@@ -239,9 +239,7 @@ class Inventory:
         for s in self.sensors.values():
             if s.station != station or s.node != node:
                 continue
-            # a node that restarted without some of its sensors: those are offline (they
-            # stayed "stale" with the dead process's pid)
-            mine = online if not isinstance(listed, list) or s.sensor in listed else False
+            mine = self._node_online(station, node, s.sensor)
             if s.node_online != mine:
                 if mine is False and s.online is not False:
                     s.offline_at = _utc_now()
@@ -249,6 +247,15 @@ class Inventory:
                 self._touch(s)
                 changed = True
         return changed
+
+    def _node_online(self, station: str, node: str, sensor: str) -> bool | None:
+        """Whether ``node``'s status says it runs ``sensor`` (None: no node status): a
+        node that restarted without some of its sensors has them offline (they stayed
+        "stale" with the dead process's pid)."""
+        key = f"{station}/{node}"
+        online = self.nodes.get(key)
+        listed = self.node_sensors.get(key)
+        return False if online and listed is not None and sensor not in listed else online
 
     def _apply_status(self, s: SensorState, payload: bytes) -> None:
         if payload.strip() == b"offline":
@@ -270,10 +277,7 @@ class Inventory:
             s.offline_at = None
         s.status = doc
         node = s.node
-        s.node_online = None if node is None else self.nodes.get(f"{s.station}/{node}")
-        listed = None if node is None else self.node_sensors.get(f"{s.station}/{node}")
-        if s.node_online and listed is not None and s.sensor not in listed:
-            s.node_online = False  # the node runs without it now
+        s.node_online = None if node is None else self._node_online(s.station, node, s.sensor)
 
     def _apply_allan(self, s: SensorState, payload: bytes, now: float) -> None:
         doc = _json_object(payload)
