@@ -15,20 +15,14 @@ from __future__ import annotations
 import math
 
 from imubench.jig.errors import JigError
+from imubench.recording.options import ACCEL_UNITS_G, GYRO_UNITS_DPS, STANDARD_GRAVITY_M_S2
 
-STANDARD_GRAVITY = 9.80665
-"""m/s^2 per g (CGPM 1901)."""
 DEG_PER_RAD = 180.0 / math.pi
 
 UNITS: dict[str, tuple[str, float]] = {
-    # angular rate, in dps
-    "dps": ("rate", 1.0), "deg/s": ("rate", 1.0), "mdps": ("rate", 1e-3),
-    "deg/h": ("rate", 1.0 / 3600.0), "rad/s": ("rate", DEG_PER_RAD),
-    "mrad/s": ("rate", DEG_PER_RAD * 1e-3),
-    # acceleration, in g
-    "g": ("accel", 1.0), "mg": ("accel", 1e-3), "ug": ("accel", 1e-6),
-    "µg": ("accel", 1e-6), "m/s2": ("accel", 1.0 / STANDARD_GRAVITY),
-    "m/s^2": ("accel", 1.0 / STANDARD_GRAVITY),
+    # angular rate in dps and acceleration in g: the recordings' own tables
+    **{u: ("rate", f) for u, f in GYRO_UNITS_DPS.items()},
+    **{u: ("accel", f) for u, f in ACCEL_UNITS_G.items()}, "µg": ("accel", 1e-6),
     # rate noise density (angle random walk), in dps/sqrt(Hz)
     "dps/sqrt(Hz)": ("rate_density", 1.0), "mdps/sqrt(Hz)": ("rate_density", 1e-3),
     "deg/sqrt(s)": ("rate_density", 1.0), "deg/sqrt(h)": ("rate_density", 1.0 / 60.0),
@@ -37,7 +31,7 @@ UNITS: dict[str, tuple[str, float]] = {
     # acceleration noise density (velocity random walk), in g/sqrt(Hz)
     "g/sqrt(Hz)": ("accel_density", 1.0), "mg/sqrt(Hz)": ("accel_density", 1e-3),
     "ug/sqrt(Hz)": ("accel_density", 1e-6), "µg/sqrt(Hz)": ("accel_density", 1e-6),
-    "m/s2/sqrt(Hz)": ("accel_density", 1.0 / STANDARD_GRAVITY),
+    "m/s2/sqrt(Hz)": ("accel_density", 1.0 / STANDARD_GRAVITY_M_S2),
     # temperature coefficients
     "dps/degC": ("rate_per_degC", 1.0), "mdps/degC": ("rate_per_degC", 1e-3),
     "deg/h/degC": ("rate_per_degC", 1.0 / 3600.0),

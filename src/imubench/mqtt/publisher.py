@@ -444,7 +444,8 @@ class MqttPublisher:
                 failures += 1
                 if down_since is None:  # from the last snapshot the broker took: a hung
                     # broker is noticed only a keep-alive later ("back after 0 s" after 55 s)
-                    down_since = min(time.monotonic(), self._last_ack or time.monotonic())
+                    down_since = (self._last_ack if self._last_ack is not None
+                                  else time.monotonic())
                 wait_s = random.uniform(backoff / 2, backoff)
                 level = logging.WARNING if failures == 1 else logging.DEBUG
                 log.log(
