@@ -98,7 +98,10 @@ def test_quickstart_daemon_end_to_end(tmp_path: Path) -> None:
              "imubench/bench1/imu0/status", "-C", "1", "-W", "5"],
             capture_output=True, text=True, timeout=10,
         )
-        assert json.loads(status.stdout)["state"] == "online"  # retained
+        retained = json.loads(status.stdout)
+        assert retained["state"] == "online"  # retained
+        # the fleet view's staleness rule reads the daemon's cadence from here
+        assert retained["publish_interval_s"] == 1.0
         t0 = time.monotonic()
         proc.send_signal(signal.SIGTERM)
         rc = proc.wait(timeout=10)

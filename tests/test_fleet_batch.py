@@ -153,6 +153,7 @@ def test_a_damaged_recording_is_reported_and_the_others_kept(
     (["gap", "recs", "--model", "m.toml", "--out-dir", "x", "--jobs", "2"],
      "--jobs runs one recording's channels"),
     (["fit", "empty", "--out-dir", "x"], "no recordings"),
+    (["fit", "nothing*.imbr"], "nothing*.imbr: no recordings"),  # not "needs --out-dir"
     (["fit", "recs", "--out-dir", "x", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
      "not both"),
 ])

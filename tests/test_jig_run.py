@@ -460,3 +460,29 @@ def test_a_frozen_output_is_named(tmp_path: Path) -> None:
     why = res["broken_reasons"]["suite/test_3_static.py::test_zero_rate_level[gx]"]
     assert "static +Z up: the output did not change on any axis for" in why
     assert "a frozen output" in why
+
+
+def test_a_stop_while_the_report_is_drawn_keeps_the_verdict(tmp_path: Path) -> None:
+    """SIGINT or SIGTERM raise KeyboardInterrupt in the command (imubench.cli); one that
+    came while the plots were drawn left result.json without its history line and no
+    report. The verdict is written first: result.json (report: null) and the history line
+    stay, and the command exits as stopped."""
+    station = write_station(tmp_path, "stop", select_tests="identity", serial="SN-STOP")
+    report = tmp_path / "reports"
+    script = ("import sys\n"
+              "import imubench.jig.runner as r\n"
+              "def stopped(*a, **k):\n"
+              "    raise KeyboardInterrupt\n"
+              "r.write_report = stopped\n"
+              "from imubench.cli import main\n"
+              f"sys.exit(main(['jig', 'run', '--station', {str(station)!r}, '--report', "
+              f"{str(report)!r}]))\n")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=600, cwd=REPO)
+    assert proc.returncode != 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    run, res = result_of(report, "SN-STOP")
+    assert res["verdict"] == "PASS" and res["report"] is None
+    assert not (run / "report.html").exists()
+    history = [json.loads(line) for line in
+               (report / "SN-STOP" / "history.jsonl").read_text().splitlines()]
+    assert [h["run_id"] for h in history] == [run.name] and history[0]["verdict"] == "PASS"

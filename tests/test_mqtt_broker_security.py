@@ -185,3 +185,18 @@ def test_the_standalone_broker_grants_publish_rights_from_its_command_line() -> 
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+def test_the_standalone_broker_refuses_an_open_address_in_one_line(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--host 0.0.0.0`` without ``--user`` is refused with the flag to give, not a
+    traceback naming the daemon's settings."""
+    from imubench.mqtt.broker import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["--host", "0.0.0.0", "--port", "0"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "Traceback" not in "\n".join(err)
+    assert "without authentication" in err[-1] and "--user NAME:PASSWORD" in err[-1]
+    assert "mqtt.username" not in err[-1]

@@ -166,6 +166,21 @@ def test_parse_broker_url_errors(url: str, needle: str) -> None:
     assert url in str(info.value)
 
 
+def test_embedded_names_no_broker_to_listen_to() -> None:
+    """``embedded`` is a daemon setting; a view or a fleet listener is told to give the
+    URL the daemon printed."""
+    with pytest.raises(MqttError, match="--broker 'embedded': give the URL"):
+        parse_broker_url("embedded", option="--broker")
+    assert "or 'embedded'" not in _message("mqtt://", "--broker")
+    assert "or 'embedded'" in _message("mqtt://", "mqtt.broker")
+
+
+def _message(url: str, option: str) -> str:
+    with pytest.raises(MqttError) as info:
+        parse_broker_url(url, option=option)
+    return str(info.value)
+
+
 def test_encode_json_numpy_and_non_finite() -> None:
     payload = {
         "time": 1.5,

@@ -756,3 +756,16 @@ def test_an_undetected_random_walk_is_bounded_above_its_truth() -> None:
             undetected += 1
             covered += f.ci["random_walk"][1] >= 1e-4
     assert undetected >= 2 and covered >= undetected - 2, (undetected, covered)
+
+
+def test_quantization_fitted_through_a_filter_says_it_is_not_ieee_q(reference_dir) -> None:
+    """ADIS16405 rep 1 gy: Q is fitted beside a ~5 Hz output filter, where sqrt(3) Q / tau0
+    is several times the measured ADEV at tau0; the fit says that it is the quantization at
+    the filter's input, not IEEE 952's Q read off the curve."""
+    y = _adis(reference_dir, 1, "gy")
+    f = fit_channel(y, 100.0, channel="gy")
+    assert {"quantization", "bandwidth_hz"} <= set(f.present), f.reasons
+    q = f.params["quantization"]
+    adev_tau0 = oadev(y, 100.0, "freq", [0.01]).dev[0]
+    assert math.sqrt(3.0) * q / 0.01 > 2.0 * adev_tau0  # not the curve's Q
+    assert any("not the IEEE 952 Q" in n for n in f.notes), f.notes
