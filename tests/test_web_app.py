@@ -215,10 +215,15 @@ def test_loopback_needs_none(listen: str) -> None:
     check_exposure(parse_listen(listen)[0], None)
 
 
-@pytest.mark.parametrize("bad", ["8080", "host:", "host:http", "127.0.0.1:70000"])
-def test_bad_listen_addresses(bad: str) -> None:
-    with pytest.raises(FleetError, match="--listen"):
+@pytest.mark.parametrize(("bad", "says"), [
+    ("8080", "no port"), ("host:", "no port"), ("host:http", "not a number"),
+    ("127.0.0.1:70000", "outside 0-65535"),
+    (":8080", "no host; use 127.0.0.1:8080"),  # it said "no port"
+])
+def test_bad_listen_addresses(bad: str, says: str) -> None:
+    with pytest.raises(FleetError, match="--listen") as info:
         parse_listen(bad)
+    assert says in str(info.value)
 
 
 def test_cli_refuses_an_exposed_view_without_password(tmp_path: Any) -> None:

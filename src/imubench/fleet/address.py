@@ -11,8 +11,12 @@ def parse_listen(text: str) -> tuple[str, int]:
     """``HOST:PORT`` or ``[IPv6]:PORT`` -> (host, port). Raises FleetError."""
     forms = "use HOST:PORT, e.g. 127.0.0.1:8080, 0.0.0.0:8080 or [::1]:8080"
     host, sep, port_text = text.rpartition(":")
-    if not sep or not host:
+    if not sep or not port_text:
         raise FleetError(f"--listen {text!r}: no port; {forms}")
+    if not host:  # ':8080' reads as every interface elsewhere: say which to give
+        raise FleetError(f"--listen {text!r}: no host; use 127.0.0.1:{port_text} (this "
+                         f"machine only) or 0.0.0.0:{port_text} (every interface, with "
+                         "--password-file)")
     if host.startswith("[") and host.endswith("]"):
         host = host[1:-1]
     try:
