@@ -46,7 +46,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lsm6ds.driver import LSM6DS, ImuConfig
-from lsm6ds.errors import BusBudgetError, ConfigurationError, DriverIOError, LSM6DSError
+from lsm6ds.errors import (
+    BusBudgetError,
+    ConfigurationError,
+    DriverIOError,
+    LSM6DSError,
+    ProbeError,
+)
 from lsm6ds.registers import DECIMATION, FIFO_DEPTH_WORDS, FIFO_MODES, ODR_HZ
 
 TICK_S = 25e-6
@@ -304,11 +310,20 @@ class FifoStream:
         self._last_data_t = d.monotonic()
 
     def _recover_chip_reset(self) -> None:
-        self.counters["chip_resets"] += 1
+        """Re-probe, reconfigure and restart after a chip reset. A transfer that fails on
+        the way raises :class:`DriverIOError` (retried by the reader: the next poll finds
+        the configuration still lost and starts again), not the probe's
+        :class:`ProbeError`, which reads as the wrong device and ended the stream."""
         self._pending_gap_reason = "chip reset"
-        self.dev.probe()
+        try:
+            self.dev.probe()
+        except ProbeError as exc:
+            if isinstance(exc.__cause__, DriverIOError):
+                raise exc.__cause__ from None
+            raise
         self.dev.configure(self.cfg)
         self._start_fifo(new_epoch=True)
+        self.counters["chip_resets"] += 1
 
     def stop(self) -> None:
         if self.started:
@@ -324,6 +339,18 @@ class FifoStream:
     @property
     def words_per_s(self) -> float:
         return self.odr_hz * self.pattern_words / self.pattern_slots
+
+    @property
+    def capacity_samples(self) -> int:
+        """Samples the FIFO holds when full: a sample made longer ago than this many
+        periods and not read is overwritten (continuous mode, §9.3)."""
+        return FIFO_DEPTH_WORDS * self.pattern_slots // self.pattern_words
+
+    @property
+    def pending_reason(self) -> str | None:
+        """Why the next hole will have been lost, when the stream already knows (a chip
+        reset recovered, an overrun seen), else None."""
+        return self._pending_gap_reason
 
     def time_to_watermark_s(self, level_words: int) -> float:
         """Host seconds until the FIFO holds the watermark, from ``level_words`` now."""

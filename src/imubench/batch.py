@@ -11,7 +11,8 @@ where it ends, how many samples it holds and why. A hole is never implicit.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import itertools
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,33 @@ class Gap:
     def __post_init__(self) -> None:
         if self.lost <= 0:
             raise ValueError(f"Gap at index {self.at}: lost={self.lost} must be positive")
+
+
+def gaps_before(gaps: Sequence[Gap], end: int) -> list[Gap]:
+    """The parts of ``gaps``' holes that lie below sample index ``end`` (a stream cut at
+    ``end``), each as a gap at ``min(at, end)``.
+
+    Gaps that share ``at`` are adjacent holes, the one listed first the earlier: together
+    they are ``[at - sum(lost), at - 1]`` (a recording's segment that starts with a full
+    disk's loss and a FIFO overrun before the same sample). Taking each as
+    ``[at - lost, at - 1]`` alone dropped the earlier one at a cut. ``gaps`` sorted by
+    ``at``."""
+    out: list[Gap] = []
+    for at, group in itertools.groupby(gaps, key=lambda g: g.at):
+        same = list(group)
+        start = at - sum(g.lost for g in same)
+        for g in same:
+            lost = min(start + g.lost, end) - start
+            if lost > 0:
+                out.append(Gap(min(at, end), lost, g.reason))
+            start += g.lost
+    return out
+
+
+def hole_start(gaps: Sequence[Gap]) -> int:
+    """The first sample index inside the earliest hole of ``gaps`` (sorted by ``at``)."""
+    first = gaps[0].at
+    return first - sum(g.lost for g in gaps if g.at == first)
 
 
 @dataclass(frozen=True)
@@ -161,4 +189,5 @@ def explain_holes(batch: Batch, last_index: int | None) -> list[Gap]:
     return out
 
 
-__all__ = ["CHANNELS", "UNEXPLAINED", "UNITS", "Batch", "Gap", "explain_holes"]
+__all__ = ["CHANNELS", "UNEXPLAINED", "UNITS", "Batch", "Gap", "explain_holes", "gaps_before",
+           "hole_start"]

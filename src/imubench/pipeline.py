@@ -39,7 +39,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from imubench.batch import Batch, Gap, explain_holes
+from imubench.batch import Batch, explain_holes, gaps_before, hole_start
 from imubench.ringbuffer import RingBuffer, RingReader
 from imubench.sources.base import Source, SourceInfo
 
@@ -293,7 +293,7 @@ class Pipeline:
                 if self.duration_s is not None:
                     if end is None:
                         origin = (int(batch.index[0]) if len(batch)
-                                  else min(g.at - g.lost for g in batch.gaps))
+                                  else hole_start(batch.gaps))
                         end = origin + round(self.duration_s * self.source.info.odr_hz)
                     parts, finished = _cut(batch, end)
                 if not all(self._write(ring, part) for part in parts) or finished:
@@ -333,15 +333,8 @@ def _cut(batch: Batch, end: int) -> tuple[list[Batch], bool]:
     kept = batch.head(n)
     last = int(kept.index[-1]) if n else None
     out = [kept] if n else []
-    tail: list[Gap] = []
-    for g in batch.gaps:
-        if last is not None and g.at <= last:
-            continue  # carried by the samples kept
-        start = g.at - g.lost
-        if start >= end:
-            continue
-        at = min(g.at, end)
-        tail.append(Gap(at, at - start, g.reason))
+    # the gaps the kept samples do not carry, cut at end
+    tail = gaps_before([g for g in batch.gaps if last is None or g.at > last], end)
     if tail:
         out.append(Batch.empty(with_raw=batch.raw is not None, gaps=tail))
     return out, True

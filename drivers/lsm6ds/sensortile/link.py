@@ -18,6 +18,7 @@ the USB host goes away).
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +34,11 @@ from lsm6ds.sensortile.tmsg import BadFrame, Frame, FrameDecoder
 
 class SensorTileError(LSM6DSError):
     """The SensorTile link failed (no port, no reply, reconnection gave up)."""
+
+
+class LinkInterruptedError(SensorTileError):
+    """A reconnection was given up because :attr:`SensorTileLink.interrupted` was set (the
+    reader is stopping), not because the kit failed."""
 
 
 LINK_COUNTERS: tuple[str, ...] = (
@@ -102,6 +108,9 @@ class SensorTileLink:
         self._replies: list[Frame] = []
         self._streaming_mask: int | None = None
         self._last_frame_s = 0.0
+        self.interrupted = threading.Event()
+        """Set it (from any thread) to give up a reconnection at once: a stop during an
+        unplug waited out ``reconnect_timeout_s`` (30 s) and then failed."""
         self.on_reconnect: Callable[[], None] | None = None
         """Called after every successful reconnection (before the stream is restarted)."""
 
@@ -169,6 +178,9 @@ class SensorTileLink:
         last_exc: Exception | None = None
         while True:
             self._sleep(delay)
+            if self.interrupted.is_set():
+                raise LinkInterruptedError(
+                    f"SensorTile at {self.url!r}: stopped while reconnecting")
             try:
                 self.open()
                 break

@@ -43,7 +43,7 @@ from lsm6ds.errors import DriverIOError, LSM6DSError
 from lsm6ds.registers import CHIPS, accel_fs_code, chip_map, gyro_fs_code
 from lsm6ds.stream import FifoStream, StreamChunk
 
-from imubench.batch import Batch, Gap
+from imubench.batch import Batch, Gap, gaps_before
 from imubench.errors import SourceError
 from imubench.sources.base import Source, SourceInfo
 from imubench.sources.registry import (
@@ -105,6 +105,9 @@ I2C_PARAMS: tuple[Param, ...] = (
     Param("bus_khz", float, 400.0, "I2C clock for the bandwidth check, kHz"),
 )
 IO_BACKOFF_MAX_S = 1.0
+NO_ANSWER = "device not answering"
+"""Gap reason of the samples a chip made while its bus failed every transfer, until the
+stream stopped or ended (:meth:`ChipSource._outage_tail`)."""
 FIRST_POLL_S = 0.1
 """The first poll comes after at most this long, s (its samples get one temperature)."""
 
@@ -192,6 +195,10 @@ class ChipSource(Source):
         """(host time of the newest sample, die temperature) of the previous poll."""
         self._sleep_first_s = 0.0
         self._pending: list[Gap] = []
+        self._last_index = -1
+        """Index of the newest sample delivered (-1 before the first)."""
+        self._last_sample_t: float | None = None
+        """Host time of that sample (the stream's start before the first), s."""
         config = {
             "watermark_s": watermark_s,
             "bus_hz": bus_hz,
@@ -264,6 +271,7 @@ class ChipSource(Source):
         except LSM6DSError as exc:
             raise SourceError(f"source {self.info.uri!r}: {exc}") from None
         self._start_host = self.dev.monotonic()
+        self._last_sample_t = self._start_host
 
     def _close(self) -> None:
         self.stream.stop()
@@ -276,7 +284,9 @@ class ChipSource(Source):
         self._sleep_first_s = 0.0
         while not self._done:
             if self._interrupt.is_set():
-                return None
+                return self._outage_tail(stopping=True)
+            if self._n_total is not None and (tail := self._outage_tail()) is not None:
+                return tail
             try:
                 chunk, level = self.stream.poll()
                 self._io_failing_since = None
@@ -304,6 +314,56 @@ class ChipSource(Source):
             gaps, self._pending = tuple(self._pending), []
             return Batch.empty(with_raw=True, gaps=gaps)
         return None
+
+    def _outage_tail(self, *, stopping: bool = False) -> Batch | None:
+        """The samples the chip made after the newest one read that no poll will bring,
+        as a batch of one gap, or None.
+
+        A chip that resets faster than it is polled, a bus that stopped answering or a
+        board that was unplugged delivers nothing, and a hole was sized only when data
+        came back: a finite stream never ended (virtual time spun for 16 simulated days)
+        and a stop during the outage reported 0 lost. The samples are counted from the
+        host time since the newest sample read, at the measured ODR:
+
+        * a finite stream ends once every sample below its end is older than the FIFO
+          holds (:attr:`~lsm6ds.stream.FifoStream.capacity_samples`): none can be read
+          any more;
+        * at a stop (``stopping``) during an outage (the device not answering, a chip
+          reset recovered and no sample since, or no sample for twice the poll interval
+          and at least a second), every sample made until now is lost. Outside an outage
+          a stop ends with the newest sample read, as before.
+        """
+        assert self._last_sample_t is not None
+        now = self.dev.monotonic()
+        odr = self.measured_odr_hz or self.info.odr_hz
+        made = self._last_index + math.floor((now - self._last_sample_t) * odr)
+        if stopping:
+            quiet = max(2.0 * self.stream.time_to_watermark_s(0), 1.0)
+            outage = (self._io_failing_since is not None
+                      or self.stream.pending_reason == "chip reset"
+                      or now - self._last_sample_t > quiet)
+            end = made + 1 if outage else self._last_index + 1
+        elif (self._n_total is not None
+              and made - self.stream.capacity_samples >= self._n_total - 1):
+            self._done = True
+            end = self._n_total
+        else:
+            return None
+        if self._n_total is not None:
+            end = min(end, self._n_total)
+        self._done = True
+        gaps = [*self._pending]
+        start = max([self._last_index + 1, *(g.at for g in gaps)])
+        if end > start:
+            gaps.append(Gap(end, end - start, self._outage_reason()))
+        self._pending = []
+        return Batch.empty(with_raw=True, gaps=tuple(gaps)) if gaps else None
+
+    def _outage_reason(self) -> str:
+        """Why the samples after the newest read were lost (:meth:`_outage_tail`)."""
+        if self._io_failing_since is not None:
+            return NO_ANSWER
+        return self.stream.pending_reason or "fifo overrun"
 
     def _temperatures(self, t_s: np.ndarray, temp_c: float) -> np.ndarray:
         """The die temperature of each sample of a poll: the one reading of the poll
@@ -341,11 +401,7 @@ class ChipSource(Source):
             n = self._n_total
             n_keep = int(np.searchsorted(index, n))
             keep = slice(0, n_keep)
-            # a gap (at, lost) is the hole [at - lost, at - 1]; keep its part below n
-            gaps = [
-                Gap(min(g.at, n), min(g.at, n) - (g.at - g.lost), g.reason)
-                for g in gaps if g.at - g.lost < n
-            ]
+            gaps = gaps_before(gaps, n)
             if n_keep < len(index):
                 self._done = True
         index = index[keep]
@@ -353,6 +409,7 @@ class ChipSource(Source):
         if not len(index):
             return None
         last = int(index[-1])
+        self._last_index, self._last_sample_t = last, float(chunk.t_s[keep][-1])
         mine = tuple(g for g in self._pending if g.at <= last)
         self._pending = [g for g in self._pending if g.at > last]
         raw = chunk.raw[keep]
@@ -479,6 +536,9 @@ def build_sim(uri: SourceURI, opts: ChipOptions) -> ChipSource:
         watermark_s = 0.1 if clock_mode == "wall" else 60.0
         if clock_mode == "virtual" and (opts.bus_hz is None or opts.cfg.odr_hz <= 833):
             max_fill = 0.9
+        if v["reset_every_s"]:  # poll between resets (each empties the FIFO), or no
+            # sample survives one: 12.5 Hz polled every 24 s with a reset every 10 s
+            watermark_s = min(watermark_s, v["reset_every_s"] / 4.0)
     return ChipSource(
         uri.text,
         dev,

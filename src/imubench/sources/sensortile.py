@@ -26,6 +26,7 @@ samples on its own timer): such frames are delivered as they are (the kit's own 
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -33,7 +34,13 @@ from typing import Any
 import numpy as np
 from lsm6ds.sensortile import commands as cmds
 from lsm6ds.sensortile.datalog_ascii import DATA_PERIOD_MS, DataLogRecord
-from lsm6ds.sensortile.link import LinkConfig, Received, SensorTileError, SensorTileLink
+from lsm6ds.sensortile.link import (
+    LinkConfig,
+    LinkInterruptedError,
+    Received,
+    SensorTileError,
+    SensorTileLink,
+)
 from lsm6ds.sensortile.stream import FLAG_TEMP, RtcTimeline, StreamFrame
 
 from imubench.batch import Batch, Gap
@@ -135,6 +142,7 @@ class SensorTileSource(Source):
         self.firmware = firmware
         self.max_batch = max_batch
         self.link = SensorTileLink(url, mode, link_config)
+        self.link.interrupted = self._interrupt  # a stop ends a reconnection at once
         self.info = SourceInfo(
             uri=uri,
             chip=chip,
@@ -144,6 +152,10 @@ class SensorTileSource(Source):
         )
         self._timeline: RtcTimeline | _AsciiTimeline | None = None
         self._last_index = -1
+        self._last_frame_host_s = 0.0
+        self._tail: Gap | None = None
+        """The frames lost before the end of a finite stream, still to be declared."""
+        """Host time (``time.monotonic``) the newest delivered frame arrived, s."""
         self._host_t0 = 0.0
         self._done = False
         self._link_bad_seen = 0
@@ -166,7 +178,7 @@ class SensorTileSource(Source):
         except SensorTileError as exc:
             self._shutdown()
             raise SourceError(f"{self.info.uri}: {exc}") from exc
-        self._host_t0 = time.monotonic()
+        self._host_t0 = self._last_frame_host_s = time.monotonic()
         if self.mode == "binary":
             self._timeline = RtcTimeline(self.period_s * 100.0, self.host_check_s)
         else:
@@ -202,10 +214,13 @@ class SensorTileSource(Source):
 
     def _read(self) -> Batch | None:
         if self._done:
-            return None
+            tail, self._tail = self._tail, None
+            return None if tail is None else Batch.empty(with_raw=False, gaps=(tail,))
         while not self._interrupt.is_set():
             try:
                 received = self.link.read_stream(self.max_batch, timeout_s=0.2)
+            except LinkInterruptedError:
+                break
             except SensorTileError as exc:
                 raise SourceError(f"{self.info.uri}: {exc}") from exc
             self._sync_counters()
@@ -215,7 +230,27 @@ class SensorTileSource(Source):
                 return batch
             if self._done:
                 return None
-        return None
+        return self._stopped_in_outage()
+
+    def _stopped_in_outage(self) -> Batch | None:
+        """At a stop: the frames the kit made since the newest one arrived, lost, when no
+        frame came for longer than an outage allows (an unplug, a silent link); None
+        otherwise. A stop during an unplug reported 0 lost for the seconds it lasted.
+        Counted from the host clock at the frame period, on a real-time link only (a
+        virtual-clock simulator's firmware time is not the host's)."""
+        self._done = True
+        if not self.info.realtime:
+            return None
+        quiet = max(1.0, self.link.config.stall_timeout_s)
+        since = time.monotonic() - self._last_frame_host_s
+        if since <= quiet:
+            return None
+        made = self._last_index + int(since / self.period_s)
+        if made <= self._last_index:
+            return None
+        reason = "serial link down" if not self.link.is_open else "no frames from the kit"
+        return Batch.empty(with_raw=False, gaps=(
+            Gap(made + 1, made - self._last_index, reason),))
 
     # -- conversion -----------------------------------------------------------------
     def _sync_counters(self) -> None:
@@ -234,6 +269,8 @@ class SensorTileSource(Source):
         t_s: list[float] = []
         vals: list[tuple[float, ...]] = []
         temps: list[float] = []
+        tail: Gap | None = None
+        received_at = self._last_frame_host_s
         for r in received:
             item = r.item
             if isinstance(item, StreamFrame):
@@ -259,8 +296,14 @@ class SensorTileSource(Source):
             elapsed = self._timeline.elapsed_s
             if self.duration_s is not None and elapsed >= self.duration_s - 1e-9:
                 self._done = True
+                # the frames between the newest delivered and the end never arrived
+                end = min(index, math.ceil(self.duration_s / self.period_s - 1e-9))
+                last = idx[-1] if idx else self._last_index
+                if end > last + 1:
+                    tail = Gap(end, end - last - 1, "frames lost on the serial link")
                 break
             g, a = item.gyro_mdps, item.accel_mg
+            received_at = r.host_s
             idx.append(index)
             t_s.append(elapsed)
             vals.append(
@@ -275,7 +318,7 @@ class SensorTileSource(Source):
             )
             temps.append(float(temp))
         if not idx:
-            return None
+            return None if tail is None else Batch.empty(with_raw=False, gaps=(tail,))
         index_arr = np.asarray(idx, dtype=np.int64)
         # the first accepted frame has index 0, so with _last_index = -1 the step is 0
         holes = np.diff(np.concatenate([[self._last_index], index_arr])) - 1
@@ -283,7 +326,9 @@ class SensorTileSource(Source):
             Gap(int(index_arr[k]), int(holes[k]), "frames lost on the serial link")
             for k in np.nonzero(holes > 0)[0]
         )
+        self._tail = tail  # after the samples: in a batch of its own, read next
         self._last_index = int(index_arr[-1])
+        self._last_frame_host_s = received_at
         return Batch(
             index=index_arr,
             t_s=np.asarray(t_s, dtype=np.float64),
