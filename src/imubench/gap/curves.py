@@ -741,21 +741,37 @@ def family_z(m: int) -> float:
     return max(Z_REGION, float(norm.isf(p / 2.0)))
 
 
+LINE_FIRST_BIN = 4
+"""Lowest periodogram bin searched for a line: four cycles in the record (a slower sine
+is a drift to this test)."""
+LINE_LOCAL_HALF = 8
+"""Half-width in bins of the running median that is the continuum of the first block."""
+
+
 def line_peak(psd: np.ndarray) -> tuple[int, float]:
-    """(bin, ln(psd / continuum)) of the highest narrow peak above the first block.
+    """(bin, ln(psd / continuum)) of the highest narrow peak from bin LINE_FIRST_BIN up.
 
     The continuum is the median of each block of LINE_CONTINUUM_BINS bins divided by
     ln 2 (the median of a chi-squared(2) periodogram bin is ln 2 times its mean),
-    so it is robust to the line itself and nearly noise-free."""
+    so it is robust to the line itself and nearly noise-free. In the first block, where
+    flicker and random walk make the continuum rise by decades, it is the running median
+    of the LINE_LOCAL_HALF bins on each side (the bins next to the peak left out, where a
+    Hann-windowed line spreads): the block's median left the first block out of the
+    search, and a 0.01-0.02 Hz sine in a 1 h record (36 cycles in the fit part) was named
+    a Markov process or a random walk."""
     b = LINE_CONTINUUM_BINS
     nb = len(psd) // b
     if nb < 2:
         return 0, 0.0
     blocks = psd[: nb * b].reshape(nb, b)
     cont = np.repeat(np.median(blocks, axis=1) / math.log(2.0), b)
+    w = LINE_LOCAL_HALF
+    for k in range(LINE_FIRST_BIN, b):
+        near = np.r_[psd[max(1, k - w): k - 1], psd[k + 2: k + w + 1]]
+        cont[k] = np.median(near) / math.log(2.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.log(np.where(cont > 0, psd[: nb * b] / cont, np.nan))
-    r[:b] = np.nan
+    r[:LINE_FIRST_BIN] = np.nan
     if not np.isfinite(r).any():
         return 0, 0.0
     ib = int(np.nanargmax(r))
