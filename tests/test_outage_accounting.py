@@ -17,6 +17,8 @@ from imubench.sources.base import Source
 from imubench.sources.chip import NO_ANSWER
 from imubench.sources.registry import open_source
 
+pytestmark = pytest.mark.timeout(120)  # the old code spun for ever on the first two
+
 
 def drain(src: Source, stop_after_s: float | None = None) -> tuple[np.ndarray, list[Gap], float]:
     """(delivered indices, every gap, seconds from the stop to the end of the stream)."""
