@@ -754,11 +754,12 @@ def line_peak(psd: np.ndarray) -> tuple[int, float]:
     The continuum is the median of each block of LINE_CONTINUUM_BINS bins divided by
     ln 2 (the median of a chi-squared(2) periodogram bin is ln 2 times its mean),
     so it is robust to the line itself and nearly noise-free. In the first block, where
-    flicker and random walk make the continuum rise by decades, it is the running median
-    of the LINE_LOCAL_HALF bins on each side (the bins next to the peak left out, where a
-    Hann-windowed line spreads): the block's median left the first block out of the
-    search, and a 0.01-0.02 Hz sine in a 1 h record (36 cycles in the fit part) was named
-    a Markov process or a random walk."""
+    flicker and random walk make the continuum rise by decades, it is the median of the
+    LINE_LOCAL_HALF bins on each side less their local power law (least squares in
+    log-log; the bins next to the peak left out, where a Hann-windowed line spreads). The
+    block's median left the first block out of the search, and a 0.01-0.02 Hz sine in a
+    1 h record (36 cycles in the fit part) was named a Markov process or a random walk;
+    a plain running median read the low side of a steep random-walk continuum as a peak."""
     b = LINE_CONTINUUM_BINS
     nb = len(psd) // b
     if nb < 2:
@@ -767,8 +768,12 @@ def line_peak(psd: np.ndarray) -> tuple[int, float]:
     cont = np.repeat(np.median(blocks, axis=1) / math.log(2.0), b)
     w = LINE_LOCAL_HALF
     for k in range(LINE_FIRST_BIN, b):
-        near = np.r_[psd[max(1, k - w): k - 1], psd[k + 2: k + w + 1]]
-        cont[k] = np.median(near) / math.log(2.0)
+        j = np.r_[max(1, k - w): k - 1, k + 2: k + w + 1]
+        # the local power law through the neighbours (least squares in log-log), so a
+        # steep random-walk or flicker continuum is not read as a peak at its low side
+        lf, lp = np.log(j / k), np.log(np.maximum(psd[j], 1e-300))
+        slope = float(np.polyfit(lf, lp, 1)[0])
+        cont[k] = math.exp(float(np.median(lp - slope * lf))) / math.log(2.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.log(np.where(cont > 0, psd[: nb * b] / cont, np.nan))
     r[:LINE_FIRST_BIN] = np.nan
