@@ -129,3 +129,32 @@ def test_a_stop_during_a_sensortile_unplug_is_prompt_and_counts_the_outage() -> 
     accounted(index, gaps, gaps[-1].at)
     # 100 Hz from the first frame until the reader saw the stop (a reconnection's wait)
     assert gaps[-1].at == pytest.approx((3.5 + stop_s) * 100, abs=30)
+
+
+def test_a_finite_sensortile_stream_without_a_single_frame_ends_all_lost() -> None:
+    """Every frame damaged: the stream never reached its end (0 lost, for ever)."""
+    src = open_source("sensortile-sim://?mode=binary&seed=6&clock=virtual&drop_rate=0.3"
+                      "&duration_s=3")
+    index, gaps, _ = drain(src)
+    assert len(index) == 0
+    accounted(index, gaps, 300)
+
+
+def test_a_device_silent_at_the_start_fails_the_pipeline_with_its_own_error() -> None:
+    """The daemon's stop joined consumer threads that were never started: an internal
+    error ("cannot join thread before it is started") instead of the device's message."""
+    from imubench.errors import SourceError
+    from imubench.pipeline import Consumer, Pipeline
+
+    class Counter(Consumer):
+        name = "counter"
+
+        def consume(self, batch: Batch) -> None:
+            pass
+
+    src = open_source("sim://lsm6dsl?odr_hz=104&clock=wall&stuck_bus_at_s=0"
+                      "&stuck_bus_for_s=7")
+    pipe = Pipeline(src, [Counter()])
+    with pytest.raises(SourceError, match="no answer from an lsm6dsl"):
+        pipe.start()
+    assert pipe.join(1.0) and not pipe.running

@@ -209,13 +209,16 @@ class Pipeline:
     def start(self) -> None:
         """Open the source and start the acquisition and consumer threads (call
         :meth:`prepare` first). Errors opening the source are raised here."""
+        # the source first: a device that does not answer leaves no consumer thread
+        # unstarted (join() then failed with "cannot join thread before it is started",
+        # an internal error of the daemon hiding the device's own)
+        self.source.open()
         info = self.source.info
         capacity = max(MIN_CAPACITY, round(self.capacity_s * info.odr_hz))
         self.ring = RingBuffer(capacity, with_raw=info.has_raw, blocking=not info.realtime)
         self._runners = [
             _Runner(c, self.ring.reader(c.name), self.max_chunk) for c in self.consumers
         ]
-        self.source.open()
         self.started_at = time.monotonic()
         for r in self._runners:
             r.start()

@@ -154,6 +154,8 @@ class SensorTileSource(Source):
         self._last_index = -1
         self._last_frame_host_s = 0.0
         self._tail: Gap | None = None
+        self._clock_t0 = 0.0
+        """The kit's clock at the start (see :meth:`_past_end`), s."""
         """The frames lost before the end of a finite stream, still to be declared."""
         """Host time (``time.monotonic``) the newest delivered frame arrived, s."""
         self._host_t0 = 0.0
@@ -179,6 +181,8 @@ class SensorTileSource(Source):
             self._shutdown()
             raise SourceError(f"{self.info.uri}: {exc}") from exc
         self._host_t0 = self._last_frame_host_s = time.monotonic()
+        self._clock_t0 = (self.firmware.clock.now() if self.firmware is not None
+                          else self._host_t0)
         if self.mode == "binary":
             self._timeline = RtcTimeline(self.period_s * 100.0, self.host_check_s)
         else:
@@ -230,7 +234,29 @@ class SensorTileSource(Source):
                 return batch
             if self._done:
                 return None
+            if self._past_end():
+                return self._ended_without_frames()
         return self._stopped_in_outage()
+
+    def _past_end(self) -> bool:
+        """A finite stream's end has passed on the kit's clock (the simulated firmware's;
+        the host's for a real kit) by more than a stall while no frame got through: a
+        kit whose every frame was damaged never reached its end (0 lost, for ever)."""
+        if self.duration_s is None:
+            return False
+        clock = self.firmware.clock.now() if self.firmware is not None else time.monotonic()
+        margin = max(1.0, self.link.config.stall_timeout_s)
+        return clock - self._clock_t0 > self.duration_s + margin
+
+    def _ended_without_frames(self) -> Batch | None:
+        """The end of a finite stream reached by the clock: the frames from the newest
+        delivered to the end are lost."""
+        self._done = True
+        end = math.ceil(self.duration_s / self.period_s - 1e-9) if self.duration_s else 0
+        if end <= self._last_index + 1:
+            return None
+        return Batch.empty(with_raw=False, gaps=(
+            Gap(end, end - self._last_index - 1, "frames lost on the serial link"),))
 
     def _stopped_in_outage(self) -> Batch | None:
         """At a stop: the frames the kit made since the newest one arrived, lost, when no
