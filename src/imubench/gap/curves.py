@@ -745,7 +745,8 @@ LINE_FIRST_BIN = 4
 """Lowest periodogram bin searched for a line: four cycles in the record (a slower sine
 is a drift to this test)."""
 LINE_LOCAL_HALF = 8
-"""Half-width in bins of the running median that is the continuum of the first block."""
+"""Half-width in bins of the neighbourhood whose local power law is the continuum of the
+first block (:func:`line_peak`)."""
 
 
 def line_peak(psd: np.ndarray) -> tuple[int, float]:

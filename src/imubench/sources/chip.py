@@ -345,7 +345,6 @@ class ChipSource(Source):
             end = made + 1 if outage else self._last_index + 1
         elif (self._n_total is not None
               and made - self.stream.capacity_samples >= self._n_total - 1):
-            self._done = True
             end = self._n_total
         else:
             return None
