@@ -46,13 +46,17 @@ def test_acceptance_1_lsm6dsl_3330hz_on_400khz(duration_s: float) -> None:
     assert payload_fraction >= 0.85
 
 
-def test_acceptance_2_6660hz_refused_or_degraded() -> None:
+def test_acceptance_2_6660hz_refused_or_degraded(caplog: pytest.LogCaptureFixture) -> None:
     with pytest.raises(SourceError, match=r"6660 Hz.*at most 44,444 B/s.*3330 Hz"):
         open_source("sim://lsm6dsl?odr_hz=6660&bus_khz=400&duration_s=1")
+    caplog.set_level("WARNING", logger="imubench.sources.chip")
     src, index, _ = drain(
         "sim://lsm6dsl?odr_hz=6660&bus_khz=400&duration_s=1&on_overbudget=degrade&counting=1"
     )
     assert src.info.odr_hz == 3330 and src.info.config["degraded_from_hz"] == 6660
+    # the halved rate is said, not only written in the header
+    assert "6660 Hz does not fit the bus (on_overbudget=degrade): streaming at 3330 Hz" \
+        in caplog.text
     assert len(index) == 3330 and src.counters["lost_samples"] == 0
 
 

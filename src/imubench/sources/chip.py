@@ -31,6 +31,7 @@ in batches of about ``watermark_s`` of data; :meth:`close` interrupts a wait at 
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -104,6 +105,7 @@ I2C_PARAMS: tuple[Param, ...] = (
     Param("chip", str, "lsm6dsl", "which chip is on the bus", CHIPS),
     Param("bus_khz", float, 400.0, "I2C clock for the bandwidth check, kHz"),
 )
+log = logging.getLogger(__name__)
 IO_BACKOFF_MAX_S = 1.0
 NO_ANSWER = "device not answering"
 """Gap reason of the samples a chip made while its bus failed every transfer, until the
@@ -177,6 +179,9 @@ class ChipSource(Source):
         except LSM6DSError as exc:
             raise SourceError(f"source {uri!r}: {exc}") from None
         cfg = self.stream.cfg
+        if self.stream.degraded_from_hz is not None:  # said in the header only, before
+            log.warning("source %r: %g Hz does not fit the bus (on_overbudget=degrade): "
+                        "streaming at %g Hz", uri, self.stream.degraded_from_hz, cfg.odr_hz)
         self._sensitivity = np.array(
             [cfg.gyro_sensitivity_dps] * 3 + [cfg.accel_sensitivity_g] * 3
         )
