@@ -153,11 +153,11 @@ class SensorTileSource(Source):
         self._timeline: RtcTimeline | _AsciiTimeline | None = None
         self._last_index = -1
         self._last_frame_host_s = 0.0
+        """Host time (``time.monotonic``) the newest delivered frame arrived, s."""
         self._tail: Gap | None = None
+        """The frames lost before the end of a finite stream, still to be declared."""
         self._clock_t0 = 0.0
         """The kit's clock at the start (see :meth:`_past_end`), s."""
-        """The frames lost before the end of a finite stream, still to be declared."""
-        """Host time (``time.monotonic``) the newest delivered frame arrived, s."""
         self._host_t0 = 0.0
         self._done = False
         self._link_bad_seen = 0
@@ -252,11 +252,19 @@ class SensorTileSource(Source):
         """The end of a finite stream reached by the clock: the frames from the newest
         delivered to the end are lost."""
         self._done = True
-        end = math.ceil(self.duration_s / self.period_s - 1e-9) if self.duration_s else 0
-        if end <= self._last_index + 1:
-            return None
-        return Batch.empty(with_raw=False, gaps=(
-            Gap(end, end - self._last_index - 1, "frames lost on the serial link"),))
+        tail = self._lost_before_end(self._last_index, self._end_index)
+        return None if tail is None else Batch.empty(with_raw=False, gaps=(tail,))
+
+    @property
+    def _end_index(self) -> int:
+        """The first index past a finite stream's ``duration_s`` (0 when endless)."""
+        return math.ceil(self.duration_s / self.period_s - 1e-9) if self.duration_s else 0
+
+    @staticmethod
+    def _lost_before_end(last: int, end: int) -> Gap | None:
+        """The frames after index ``last`` up to ``end`` (exclusive), lost, or None."""
+        return Gap(end, end - last - 1, "frames lost on the serial link") if end > last + 1 \
+            else None
 
     def _stopped_in_outage(self) -> Batch | None:
         """At a stop: the frames the kit made since the newest one arrived, lost, when no
@@ -323,10 +331,8 @@ class SensorTileSource(Source):
             if self.duration_s is not None and elapsed >= self.duration_s - 1e-9:
                 self._done = True
                 # the frames between the newest delivered and the end never arrived
-                end = min(index, math.ceil(self.duration_s / self.period_s - 1e-9))
-                last = idx[-1] if idx else self._last_index
-                if end > last + 1:
-                    tail = Gap(end, end - last - 1, "frames lost on the serial link")
+                tail = self._lost_before_end(idx[-1] if idx else self._last_index,
+                                             min(index, self._end_index))
                 break
             g, a = item.gyro_mdps, item.accel_mg
             received_at = r.host_s
