@@ -363,6 +363,28 @@ def test_a_none_verdict_says_when_the_held_out_part_departs() -> None:
     assert explain_channel(c, 10)[0].startswith("No unmodelled effect: the model explains")
 
 
+def test_a_kept_effect_says_when_the_held_out_part_still_departs_after_it() -> None:
+    """Blind pair flicker + random walk: the flicker alone explained the fit part (the
+    first half's walk was small) and the held-out part kept a systematic gap of 0.31
+    against a scatter of 0.10; nothing said an effect was left there."""
+    flicker = {"effect": "flicker", "params": {"flicker": 0.0026}, "gap_after": 0.19,
+               "n_params": 1, "score": 54.0, "chi2_closed": 0.98, "evidence_closed": 0.98}
+    hold = {"gap_before": 0.83, "gap_after": 0.32, "region_gap_before": 0.96,
+            "region_gap_after": 0.37, "gap_excess_before": 0.83, "gap_excess_after": 0.307,
+            "gap_null": 0.095, "chi2_closed": 0.96, "significant": True,
+            "significant_after": True,
+            "regions_after": [{"tau_min_s": 78.8, "tau_max_s": 315.0,
+                               "direction": "real_above", "gap": 0.5, "z_max": 5.0}]}
+    c = _entry("flicker", effects=[flicker], kept=[dict(flicker)], holdout=hold,
+               residual_significant=False)
+    text = "\n".join(explain_channel(c, 10))
+    assert ("The held-out part still departs from the model with the kept effects "
+            "(78.8-315 s real above) where the fit part no longer does (systematic gap "
+            "0.307 against a scatter of 0.095)") in text
+    hold["significant_after"] = False
+    assert "still departs" not in "\n".join(explain_channel(c, 10))
+
+
 def test_the_whole_curve_test_is_listed_beside_the_regions() -> None:
     """A reviewer found global.fired true with no mention of it next to an Allan region."""
     g = {"chi2": 30.0, "dof": 16, "threshold": 44.1, "chi2_smooth": 19.9, "dof_smooth": 3,

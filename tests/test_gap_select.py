@@ -243,12 +243,42 @@ def test_two_effects_are_both_kept_and_close_the_held_out_gap() -> None:
     assert all("holdout_gap_after" in k for k in out["kept"])
 
 
+def test_fired_deterministic_tests_first_is_a_second_start_of_the_selection(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A ramp beside a temperature response: a random walk takes both long-tau excesses
+    in the first step and the forward selection keeps it (with the ramp); the second
+    start, the effects whose whole-record tests fired first, keeps the ramp and the
+    temperature response, which score better on the fit part and hold on the held-out
+    part, and the walk is reported as replaced."""
+    n = int(1800 * RATE)
+    rng = np.random.default_rng(1)
+    t = np.arange(n) / RATE
+    temp = (25.0 + 2.0 * t / 3600 + np.sin(2 * math.pi * t / 1500 + 0.3)
+            + 0.4 * np.sin(2 * math.pi * t / 430))
+    y = white(rng, n) + 0.002 * (temp - 25.0) + 2e-5 * t
+    series = Series(y, temp, RATE, "temperature+ramp")
+    opt = GapOptions(seed=1, realisations=5)
+    monkeypatch.setattr(diagnose, "_fired_effects", lambda st: ())
+    one = diagnose_channel(MODEL, "gx", series, opt)
+    assert [c.effect for c in one.kept] == ["random_walk", "ramp"]
+    monkeypatch.undo()
+    d = diagnose_channel(MODEL, "gx", series, opt)
+    assert {c.effect for c in d.kept} == {"ramp", "temperature"}, d.kept
+    assert d.verdict in ("ramp", "temperature")
+    ramp = next(c for c in d.kept if c.effect == "ramp")
+    assert ramp.params["ramp"] == pytest.approx(2e-5, rel=0.25)
+    walk = next(c for c in d.pruned if c.effect == "random_walk")
+    assert walk.note.startswith("replaced by ") and not walk.accepted
+    assert "random_walk" in {x["effect"] for x in d.to_dict()["dropped"]}
+
+
 def test_an_effect_fitted_beside_an_unmodelled_one_is_replaced_once_that_is_kept(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A telegraph beside a ramp: the ramp's Allan rise stretches the fitted dwell, the
     two-level test then refuses the telegraph and the forward selection keeps `markov`
     and the ramp. The sequential replacement fits the first effect again beside the ramp
-    and the telegraph takes its place."""
+    and the telegraph takes its place (the second start, the ramp's fired drift test
+    first, is switched off here: it finds the pair on its own)."""
     n = int(1800 * RATE)
     rng = np.random.default_rng(1)
     y = (white(rng, n) + 3e-5 * np.arange(n) / RATE
@@ -256,10 +286,11 @@ def test_an_effect_fitted_beside_an_unmodelled_one_is_replaced_once_that_is_kept
                      RATE, 101))
     series = Series(y, None, RATE, "telegraph+ramp")
     opt = GapOptions(seed=1, realisations=5)
+    monkeypatch.setattr(diagnose, "_fired_effects", lambda st: ())
     monkeypatch.setattr(diagnose, "EXCHANGE_PASSES", 0)
     forward = diagnose_channel(MODEL, "gx", series, opt)
     assert [c.effect for c in forward.kept] == ["markov", "ramp"]
-    monkeypatch.undo()
+    monkeypatch.setattr(diagnose, "EXCHANGE_PASSES", 2)
     d = diagnose_channel(MODEL, "gx", series, opt)
     assert d.verdict == "telegraph" and {c.effect for c in d.kept} == {"telegraph", "ramp"}
     assert d.kept[-1].params["telegraph_dwell_s"] == pytest.approx(10.0, rel=0.5)

@@ -471,6 +471,18 @@ def explain_channel(c: dict[str, Any], realisations: int,
             txt += (f", over the fit part's regions {_f(h['region_gap_before'])} -> "
                     f"{_f(h['region_gap_after'])}")
         lines.append(txt + ".")
+        if c.get("kept") and h.get("significant_after") and not c.get("residual_significant"):
+            regs = "; ".join(f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s "
+                             f"{r['direction'].replace('_', ' ')}"
+                             for r in h.get("regions_after", []))
+            lines.append(
+                "The held-out part still departs from the model with the kept effects"
+                + (f" ({regs})" if regs else "")
+                + f" where the fit part no longer does (systematic gap "
+                f"{_f(h['gap_excess_after'])} against a scatter of {_f(h.get('gap_null'))}): "
+                "an effect the fit part does not show is left there (a random walk's or a "
+                "slow process's size differs from part to part), not diagnosed; "
+                "--holdout-fraction 0 diagnoses the whole record, without a held-out check.")
     reps = (h or {}).get("recordings", [])
     for r in reps:
         txt = f"Replicate {r['recording']}: gap {_f(r['gap_before'])} -> {_f(r['gap_after'])}"
