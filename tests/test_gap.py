@@ -113,7 +113,8 @@ def _null_comparison(m: int, k: int, spike_z: float | None) -> Comparison:
     bands = np.exp(0.2 * rng.standard_normal((k, 6)))
     sims = SimFeatures(avar, bands, np.ones((k, 8)), np.zeros(k),
                        rng.standard_normal(k), rng.standard_normal(k),
-                       rng.standard_normal(k), rng.standard_normal(k), np.zeros(k))
+                       rng.standard_normal(k), rng.standard_normal(k),
+                       rng.standard_normal(k), np.zeros(k))
     edges = np.logspace(-2, 1, 7)
 
     def run(real_avar: np.ndarray) -> Comparison:

@@ -21,7 +21,17 @@ from scipy.signal import lfilter
 from imubench.gap import GapOptions, Series, diagnose, diagnose_channel
 from imubench.gap.background import Background, from_halves, from_replicates, within
 from imubench.gap.candidates import Candidate
-from imubench.gap.curves import Comparison, Region, t_threshold, wilson_hilferty_z
+from imubench.gap.curves import (
+    LINE_CONTINUUM_BINS,
+    Comparison,
+    Region,
+    line_peaks,
+    line_segment,
+    sidak_t,
+    t_threshold,
+    welch_psd,
+    wilson_hilferty_z,
+)
 from imubench.gap.evidence import (
     drift_statistic,
     fit_bias_step,
@@ -216,6 +226,42 @@ def test_a_fired_statistic_is_never_background() -> None:
     c = _cmp([0.0, 0.0, 0.0, 0.0])
     c.temp_z = 9.0
     assert not within(c, Background("halves", np.full(4, 10.0), np.full(2, 10.0)))
+
+
+# ------------------------------------------------------------------ spectral line
+def _line_record(f_hz: float, amp: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """30 min of white noise and a random walk (K 3e-4 dps/sqrt(s)) with a sine."""
+    n = int(1800 * RATE)
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / RATE
+    y = (white(rng, n) + np.cumsum(3e-4 / math.sqrt(RATE) * rng.standard_normal(n))
+         + amp * np.sin(2 * math.pi * f_hz * t + 0.7))
+    return welch_psd(y, RATE, line_segment(n))
+
+
+def test_line_peaks_finds_a_slow_sine_in_the_first_block_and_a_fast_one_above_it() -> None:
+    """A 0.015 Hz sine (27 cycles in 30 min, inside the first 64 bins, where the random
+    walk's continuum rises by decades) in the first family; a 5 Hz sine in the second.
+    Without a sine neither family's peak stands out (the local power law keeps the walk's
+    steep continuum from reading as a peak)."""
+    f, p = _line_record(0.015, 0.01, 1)
+    (il, low), (ih, high) = line_peaks(p)
+    assert il < LINE_CONTINUUM_BINS <= ih
+    assert f[il] == pytest.approx(0.015, abs=2 * (f[1] - f[0])) and low > 5.0
+    f, p = _line_record(5.0, 0.004, 2)
+    (il, low), (ih, high) = line_peaks(p)
+    assert f[ih] == pytest.approx(5.0, abs=2 * (f[1] - f[0])) and high > 5.0
+    f, p = _line_record(5.0, 0.0, 3)
+    (_, low), (_, high) = line_peaks(p)
+    assert low < 4.0 and high < 4.0
+
+
+def test_sidak_t_keeps_the_family_wise_tail() -> None:
+    from scipy.stats import t as student_t
+    assert sidak_t(2.5, 1, 9) == pytest.approx(2.5)
+    p = student_t.sf(3.0, 9)
+    assert student_t.sf(sidak_t(3.0, 2, 9), 9) == pytest.approx(1 - (1 - p) ** 2, rel=1e-9)
+    assert sidak_t(3.0, 2, 9) < 3.0
 
 
 # ------------------------------------------------------------------ selection and held out
