@@ -23,11 +23,12 @@ from imubench.gap.background import Background, from_halves, from_replicates, wi
 from imubench.gap.candidates import Candidate
 from imubench.gap.curves import (
     LINE_CONTINUUM_BINS,
+    Z_LINE,
+    Z_LINE_FAMILY,
     Comparison,
     Region,
     line_peaks,
     line_segment,
-    sidak_t,
     t_threshold,
     welch_psd,
     wilson_hilferty_z,
@@ -256,12 +257,11 @@ def test_line_peaks_finds_a_slow_sine_in_the_first_block_and_a_fast_one_above_it
     assert low < 4.0 and high < 4.0
 
 
-def test_sidak_t_keeps_the_family_wise_tail() -> None:
-    from scipy.stats import t as student_t
-    assert sidak_t(2.5, 1, 9) == pytest.approx(2.5)
-    p = student_t.sf(3.0, 9)
-    assert student_t.sf(sidak_t(3.0, 2, 9), 9) == pytest.approx(1 - (1 - p) ** 2, rel=1e-9)
-    assert sidak_t(3.0, 2, 9) < 3.0
+def test_the_two_line_families_keep_one_test_s_false_alarm_rate() -> None:
+    from scipy.stats import norm
+    p = norm.sf(Z_LINE)
+    assert 1 - (1 - norm.sf(Z_LINE_FAMILY)) ** 2 == pytest.approx(p, rel=1e-9)
+    assert Z_LINE < Z_LINE_FAMILY < Z_LINE + 0.25
 
 
 # ------------------------------------------------------------------ selection and held out
