@@ -313,6 +313,9 @@ def test_fired_deterministic_tests_first_is_a_second_start_of_the_selection(
     assert d.verdict in ("ramp", "temperature")
     ramp = next(c for c in d.kept if c.effect == "ramp")
     assert ramp.params["ramp"] == pytest.approx(2e-5, rel=0.25)
+    # kept after the ramp and refitted on the record less it (backfitting): 0.0011 before
+    temp = next(c for c in d.kept if c.effect == "temperature")
+    assert temp.params["temp_coeff"] == pytest.approx(0.002, rel=0.3)
     walk = next(c for c in d.pruned if c.effect == "random_walk")
     assert walk.note.startswith("replaced by ") and not walk.accepted
     assert "random_walk" in {x["effect"] for x in d.to_dict()["dropped"]}
