@@ -359,6 +359,20 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     return out
 
 
+def _held_out_departure(h: dict[str, Any], after: bool) -> str:
+    """'The held-out part departs from the model (its regions) where the fit part does not
+    (systematic gap, scatter)', before any effect or (``after``) after all kept ones."""
+    regs = "; ".join(f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s "
+                     f"{r['direction'].replace('_', ' ')}"
+                     for r in h.get("regions_after" if after else "regions", []))
+    lead = ("The held-out part still departs from the model with the kept effects" if after
+            else "The held-out part departs from the model")
+    gap = h.get("gap_excess_after" if after else "gap_excess_before")
+    return (lead + (f" ({regs})" if regs else "")
+            + f" where the fit part {'no longer does' if after else 'does not'} (systematic "
+            f"gap {_f(gap)} against a scatter of {_f(h.get('gap_null'))})")
+
+
 def explain_channel(c: dict[str, Any], realisations: int,
                     units: Mapping[str, str] | None = None) -> list[str]:
     """Sentences explaining the verdict of one channel's JSON entry; ``units``: the
@@ -389,15 +403,9 @@ def explain_channel(c: dict[str, Any], realisations: int,
             "realisations."))
         h = c.get("holdout") or {}
         if h.get("significant") and c.get("reason") != "replicate variation":
-            regs = "; ".join(f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s "
-                             f"{r['direction'].replace('_', ' ')}"
-                             for r in h.get("regions", []))
             lines.append(
-                "The held-out part departs from the model"
-                + (f" ({regs})" if regs else "")
-                + f" where the fit part does not (systematic gap {_f(h.get('gap_excess_before'))}"
-                f" against a scatter of {_f(h.get('gap_null'))}): the recording changes "
-                "within itself; candidates are fitted on the fit part only, so this is not "
+                _held_out_departure(h, after=False) + ": the recording changes within "
+                "itself; candidates are fitted on the fit part only, so this is not "
                 "diagnosed (try --holdout-fraction 0 to diagnose the whole record).")
     elif verdict == "unexplained":
         best = effects[0] if effects else None
@@ -472,17 +480,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
                     f"{_f(h['region_gap_after'])}")
         lines.append(txt + ".")
         if c.get("kept") and h.get("significant_after") and not c.get("residual_significant"):
-            regs = "; ".join(f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s "
-                             f"{r['direction'].replace('_', ' ')}"
-                             for r in h.get("regions_after", []))
             lines.append(
-                "The held-out part still departs from the model with the kept effects"
-                + (f" ({regs})" if regs else "")
-                + f" where the fit part no longer does (systematic gap "
-                f"{_f(h['gap_excess_after'])} against a scatter of {_f(h.get('gap_null'))}): "
-                "an effect the fit part does not show is left there (a random walk's or a "
-                "slow process's size differs from part to part), not diagnosed; "
-                "--holdout-fraction 0 diagnoses the whole record, without a held-out check.")
+                _held_out_departure(h, after=True) + ": an effect the fit part does not "
+                "show is left there (a random walk's or a slow process's size differs from "
+                "part to part), not diagnosed; --holdout-fraction 0 diagnoses the whole "
+                "record, without a held-out check.")
     reps = (h or {}).get("recordings", [])
     for r in reps:
         txt = f"Replicate {r['recording']}: gap {_f(r['gap_before'])} -> {_f(r['gap_after'])}"
