@@ -401,9 +401,15 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                 # the kept effects' deterministic parts (a kept bias step biased it) and
                 # less the model's own temperature response (its realisations carry it)
                 dt = np.nan_to_num(s.temp_c - cm.temp_ref, nan=0.0)
-                tf = evidence.fit_temperature(
-                    whole.y[:len(s.y)] - cm.temp_coeff * dt - cm.temp_coeff2 * dt * dt,
-                    s.temp_c, s.rate_hz, cm.temp_ref)
+                lacking = whole.y[:len(s.y)] - cm.temp_coeff * dt - cm.temp_coeff2 * dt * dt
+                tf = evidence.fit_temperature(lacking, s.temp_c, s.rate_hz, cm.temp_ref)
+                gls = (float(fit.temp.slopes(lacking[None, :])[0]) if fit.temp is not None
+                       else math.nan)
+                if math.isfinite(gls):
+                    # the model-GLS slope beside a trend (the level test's), which a ramp
+                    # or a slow wander does not bias as it does the levels' least squares
+                    cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + gls,
+                                                 "temp_coeff2": cm.temp_coeff2}, 1))
                 if tf is not None:
                     ev["temperature"] = tf
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff

@@ -534,6 +534,14 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
         c.evidence_closed = st.evidence_closed(c)
         if c.refusal:  # never examined (_choose)
             continue
+        # one form per effect (temperature: linear by GLS or least squares, or quadratic):
+        # the better-scoring one, so that another effect's realisations are not crowded out
+        rival = next((x for x in cands if x is not c and x.effect == c.effect
+                      and id(x) in best), None)
+        if rival is not None and rival.score <= c.score:
+            continue
+        if rival is not None:
+            del best[id(rival)]
         best[id(c)] = cs
         # keep the realisations of the best few only (one more: the telegraph's refusal
         # comes with the shape scores, after this loop)

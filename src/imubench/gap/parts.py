@@ -166,7 +166,6 @@ class RecordTemperature:
         refused as a transient)."""
         if self.chol is None or self.tb is None or self.temp_c is None:
             return ys
-        yb = np.array([block_means(y, self.n_block) for y in ys])
         extra = None
         if step_at is not None:
             j, f = divmod(step_at, self.n_block)
@@ -177,9 +176,20 @@ class RecordTemperature:
                 extra[j] += f / self.n_block
             if not extra.any():
                 extra = None
-        slopes, _ = gls_slopes(np.diff(yb, axis=1), np.diff(self.tb), self.chol, extra)
+        slopes = self.slopes(ys, extra)
         slopes = np.where(np.isfinite(slopes), slopes, 0.0)
         return ys - slopes[:, None] * (self.temp_c - np.nanmean(self.temp_c))[None, :]
+
+    def slopes(self, ys: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
+        """The temperature response (unit/degC) of each row of ``ys`` (k, n): the GLS slope
+        of its block-mean increments on the temperature's, beside a constant (a linear
+        trend of the level, so a ramp does not enter it) and ``extra``
+        (:func:`imubench.gap.curves.gls_slopes`); NaN without the test (:attr:`note`) or
+        where undefined."""
+        if self.chol is None or self.tb is None:
+            return np.full(len(ys), np.nan)
+        yb = np.array([block_means(y, self.n_block) for y in ys])
+        return gls_slopes(np.diff(yb, axis=1), np.diff(self.tb), self.chol, extra)[0]
 
 
 class PartSetup:
@@ -206,7 +216,10 @@ class PartSetup:
                                                                            :len(self.tau_s)])
         # a block the real part lacks makes its increments' count differ from the
         # covariance's, and the level test NaN (curves.gls_against)
-        self.temp_chol = None if cm is None else RecordTemperature(cm, series).chol
+        self.temp = None if cm is None else RecordTemperature(cm, series)
+        """The part's temperature blocks and the base model's covariance of their
+        increments (None without a model)."""
+        self.temp_chol = None if self.temp is None else self.temp.chol
 
     def sim_features(self, sims: np.ndarray) -> SimFeatures:
         return stack([features(s, self.series.rate_hz, self.afs, self.edges, self.nperseg,
