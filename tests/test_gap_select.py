@@ -341,7 +341,10 @@ def test_fired_deterministic_tests_first_is_a_second_start_of_the_selection(
     assert temp.params["temp_coeff"] == pytest.approx(0.002, rel=0.3)
     walk = next(c for c in d.pruned if c.effect == "random_walk")
     assert walk.note.startswith("replaced by ") and not walk.accepted
-    assert "random_walk" in {x["effect"] for x in d.to_dict()["dropped"]}
+    out = d.to_dict()
+    assert "random_walk" in {x["effect"] for x in out["dropped"]}
+    # the ramp, kept by both starts, is not also listed as replaced (by itself)
+    assert not {x["effect"] for x in out["dropped"]} & {k["effect"] for k in out["kept"]}
 
 
 def test_an_effect_fitted_beside_an_unmodelled_one_is_replaced_once_that_is_kept(

@@ -959,7 +959,9 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     0.121 against 0.117).
 
     Returns the path kept (with ``main``'s first-step ranking and evidence, which the
-    report shows) and the effects of ``main`` it replaced, each with its ``note``."""
+    report shows) and the effects of ``main`` that ``alt`` does not keep, each with its
+    ``note`` (an effect both keep, refitted in ``alt``'s order, is not listed as
+    replaced: a reviewer saw a ramp both kept and "replaced by ramp + telegraph")."""
     def score(p: _Path) -> tuple[float, float]:
         st = r.step(p.kept)
         bic = st.chi2() + math.log(st.before.n_terms) * sum(c.n_params for c in p.kept)
@@ -972,14 +974,16 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     if not (s_alt < s_main and h_alt - h_main <= scatter):
         return main, []
     names = " + ".join(c.effect for c in alt.kept)
+    gone = [c for c in main.kept if c.effect not in {a.effect for a in alt.kept}]
     for c in main.kept:
         c.accepted = False
+    for c in gone:  # an effect both kept is not said to be replaced (by itself)
         c.note = (f"replaced by {names}, kept with the effects whose own whole-record tests "
                   f"fired examined first: score {s_alt:.1f} against {s_main:.1f} on the fit "
                   f"part, held-out systematic gap {h_alt:.3f} against {h_main:.3f} (scatter "
                   f"{scatter:.3f})")
     alt.ranked0, alt.ev0 = main.ranked0, main.ev0
-    return alt, list(main.kept)
+    return alt, gone
 
 
 NEGLIGIBLE_BESIDE_BASE = 1e-3
