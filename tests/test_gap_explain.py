@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from imubench.commands.gap import gap_units
+from imubench.commands.gap import gap_units, headline
 from imubench.gap.candidates import DENSE_TAIL
 from imubench.gap.curves import Z_SLOPE, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
@@ -480,3 +480,14 @@ def test_a_verdict_that_does_not_close_the_gap_alone_says_so_beside_the_others()
     text = headline(flat, 10)
     assert "closes" not in text
     assert "within its scatter before and after (systematic gap 0.034 -> 0)" in text
+
+
+def test_headline_gives_the_held_out_gap_beside_the_fit_part_s() -> None:
+    """A reviewer's bias step in the held-out half: the headline said "gap 0.179 ->
+    0.179" (the fit part's) while the held-out part closed to 0.02."""
+    c = _entry("bias_step", gap_before=0.179, gap_after=0.179)
+    c["holdout"]["gap_before"], c["holdout"]["gap_after"] = 0.52, 0.02
+    assert headline("gx", c) == ("gx: verdict bias_step, gap 0.179 -> 0.179 on the fit part; "
+                                 "held out 0.520 -> 0.020")
+    c["holdout"] = None
+    assert headline("gx", c) == "gx: verdict bias_step, gap 0.179 -> 0.179 on the fit part"
