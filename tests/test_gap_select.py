@@ -1158,3 +1158,68 @@ def test_a_located_step_is_fitted_beside_the_temperature_response() -> None:
     joint = rec.less_response(y[None, :], step_at=at)[0]
     assert abs(evidence.step_persistence(plain, fs, step) - 1.0) > 0.3  # bent by it
     assert evidence.step_persistence(joint, fs, step) == pytest.approx(1.0, abs=0.1)
+
+
+def test_curvature_of_a_linear_response_on_a_slow_temperature_is_not_significant() -> None:
+    """A linear response (1e-3 dps/degC) on a slow temperature (+-1.5 and +-0.8 degC at
+    periods of 27 and 19 min) over white plus flicker: the flicker's wander gave the
+    least-squares quadratic a curvature, and its coefficient at temp_ref 25 degC read
+    -5.2e-4 dps/degC. The GLS curvature z under the model's covariance stays within the
+    normal range on 30 such records (N(0, 1) under the null: spread near 1) and is large
+    for a curvature well above its standard error (1.8e-3 dps/degC^2 here: on +-2 degC
+    the squared temperature's increments follow the temperature's, r 0.95)."""
+    from lsm6ds_sim.model import ChannelModel
+
+    from imubench.gap.candidates import Z_CURVATURE, _flat_curvature
+
+    fs, n = 10.0, 18000
+    t = np.arange(n) / fs
+    temp = (26.0 + 1.5 * np.sin(2 * math.pi * t / 1592.0 + 0.3)
+            + 0.8 * np.sin(2 * math.pi * t / 1139.0 + 2.0) + t / 3600.0)
+    rng = np.random.default_rng(17)
+    white_d, flicker = 0.004 * 4.0, 0.0008 * 2.0
+    cm = ChannelModel().replace(white=white_d, flicker=flicker)
+    freq = np.fft.rfftfreq(n, 1.0 / fs)
+    s_fl = np.zeros_like(freq)
+    s_fl[1:] = flicker**2 / (math.pi * freq[1:])  # one-sided S(f) = B^2 / (pi f)
+
+    def noise() -> np.ndarray:  # textbook generator (FFT shaping), not the simulator
+        sd = np.sqrt(s_fl * fs * n / 4.0)
+        x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
+        return white_d * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+
+    rt = RecordTemperature(cm, Series(np.zeros(n), temp, fs))
+    linear = 1e-3 * (temp - 25.0)
+    zs = np.array([rt.curvature_z(noise() + linear, 25.0) for _ in range(30)])
+    assert np.all(np.abs(zs) < Z_CURVATURE), zs
+    assert 0.5 < zs.std() < 1.5
+    curved = noise() + linear + 0.02 * (temp - 25.0) ** 2
+    assert rt.curvature_z(curved, 25.0) > 2 * Z_CURVATURE
+    assert "not significant" in _flat_curvature(rt, noise() + linear, 25.0)
+    assert _flat_curvature(rt, curved, 25.0) == ""
+    assert _flat_curvature(None, curved, 25.0) == ""  # no covariance: the score decides
+
+
+def test_a_curved_temperature_response_is_stated_at_the_records_mean() -> None:
+    """The model file states temp_coeff at temp_ref; with a curvature the words and the
+    JSON give the slope at the record's mean temperature (a reviewer read -5.2e-4
+    dps/degC for a response of +1.3e-3 at 26.5 degC)."""
+    from imubench.gap.diagnose import ChannelDiagnosis
+    from imubench.gap.explain import describe
+
+    d = ChannelDiagnosis("gx", cast(Any, None), None, [], "temperature", {},
+                         temp_mean_c=26.5, temp_ref_c=25.0)
+    entry: dict[str, Any] = {"effect": "temperature",
+                             "params": {"temp_coeff": -5.2e-4, "temp_coeff2": 6e-4}}
+    d._slope_at_mean(entry)
+    assert entry["temp_mean_c"] == 26.5
+    assert entry["temp_slope_at_mean"] == pytest.approx(-5.2e-4 + 2 * 6e-4 * 1.5)
+    units = {"temp_coeff": "dps/degC", "temp_coeff2": "dps/degC^2"}
+    text = describe("temperature", entry["params"], units, entry)
+    assert "0.00128 dps/degC at the record's mean 26.5 degC" in text, text
+    assert "temp_coeff -0.00052 dps/degC" in text
+    lin = {"effect": "temperature", "params": {"temp_coeff": 1e-3, "temp_coeff2": 0.0}}
+    d._slope_at_mean(lin)
+    assert lin["temp_slope_at_mean"] == pytest.approx(1e-3)
+    assert describe("temperature", lin["params"], units, lin) == (
+        "the rate drifts with temperature, 0.001 dps/degC")

@@ -20,7 +20,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from imubench.gap import avarfit, evidence, extras
 from imubench.gap.curves import Comparison, SimFeatures, line_segment, stat_dof, t_threshold
-from imubench.gap.parts import PartSetup, Series, simulate_channel
+from imubench.gap.parts import PartSetup, RecordTemperature, Series, simulate_channel
 from imubench.gap.two_level import detrend_span
 from imubench.noisefit.spectral_line import PEAK_MIN_BINS, SCAN_LOW_FRACTION
 
@@ -294,6 +294,23 @@ def _curvature_refusal(temp_c: np.ndarray, temp_ref: float, coeff: float) -> str
             "response is the candidate")
 
 
+Z_CURVATURE = 3.29
+"""Two-sided normal threshold (alpha 1e-3, as :data:`imubench.gap.diagnose.FIT_ALPHA`)
+the temperature response's GLS curvature z must pass for the quadratic candidate to be
+offered (:meth:`imubench.gap.parts.RecordTemperature.curvature_z`)."""
+
+
+def _flat_curvature(temp: RecordTemperature | None, y: np.ndarray, temp_ref: float) -> str:
+    """Why the quadratic temperature response is not offered (empty when it is): its
+    curvature is not significant under the model's covariance (:data:`Z_CURVATURE`).
+    Empty where that test cannot be made (no covariance: the score decides, as before)."""
+    z = math.nan if temp is None else temp.curvature_z(y, temp_ref)
+    if not math.isfinite(z) or abs(z) > Z_CURVATURE:
+        return ""
+    return (f"its curvature is not significant under the model's covariance (GLS z "
+            f"{z:.1f}, needs {Z_CURVATURE:.2f}): the linear response is the candidate")
+
+
 def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
                   sf: evidence.SineFit | None) -> np.ndarray:
     """The real Allan variance less the fitted spectral line's (IEEE 952 C.7 for means of
@@ -418,8 +435,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + tf.temp_coeff,
                                                  "temp_coeff2": cm.temp_coeff2
                                                  + tf.temp_coeff2}, 2))
-                    cands[-1].refusal = _curvature_refusal(tf.block_temp_c, cm.temp_ref,
-                                                           cands[-1].params["temp_coeff"])
+                    cands[-1].refusal = (
+                        _curvature_refusal(tf.block_temp_c, cm.temp_ref,
+                                           cands[-1].params["temp_coeff"])
+                        or _flat_curvature(fit.temp, lacking, cm.temp_ref))
         elif eff == "outliers" and before.tail_z > Z_TAIL_CANDIDATE:
             of = evidence.fit_outliers(s.y, s.rate_hz, float(cur.impulses.mean()))
             if of is not None:

@@ -190,6 +190,10 @@ class ChannelDiagnosis:
     (:func:`_exchange`) or the backward step (:func:`_prune`) dropped, each with its
     ``note``."""
     replicates: list[tuple[str, Comparison, Comparison | None]] = field(default_factory=list)
+    temp_mean_c: float = float("nan")
+    """The record's mean temperature (degC; NaN without one)."""
+    temp_ref_c: float = float("nan")
+    """The model's ``temp_ref`` (degC), where the temperature coefficients are stated."""
     not_kept: list[Candidate] = field(default_factory=list)
     """The candidates examined at the step where the forward selection stopped with a
     significant departure left (after at least one kept effect), each with the ``note``
@@ -249,6 +253,8 @@ class ChannelDiagnosis:
             "global": self.before.global_dict(),
             "background": self.background,
         }
+        for entry in (out["effects"] + out["kept"] + out["dropped"] + out["not_kept"]):
+            self._slope_at_mean(entry)
         for rd, r in zip(out["regions"], self.before.regions, strict=True):
             rd["gap_after"] = ff.gap_over(r.tau_min_s, r.tau_max_s)
         if self.holdout_before is not None:
@@ -279,6 +285,22 @@ class ChannelDiagnosis:
             out["holdout"] = dict(out["holdout"] or {})
             out["holdout"]["recordings"] = reps
         return out
+
+
+    def _slope_at_mean(self, entry: dict[str, Any]) -> None:
+        """Adds to a temperature effect's ``entry`` its response's slope at the record's
+        mean temperature, ``temp_slope_at_mean`` (unit/degC) at ``temp_mean_c`` (degC):
+        ``temp_coeff + 2 temp_coeff2 (T_mean - temp_ref)``. The model file states both
+        coefficients at ``temp_ref``; with a curvature, ``temp_coeff`` alone is the slope
+        there, which may lie outside the record (a reviewer read -5.2e-4 dps/degC for a
+        response of +1.3e-3 dps/degC at the record's 26.5 degC, temp_ref 25 degC)."""
+        p = entry.get("params") or {}
+        if entry.get("effect") != "temperature" or not math.isfinite(self.temp_mean_c):
+            return
+        dt = self.temp_mean_c - self.temp_ref_c
+        entry["temp_mean_c"] = self.temp_mean_c
+        entry["temp_slope_at_mean"] = (p["temp_coeff"]
+                                       + 2.0 * p.get("temp_coeff2", 0.0) * dt)
 
 
 def _kept_dict(c: Candidate) -> dict[str, Any]:
@@ -1106,6 +1128,10 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             step_fired=first.step_fired, drift_fired=first.drift_fired,
                             temp_record_z=first.temp_z, temp_fired=first.temp_fired,
                             temp_note=rtemp.note,
+                            temp_mean_c=(float(np.nanmean(series.temp_c))
+                                         if series.has_temperature and series.temp_c is not None
+                                         else math.nan),
+                            temp_ref_c=float(cm0.temp_ref),
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [])
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):

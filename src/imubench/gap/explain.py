@@ -142,11 +142,22 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
             f"trend) the closest to its threshold is {n} ({kind} {z:.1f} against {thr:.1f})")
 
 
-def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
+def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = None,
+             entry: Mapping[str, Any] | None = None) -> str:
     """What an effect with parameters ``p`` does, in plain words; each value is followed
-    by its unit from ``units`` (the JSON's ``units.params.<channel>``) when given."""
+    by its unit from ``units`` (the JSON's ``units.params.<channel>``) when given.
+    ``entry``: the effect's JSON entry, whose ``temp_slope_at_mean`` states a curved
+    temperature response at the record's mean temperature rather than at temp_ref."""
     def g(k: str) -> str:
         return _valued(p, k, units)
+
+    at_mean = (entry or {}).get("temp_slope_at_mean")
+    if effect == "temperature" and p.get("temp_coeff2") and at_mean is not None:
+        tm = (entry or {}).get("temp_mean_c")
+        return (f"the rate drifts with temperature, "
+                f"{_valued({'s': at_mean}, 's', {'s': (units or {}).get('temp_coeff', '1')})}"
+                f" at the record's mean {_f(tm, 3)} degC, curving by {g('temp_coeff2')} "
+                f"(model-file coefficients at temp_ref: temp_coeff {g('temp_coeff')})")
 
     bw = p.get("bandwidth_hz")
     filt = (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
@@ -254,7 +265,7 @@ def headline(c: dict[str, Any], realisations: int,
                 "on both the fit and the held-out part.")
     main = next((k for k in kept if k["effect"] == verdict), None)
     ranked = next((e for e in c.get("effects", []) if e["effect"] == verdict), None)
-    text = describe(verdict, (main or ranked or {}).get("params", {}), units)
+    text = describe(verdict, (main or ranked or {}).get("params", {}), units, main or ranked)
     # the held-out figures of the verdict's effect alone (kept dicts are cumulative)
     alone = _closed(c.get("holdout"), main) if kept and kept[0] is main else ""
     others = [k for k in kept if k is not main]
@@ -263,7 +274,7 @@ def headline(c: dict[str, Any], realisations: int,
                               1)
     text = text[0].upper() + text[1:] + alone + "."
     if others:
-        text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units)
+        text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units, k)
                                            for k in others)
         together = _closed(c.get("holdout"), None)
         if together.startswith("; modelling it closes "):

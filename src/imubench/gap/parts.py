@@ -26,6 +26,7 @@ from imubench.gap.curves import (
     compare,
     features,
     gls_against,
+    gls_fit,
     gls_slopes,
     only_trend,
     psd_segment,
@@ -179,6 +180,28 @@ class RecordTemperature:
         slopes = self.slopes(ys, extra)
         slopes = np.where(np.isfinite(slopes), slopes, 0.0)
         return ys - slopes[:, None] * (self.temp_c - np.nanmean(self.temp_c))[None, :]
+
+    def curvature_z(self, y: np.ndarray, temp_ref_c: float) -> float:
+        """z of the curvature of ``y``'s temperature response (unit/degC^2 over its GLS
+        standard error): the block-mean increments regressed on those of ``T - temp_ref``
+        and ``(T - temp_ref)^2`` beside a constant, under the base model's covariance
+        (:func:`imubench.gap.curves.gls_fit`); NaN without the test (:attr:`note`).
+
+        The quadratic candidate's least squares of the block means weighs every block
+        alike; on a slow temperature (+-1.5 degC at periods of 19 and 27 min, flicker
+        0.0008 dps) the flicker's wander gave a curvature of 6e-4 dps/degC^2 to a linear
+        response of 1e-3 dps/degC, and the coefficient at temp_ref 25 degC read -5.2e-4
+        (the slope at the record's 26.5 degC was right)."""
+        if self.chol is None or self.tb is None or self.temp_c is None:
+            return float("nan")
+        tb2 = block_means((self.temp_c - temp_ref_c) ** 2, self.n_block)
+        yb = block_means(y, self.n_block)
+        if not (np.isfinite(tb2).all() and np.isfinite(yb).all()):
+            return float("nan")
+        dx = np.diff(self.tb)
+        x = np.column_stack([np.ones_like(dx), dx, np.diff(tb2)])
+        coef, se = gls_fit(np.diff(yb)[None, :], x, self.chol)
+        return float(coef[2, 0] / se[2, 0])
 
     def slopes(self, ys: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
         """The temperature response (unit/degC) of each row of ``ys`` (k, n): the GLS slope

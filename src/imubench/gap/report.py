@@ -63,12 +63,15 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         assert w is not None
         p = w.params
         tt = np.linspace(tf.block_temp_c.min(), tf.block_temp_c.max(), 50)
-        ref = float(np.mean(tf.block_rate) - np.mean(
-            p["temp_coeff"] * (tf.block_temp_c - tf.block_temp_c.mean())))
-        yy = ref + p["temp_coeff"] * (tt - tf.block_temp_c.mean()) + p.get("temp_coeff2", 0.0) * (
-            (tt - tf.block_temp_c.mean()) ** 2 - np.mean((tf.block_temp_c
-                                                          - tf.block_temp_c.mean()) ** 2))
-        ax.plot(tt, yy, "r-", label=f"fit: {p['temp_coeff']:.3g} {unit}/degC")
+
+        def response(temp_c: np.ndarray) -> np.ndarray:  # the model file's form at temp_ref
+            dt = temp_c - d.temp_ref_c
+            return np.asarray(p["temp_coeff"] * dt + p.get("temp_coeff2", 0.0) * dt * dt)
+
+        yy = response(tt) - np.mean(response(tf.block_temp_c)) + np.mean(tf.block_rate)
+        tm = float(np.mean(tf.block_temp_c))
+        slope = p["temp_coeff"] + 2.0 * p.get("temp_coeff2", 0.0) * (tm - d.temp_ref_c)
+        ax.plot(tt, yy, "r-", label=f"fit: {slope:.3g} {unit}/degC at {tm:.1f} degC")
         ax.set_xlabel("temperature (degC)")
         ax.set_ylabel(f"{d.channel} block mean ({unit})")
         ax.legend(fontsize=7)
