@@ -55,6 +55,18 @@ def white(rng: np.random.Generator, n: int) -> np.ndarray:
     return WHITE * math.sqrt(RATE) * rng.standard_normal(n)
 
 
+def white_flicker(rng: np.random.Generator, n: int, fs: float, white_d: float,
+                  flicker: float) -> np.ndarray:
+    """White noise of density ``white_d`` plus flicker ``flicker`` by FFT shaping (one-sided
+    S(f) = B^2 / (pi f), NIST SP 1065 Table 3): a textbook generator, not the simulator."""
+    freq = np.fft.rfftfreq(n, 1.0 / fs)
+    s_fl = np.zeros_like(freq)
+    s_fl[1:] = flicker**2 / (math.pi * freq[1:])
+    sd = np.sqrt(s_fl * fs * n / 4.0)
+    x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
+    return white_d * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+
+
 # ------------------------------------------------------------------ whole-record tests
 def test_drift_t_tells_a_ramp_from_a_random_walk() -> None:
     """A random walk K 5e-4 dps/sqrt(s) over 30 min, with and without a ramp R = 1e-4 dps/s:
@@ -616,14 +628,9 @@ def test_model_gls_level_test_sees_a_smooth_temperature_response_the_increments_
     rng = np.random.default_rng(8)
     white, flicker = 0.004 * 4.0, 0.0008 * 4.0  # noisier than the LSM6DSL: a weak response
     cm = ChannelModel().replace(white=white, flicker=flicker)
-    freq = np.fft.rfftfreq(n, 1.0 / fs)
-    s_fl = np.zeros_like(freq)
-    s_fl[1:] = flicker**2 / (math.pi * freq[1:])  # one-sided S(f) = B^2 / (pi f)
 
-    def noise() -> np.ndarray:  # textbook generator (FFT shaping), not the simulator
-        sd = np.sqrt(s_fl * fs * n / 4.0)
-        x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
-        return white * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+    def noise() -> np.ndarray:
+        return white_flicker(rng, n, fs, white, flicker)
 
     def feats(y: np.ndarray) -> Any:
         return features(y, fs, afs, edges, 256, temp)
@@ -1179,14 +1186,9 @@ def test_curvature_of_a_linear_response_on_a_slow_temperature_is_not_significant
     rng = np.random.default_rng(17)
     white_d, flicker = 0.004 * 4.0, 0.0008 * 2.0
     cm = ChannelModel().replace(white=white_d, flicker=flicker)
-    freq = np.fft.rfftfreq(n, 1.0 / fs)
-    s_fl = np.zeros_like(freq)
-    s_fl[1:] = flicker**2 / (math.pi * freq[1:])  # one-sided S(f) = B^2 / (pi f)
 
-    def noise() -> np.ndarray:  # textbook generator (FFT shaping), not the simulator
-        sd = np.sqrt(s_fl * fs * n / 4.0)
-        x = sd * (rng.standard_normal(sd.size) + 1j * rng.standard_normal(sd.size))
-        return white_d * math.sqrt(fs) * rng.standard_normal(n) + np.fft.irfft(x, n)
+    def noise() -> np.ndarray:
+        return white_flicker(rng, n, fs, white_d, flicker)
 
     rt = RecordTemperature(cm, Series(np.zeros(n), temp, fs))
     linear = 1e-3 * (temp - 25.0)
