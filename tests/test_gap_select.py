@@ -1225,3 +1225,29 @@ def test_a_curved_temperature_response_is_stated_at_the_records_mean() -> None:
     assert lin["temp_slope_at_mean"] == pytest.approx(1e-3)
     assert describe("temperature", lin["params"], units, lin) == (
         "the rate drifts with temperature, 0.001 dps/degC")
+
+
+def test_a_line_seen_at_the_output_is_simulated_at_its_seen_amplitude() -> None:
+    """The model's sine is added before the output filter; a line fitted at the output is
+    scaled back by |H(f)|, so that the model's realisations show the line as seen (a 14 Hz
+    line after a 17.4 Hz filter came out 14 % small); a resonance's height by |H(f)|^2.
+    Checked by a least-squares fit of the simulated output, not by the filter formula."""
+    from lsm6ds_sim.model import ChannelModel
+
+    from imubench.gap.candidates import filter_power_gain, sine_before_filter
+
+    cm = ChannelModel().replace(white=1e-6, bandwidth_hz=17.4, filter_order=2)
+    a = sine_before_filter(0.003, 14.0, cm, RATE)
+    assert a > 0.003 * 1.1
+    n = int(200 * RATE)
+    m = NoiseModel.single_term("gx", white=1e-6, bandwidth_hz=17.4, filter_order=2,
+                               sine_amplitude=a, sine_freq=14.0)
+    y = simulate(m, n, RATE, 5, channels=["gx"])["gx"][n // 4:]
+    t = np.arange(n)[n // 4:] / RATE
+    basis = np.column_stack([np.sin(2 * math.pi * 14.0 * t), np.cos(2 * math.pi * 14.0 * t)])
+    c, *_ = np.linalg.lstsq(basis, y, rcond=None)
+    assert math.hypot(*c) == pytest.approx(0.003, rel=0.01)
+    assert filter_power_gain(14.0, cm, RATE) == pytest.approx((0.003 / a) ** 2)
+    assert sine_before_filter(0.003, 14.0, ChannelModel(), RATE) == 0.003  # no filter
+    deep = ChannelModel().replace(bandwidth_hz=2.0, filter_order=2)  # stop band: as seen
+    assert sine_before_filter(0.003, 40.0, deep, RATE) == 0.003
