@@ -172,7 +172,7 @@ def run_case(case: Case, series: Series, model: NoiseModel, channel: str, seed: 
             case.holdout_closed = h["chi2_closed"]
     w = d.winner
     if case.verdict == case.truth and case.truth != "none" and truth_value and w is not None:
-        case.param_error = main_param_error(case.truth, w.params, truth_value)
+        case.param_error = main_param_error(case.truth, w.as_recorded(), truth_value)
     return case
 
 

@@ -204,7 +204,8 @@ def run(group: str, case: str, bg: str, model: NoiseModel, ch: str, series: Seri
         check = f" independent peak test: {peak.describe() if peak else 'not testable'}"
     if truth and w is not None and w.effect in MAIN and MAIN[w.effect] in truth:
         key = MAIN[w.effect]
-        r.param_error = abs(abs(w.params[key]) - abs(truth[key])) / abs(truth[key])
+        got = w.as_recorded()[key]  # injected at the output: compared there
+        r.param_error = abs(abs(got) - abs(truth[key])) / abs(truth[key])
     r.detail = (f"reason={out['reason']!r} step_z={out['bias_step_z'] or 0:.1f} "
                 f"rejected={[e['effect'] for e in out['effects'] if e.get('rejected_because')]}"
                 + check)

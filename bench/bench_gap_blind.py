@@ -359,8 +359,10 @@ def run_case(c: Case, work: Path) -> Case:
             if win is not None and key in win["params"] and c.truth.get(key):
                 # a linear truth's slope is the same at every temperature: a curved fit is
                 # judged by its slope at the record's mean, not at temp_ref
+                # a line is injected at the output: compared as recorded
                 got = (win.get("temp_slope_at_mean", win["params"][key])
-                       if key == "temp_coeff" else win["params"][key])
+                       if key == "temp_coeff"
+                       else win.get(f"{key}_at_output", win["params"][key]))
                 errors.append(abs(abs(got) - abs(c.truth[key])) / abs(c.truth[key]))
         if errors:  # a pair: the worse of the two
             c.param_error = max(errors)

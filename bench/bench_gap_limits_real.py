@@ -373,7 +373,8 @@ def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
         w = d.winner
         if w is not None and d.verdict == eff:
             key = MAIN_PARAM[eff]
-            c.param_error = abs(abs(w.params[key]) - abs(truth[key])) / abs(truth[key])
+            got = w.as_recorded()[key]  # injected at the output: compared there
+            c.param_error = abs(abs(got) - abs(truth[key])) / abs(truth[key])
         print(line(c), flush=True)
         out.append(c)
     return out, {"seconds": lim_s, **lim}

@@ -1229,15 +1229,18 @@ def test_a_curved_temperature_response_is_stated_at_the_records_mean() -> None:
 
 def test_a_line_seen_at_the_output_is_simulated_at_its_seen_amplitude() -> None:
     """The model's sine is added before the output filter; a line fitted at the output is
-    scaled back by |H(f)|, so that the model's realisations show the line as seen (a 14 Hz
-    line after a 17.4 Hz filter came out 14 % small); a resonance's height by |H(f)|^2.
-    Checked by a least-squares fit of the simulated output, not by the filter formula."""
+    scaled back by |H(f)| (a resonance's height by |H(f)|^2), so that the model's
+    realisations show the line as seen (a 14 Hz line after a 17.4 Hz filter came out 14 %
+    small). Checked by a least-squares fit of the simulated output, not by the filter
+    formula; the JSON and the words give both amplitudes."""
     from lsm6ds_sim.model import ChannelModel
 
-    from imubench.gap.candidates import filter_power_gain, sine_before_filter
+    from imubench.gap.candidates import filter_power_gain
+    from imubench.gap.explain import describe
 
     cm = ChannelModel().replace(white=1e-6, bandwidth_hz=17.4, filter_order=2)
-    a = sine_before_filter(0.003, 14.0, cm, RATE)
+    g2 = filter_power_gain(14.0, cm, RATE)
+    a = 0.003 / math.sqrt(g2)
     assert a > 0.003 * 1.1
     n = int(200 * RATE)
     m = NoiseModel.single_term("gx", white=1e-6, bandwidth_hz=17.4, filter_order=2,
@@ -1247,7 +1250,16 @@ def test_a_line_seen_at_the_output_is_simulated_at_its_seen_amplitude() -> None:
     basis = np.column_stack([np.sin(2 * math.pi * 14.0 * t), np.cos(2 * math.pi * 14.0 * t)])
     c, *_ = np.linalg.lstsq(basis, y, rcond=None)
     assert math.hypot(*c) == pytest.approx(0.003, rel=0.01)
-    assert filter_power_gain(14.0, cm, RATE) == pytest.approx((0.003 / a) ** 2)
-    assert sine_before_filter(0.003, 14.0, ChannelModel(), RATE) == 0.003  # no filter
+    assert filter_power_gain(14.0, ChannelModel(), RATE) == 1.0  # no filter
     deep = ChannelModel().replace(bandwidth_hz=2.0, filter_order=2)  # stop band: as seen
-    assert sine_before_filter(0.003, 40.0, deep, RATE) == 0.003
+    assert filter_power_gain(40.0, deep, RATE) == 1.0
+    sine = Candidate("sine", {"sine_amplitude": a, "sine_freq": 14.0}, 2, output_gain2=g2)
+    seen = sine.at_output()
+    assert seen["sine_amplitude_at_output"] == pytest.approx(0.003)
+    entry = {"effect": "sine", "params": sine.params, **seen}
+    text = describe("sine", sine.params, {"sine_amplitude": "dps"}, entry)
+    assert text.startswith("a sinusoidal disturbance of amplitude 0.003 dps at 14 Hz as "
+                           "recorded"), text
+    assert Candidate("sine", sine.params, 2).at_output() == {}
+    assert sine.as_recorded()["sine_amplitude"] == pytest.approx(0.003)
+    assert sine.params["sine_amplitude"] == a  # the model file's stays

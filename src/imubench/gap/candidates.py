@@ -127,6 +127,10 @@ class Candidate:
     refusal: str = ""
     """Why the candidate cannot be accepted whatever its chi-squared (set before the
     checks; e.g. a telegraph whose two levels the amplitude distribution does not show)."""
+    output_gain2: float = 1.0
+    """|H(f)|^2 of the model's output filter at a sine's line or a resonance's centre
+    (:func:`filter_power_gain`): the model file's amplitude or height is before the
+    filter, the record shows it times this (its square root for the amplitude)."""
     accepted: bool = False
     note: str = ""
     """Why the candidate was not accepted (empty when accepted or not examined)."""
@@ -152,8 +156,34 @@ class Candidate:
             d["rejected_because"] = self.note or self.refusal
         if math.isfinite(self.shape_z):
             d["shape_z"] = self.shape_z
+        d.update(self.at_output())
         d.update(self.holdout_dict())
         return d
+
+    def as_recorded(self) -> dict[str, float]:
+        """:attr:`params` with a sine's amplitude and a resonance's height as the record
+        shows them (:meth:`at_output`): what an effect injected into a record is to be
+        compared with."""
+        seen = self.at_output()
+        out = dict(self.params)
+        for key in ("sine_amplitude", "resonance_height"):
+            if f"{key}_at_output" in seen:
+                out[key] = seen[f"{key}_at_output"]
+        return out
+
+    def at_output(self) -> dict[str, float]:
+        """A sine's amplitude or a resonance's height as the record shows it, after the
+        model's output filter (``sine_amplitude_at_output``, ``resonance_height_at_output``;
+        empty without a filter at the line, where the two are the model file's)."""
+        if self.output_gain2 == 1.0:
+            return {}
+        if self.effect == "sine":
+            return {"sine_amplitude_at_output":
+                    self.params["sine_amplitude"] * math.sqrt(self.output_gain2)}
+        if self.effect == "resonance":
+            return {"resonance_height_at_output":
+                    self.params["resonance_height"] * self.output_gain2}
+        return {}
 
     @property
     def holdout_dchi2(self) -> float:
@@ -332,14 +362,6 @@ def filter_power_gain(freq_hz: float, cm: ChannelModel, rate_hz: float) -> float
     return g2 if g2 >= MIN_FILTER_GAIN**2 else 1.0
 
 
-def sine_before_filter(amplitude: float, freq_hz: float, cm: ChannelModel,
-                       rate_hz: float) -> float:
-    """The model's ``sine_amplitude`` (before the output filter) of a line of
-    ``amplitude`` seen at the output (:func:`filter_power_gain`; a sinusoid only changes
-    amplitude in a linear filter)."""
-    return amplitude / math.sqrt(filter_power_gain(freq_hz, cm, rate_hz))
-
-
 def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
                   sf: evidence.SineFit | None) -> np.ndarray:
     """The real Allan variance less the fitted spectral line's (IEEE 952 C.7 for means of
@@ -417,9 +439,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             if before.line_z > Z_LINE_CANDIDATE:
                 bin_hz = s.rate_hz / line_segment(len(s.y))
                 sf = evidence.fit_sine(s.y, s.rate_hz, before.line_f_hz, bin_hz)
-                amplitude = sine_before_filter(sf.sine_amplitude, sf.sine_freq, cm, s.rate_hz)
-                cands.append(Candidate(eff, {"sine_amplitude": amplitude,
-                                             "sine_freq": sf.sine_freq}, 2))
+                g2 = filter_power_gain(sf.sine_freq, cm, s.rate_hz)
+                cands.append(Candidate(eff, {"sine_amplitude": sf.sine_amplitude / math.sqrt(g2),
+                                             "sine_freq": sf.sine_freq}, 2, output_gain2=g2))
                 ev["sine"] = sf
         elif eff == "resonance":
             above = any(b["direction"] == "real_above" for b in before.bands)
@@ -428,11 +450,11 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                 rf = evidence.fit_resonance(fit.f_hz, fit.real.psd, model_psd,
                                             SCAN_LOW_FRACTION * s.rate_hz)
                 if rf is not None and is_peak(rf, fit.f_hz, model_psd):
+                    g2 = filter_power_gain(rf.resonance_freq_hz, cm, s.rate_hz)
                     cands.append(Candidate(eff, {
                         "resonance_freq_hz": rf.resonance_freq_hz,
                         "resonance_width_hz": rf.resonance_width_hz,
-                        "resonance_height": rf.resonance_height / filter_power_gain(
-                            rf.resonance_freq_hz, cm, s.rate_hz)}, 3))
+                        "resonance_height": rf.resonance_height / g2}, 3, output_gain2=g2))
                     df = float(fit.f_hz[1] - fit.f_hz[0])
                     if rf.resonance_width_hz < PEAK_MIN_BINS * df:
                         cands[-1].refusal = (

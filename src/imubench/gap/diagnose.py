@@ -229,10 +229,10 @@ class ChannelDiagnosis:
             "verdict": self.verdict,
             "reason": self.reason,
             "kept": [_kept_dict(c) for c in self.kept],
-            "dropped": [{"effect": c.effect, "params": c.params, "reason": c.note}
-                        for c in self.pruned],
-            "not_kept": [{"effect": c.effect, "params": c.params, "reason": c.note}
-                         for c in self.not_kept],
+            "dropped": [{"effect": c.effect, "params": c.params, **c.at_output(),
+                         "reason": c.note} for c in self.pruned],
+            "not_kept": [{"effect": c.effect, "params": c.params, **c.at_output(),
+                          "reason": c.note} for c in self.not_kept],
             "residual_significant": self.residual_significant,
             "gap_after": ff.gap,
             "gap_null": self.before.gap_null,
@@ -307,7 +307,8 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
     assert c.fit is not None
     d: dict[str, Any] = {"effect": c.effect, "params": c.params, "gap_after": c.fit.gap,
                          "gap_excess_after": c.fit.gap_excess,
-                         "evidence_closed": c.evidence_closed, **c.holdout_dict()}
+                         "evidence_closed": c.evidence_closed, **c.at_output(),
+                         **c.holdout_dict()}
     if math.isfinite(c.unique_chi2):
         d["chi2_rise_without"] = c.unique_chi2
     return d

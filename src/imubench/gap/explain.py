@@ -151,12 +151,20 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     def g(k: str) -> str:
         return _valued(p, k, units)
 
-    at_mean = (entry or {}).get("temp_slope_at_mean")
-    if effect == "temperature" and p.get("temp_coeff2") and at_mean is not None:
-        tm = (entry or {}).get("temp_mean_c")
+    def like(value: Any, key: str) -> str:  # another value in the unit of ``key``
+        return _valued({key: value}, key, units)
+
+    e = entry or {}
+    if effect == "sine" and e.get("sine_amplitude_at_output") is not None:
+        return (f"a sinusoidal disturbance of amplitude "
+                f"{like(e['sine_amplitude_at_output'], 'sine_amplitude')} at "
+                f"{_f(p.get('sine_freq'), 3)} Hz as recorded ({g('sine_amplitude')} before "
+                "the model's output filter, the model file's value)")
+    if effect == "temperature" and p.get("temp_coeff2") and \
+            e.get("temp_slope_at_mean") is not None:
         return (f"the rate drifts with temperature, "
-                f"{_valued({'s': at_mean}, 's', {'s': (units or {}).get('temp_coeff', '1')})}"
-                f" at the record's mean {_f(tm, 3)} degC, curving by {g('temp_coeff2')} "
+                f"{like(e['temp_slope_at_mean'], 'temp_coeff')} at the record's mean "
+                f"{_f(e.get('temp_mean_c'), 3)} degC, curving by {g('temp_coeff2')} "
                 f"(model-file coefficients at temp_ref: temp_coeff {g('temp_coeff')})")
 
     bw = p.get("bandwidth_hz")
