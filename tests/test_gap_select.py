@@ -1263,3 +1263,33 @@ def test_a_line_seen_at_the_output_is_simulated_at_its_seen_amplitude() -> None:
     assert Candidate("sine", sine.params, 2).at_output() == {}
     assert sine.as_recorded()["sine_amplitude"] == pytest.approx(0.003)
     assert sine.params["sine_amplitude"] == a  # the model file's stays
+
+
+def test_the_held_out_check_leaves_a_sines_band_to_the_line_statistic() -> None:
+    """The band holding a sine's line counts its power a second time beside the line
+    statistic; the held-out check's drop leaves that band out for a sine candidate (blind
+    pair filter + sine: that band's z went -17 -> -22 next to a refitted filter's
+    continuum and outweighed the line's drop), and only for a sine."""
+    import dataclasses
+
+    from imubench.gap.curves import line_bands
+    from imubench.gap.parts import PartSetup
+
+    n = int(600 * RATE)
+    rng = np.random.default_rng(3)
+    part = PartSetup(Series(white(rng, n), None, RATE, "w"))
+    before = part.compare(part.sim_features(np.array([white(rng, n) for _ in range(5)])))
+    mask = line_bands("sine", {"sine_amplitude": 0.003, "sine_freq": 14.0}, part.edges)
+    assert mask is not None and mask.sum() == 1
+    i = int(np.flatnonzero(mask)[0])
+    assert part.edges[i] <= 14.0 < part.edges[i + 1]
+    assert line_bands("flicker", {"flicker": 1e-3}, part.edges) is None
+    bz = before.band_z.copy()
+    bz[i] -= 5.0  # the line's band moves away, the other bands do not move
+    after = dataclasses.replace(before, band_z=bz)
+    every = before.chi2_drop(after)["bands"]
+    assert every == pytest.approx(before.band_z[i] ** 2 - bz[i] ** 2)
+    assert before.chi2_drop(after, mask)["bands"] == pytest.approx(0.0, abs=1e-9)
+    # the statistics part is the same either way (the band is not moved into it)
+    assert before.chi2_drop(after, mask)["statistics"] == pytest.approx(
+        before.chi2_drop(after)["statistics"])

@@ -71,7 +71,14 @@ from imubench.gap.candidates import (
     deterministic,
     fit_candidates,
 )
-from imubench.gap.curves import POOLED_DOF, Z_SLOPE, Comparison, stat_fired, z_against
+from imubench.gap.curves import (
+    POOLED_DOF,
+    Z_SLOPE,
+    Comparison,
+    line_bands,
+    stat_fired,
+    z_against,
+)
 from imubench.gap.errors import GapError
 from imubench.gap.parts import PartSetup, RecordTemperature, Series, seeds_of, simulate_channel
 from imubench.gap.two_level import two_level_llr as llr
@@ -601,7 +608,8 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
         if hold is not None and st.hold is not None:
             n_fit = cs.shape[1] - len(hold.series.y)
             c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]))
-            c.holdout_dparts = st.hold.chi2_drop(c.holdout)
+            c.holdout_dparts = st.hold.chi2_drop(c.holdout,
+                                                 line_bands(c.effect, c.params, hold.edges))
         c.note = _acceptable(c, st)
         if not c.note and replicate_check is not None:
             c.note = replicate_check(c)
@@ -709,9 +717,10 @@ class _Realiser:
         c.fit, c.step_z, c.drift_t = after.before, after.step_z, after.drift_t
         c.temp_record_z = after.temp_z
         c.evidence_closed = st.evidence_closed(c)
-        if st.hold is not None and after.hold is not None:
+        if self.hold is not None and st.hold is not None and after.hold is not None:
             c.holdout = after.hold
-            c.holdout_dparts = st.hold.chi2_drop(c.holdout)
+            c.holdout_dparts = st.hold.chi2_drop(
+                c.holdout, line_bands(c.effect, c.params, self.hold.edges))
 
 
 def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[Candidate]]:
