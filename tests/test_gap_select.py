@@ -1293,3 +1293,42 @@ def test_the_held_out_check_leaves_a_sines_band_to_the_line_statistic() -> None:
     # the statistics part is the same either way (the band is not moved into it)
     assert before.chi2_drop(after, mask)["statistics"] == pytest.approx(
         before.chi2_drop(after)["statistics"])
+
+
+def test_a_ramp_whose_held_out_part_drifts_otherwise_is_refused() -> None:
+    """A response curved in temperature on a linear sweep is a parabola in time: the fit
+    half drifts down, the held-out half up. A ramp fitted on the first half was kept
+    after a random walk on the held-out Allan curve, which cannot see a drift's sign,
+    while its trend statistic worsened by 216 (an outside reviewer: ramp -1.16e-4 dps/s
+    where the held-out half drifts +3.3e-4). The ramp is refused on its own held-out
+    statistic; the temperature note says a curved response cannot be told from a drift
+    curving in time."""
+    model = NoiseModel.single_term("gx", white=0.004, flicker=0.0008)
+    n = int(3600 * RATE)
+    t = np.arange(n) / RATE
+    temp = 10.0 + 40.0 * t / t[-1]
+    y = (white_flicker(np.random.default_rng(2), n, RATE, 0.004, 0.0008)
+         + 1e-3 * (temp - 25.0) ** 2)
+    d = diagnose_channel(model, "gx", Series(y, temp, RATE, "sweep"),
+                         GapOptions(seed=4, realisations=5))
+    assert "ramp" not in [k.effect for k in d.kept]
+    notes = [c.note for c in d.not_kept + d.pruned + d.candidates if c.effect == "ramp"]
+    assert any("the held-out part drifts otherwise" in x for x in notes), notes
+    assert "nor a curved response from a drift that curves in time" in d.to_dict()[
+        "temperature_note"]
+
+
+def test_a_held_out_part_without_temperature_change_is_said_to_be_no_test() -> None:
+    """A warm-up that ends in the fit part leaves the held-out part at one temperature:
+    the temperature response's refusal says so (an outside reviewer's 20 -> 30 degC,
+    600 s time constant: held-out part 29.5-30.0 degC)."""
+    from imubench.gap.diagnose import _temperature_span
+
+    y = np.zeros(100)
+    fit = Series(y, np.linspace(20.0, 29.5, 100), RATE, "fit")
+    flat = Series(y, np.linspace(29.5, 30.0, 100), RATE, "hold")
+    text = _temperature_span(fit, flat)
+    assert "spans 0.50 degC against 9.50 degC in the fit part" in text, text
+    assert _temperature_span(fit, Series(y, np.linspace(25.0, 30.0, 100), RATE, "h")) == ""
+    assert _temperature_span(fit, None) == ""
+    assert _temperature_span(Series(y, None, RATE, "f"), flat) == ""

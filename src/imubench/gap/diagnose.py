@@ -346,6 +346,8 @@ class _Step:
                      if hold is not None else None)
         self.det_sum = det_sum
         self.rate_hz = rate
+        self.series_parts = (fit.series, None if hold is None else hold.series)
+        """The fit and held-out parts' series (the latter None without a held-out part)."""
         self.residual = series.y - det_sum
         """The record less the kept effects' deterministic parts."""
         self.drift_t, self.drift_dof = evidence.drift_statistic(self.residual, rate)
@@ -499,6 +501,29 @@ def _explains_own_test(c: Candidate, st: _Step) -> bool:
     return False
 
 
+HOLDOUT_TEMP_SPAN = 0.25
+"""Share of the fit part's temperature span below which the held-out part is said to be
+too narrow in temperature to test a response fitted there (:func:`_temperature_span`)."""
+
+
+def _temperature_span(fit: Series, hold: Series | None) -> str:
+    """Why the held-out part could not test a temperature response, when its temperature
+    spans less than :data:`HOLDOUT_TEMP_SPAN` of the fit part's (empty otherwise): a
+    warm-up that ends in the fit part leaves the held-out part at one temperature, and
+    the refusal then said nothing of it (an outside reviewer: 20 -> 30 degC with a
+    600 s time constant, held-out part 29.5-30.0 degC, whole-record z 10.9)."""
+    if hold is None or fit.temp_c is None or hold.temp_c is None:
+        return ""
+    sf, sh = float(np.nanmax(fit.temp_c) - np.nanmin(fit.temp_c)), float(
+        np.nanmax(hold.temp_c) - np.nanmin(hold.temp_c))
+    if not (sf > 0 and sh < HOLDOUT_TEMP_SPAN * sf):
+        return ""
+    return (f"; the held-out part's temperature spans {sh:.2f} degC against {sf:.2f} degC in "
+            "the fit part, too little to test a response there: --holdout-fraction 0 "
+            "diagnoses the whole record without a held-out check, or record the held-out "
+            "part over a temperature change")
+
+
 def _acceptable(c: Candidate, st: _Step) -> str:
     """Empty when ``c`` is kept; else why not, in plain words."""
     assert c.fit is not None
@@ -516,7 +541,16 @@ def _acceptable(c: Candidate, st: _Step) -> str:
         if not c.holdout_dchi2 > need:
             parts = ", ".join(f"{k} {v:.1f}" for k, v in c.holdout_dparts.items())
             return (f"does not reduce the held-out chi-squared beyond its scatter (drop "
-                    f"{c.holdout_dchi2:.1f}: {parts}; needs {need:.1f})")
+                    f"{c.holdout_dchi2:.1f}: {parts}; needs {need:.1f})"
+                    + (_temperature_span(*st.series_parts)
+                       if c.effect == "temperature" else ""))
+        if c.effect == "ramp":
+            tb, ta = st.hold.trend_z, c.holdout.trend_z
+            if math.isfinite(tb) and math.isfinite(ta) and ta * ta - tb * tb > need:
+                return (f"the held-out part drifts otherwise: its trend statistic moves "
+                        f"{tb:.1f} -> {ta:.1f} with the ramp (a chi-squared rise of "
+                        f"{ta * ta - tb * tb:.1f}, more than {need:.1f}), whatever the Allan "
+                        "curve, which cannot see a drift's sign")
         before, after = st.hold.gap_excess, c.holdout.gap_excess
         noise = c.effect in NOISE_PROCESSES or c.effect == "base_model"
         if noise and after - before > st.hold.gap_null:

@@ -139,7 +139,9 @@ class RecordTemperature:
                 self.note = "the temperature is constant: no response can be seen"
             elif only_trend(np.diff(tb)):
                 self.note = ("the temperature only drifts, at a constant rate: a response "
-                             "to it cannot be told from a ramp (a ramp candidate takes it)")
+                             "to it cannot be told from a ramp (a ramp candidate takes "
+                             "it), nor a curved response from a drift that curves in time "
+                             "(no candidate has that shape)")
             else:
                 self.tb, self.temp_c = tb, series.temp_c
                 self.chol = cho_factor(toeplitz(block_increment_acv(
