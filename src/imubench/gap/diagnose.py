@@ -293,7 +293,6 @@ class ChannelDiagnosis:
             out["holdout"]["recordings"] = reps
         return out
 
-
     def _slope_at_mean(self, entry: dict[str, Any]) -> None:
         """Adds to a temperature effect's ``entry`` its response's slope at the record's
         mean temperature, ``temp_slope_at_mean`` (unit/degC) at ``temp_mean_c`` (degC):

@@ -147,7 +147,9 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     """What an effect with parameters ``p`` does, in plain words; each value is followed
     by its unit from ``units`` (the JSON's ``units.params.<channel>``) when given.
     ``entry``: the effect's JSON entry, whose ``temp_slope_at_mean`` states a curved
-    temperature response at the record's mean temperature rather than at temp_ref."""
+    temperature response at the record's mean temperature rather than at temp_ref, and
+    whose ``sine_amplitude_at_output`` a line as recorded beside the model file's
+    amplitude before the output filter."""
     def g(k: str) -> str:
         return _valued(p, k, units)
 
