@@ -61,6 +61,7 @@ from typing import Any
 import numpy as np
 from lsm6ds_sim.model import NoiseModel
 from scipy.stats import chi2 as chi2_dist
+from scipy.stats import t as student_t
 
 from imubench.gap import avarfit, background, evidence, extras
 from imubench.gap.candidates import (
@@ -362,6 +363,16 @@ class _Step:
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
 
+    def hold_drift(self) -> tuple[float, int]:
+        """The held-out part's own drift test (:func:`imubench.gap.evidence.
+        drift_statistic` of the record less the kept effects' deterministic parts, over
+        the held-out samples): its t and degrees of freedom; NaN without a held-out
+        part."""
+        fit_part, hold_part = self.series_parts
+        if hold_part is None:
+            return math.nan, 1
+        return evidence.drift_statistic(self.residual[len(fit_part.y):], self.rate_hz)
+
     def _for_step(self, ys: np.ndarray) -> np.ndarray:
         """``ys`` as the step test sees them: less the kept effects' deterministic parts
         (done by the caller for the record) and, when the temperature test fired, less
@@ -544,12 +555,12 @@ def _acceptable(c: Candidate, st: _Step) -> str:
                     + (_temperature_span(*st.series_parts)
                        if c.effect == "temperature" else ""))
         if c.effect == "ramp":
-            tb, ta = st.hold.trend_z, c.holdout.trend_z
-            if math.isfinite(tb) and math.isfinite(ta) and ta * ta - tb * tb > need:
-                return (f"the held-out part drifts otherwise: its trend statistic moves "
-                        f"{tb:.1f} -> {ta:.1f} with the ramp (a chi-squared rise of "
-                        f"{ta * ta - tb * tb:.1f}, more than {need:.1f}), whatever the Allan "
-                        "curve, which cannot see a drift's sign")
+            t_hold, dof = st.hold_drift()
+            if (math.isfinite(t_hold) and t_hold * c.params["ramp"] < 0
+                    and abs(t_hold) > float(student_t.isf(HOLDOUT_ALPHA / 2.0, dof))):
+                return (f"the held-out part drifts the other way (drift t {t_hold:.1f} "
+                        f"on its own, against a ramp of {c.params['ramp']:.3g}), whatever "
+                        "the Allan curve, which cannot see a drift's sign")
         before, after = st.hold.gap_excess, c.holdout.gap_excess
         noise = c.effect in NOISE_PROCESSES or c.effect == "base_model"
         if noise and after - before > st.hold.gap_null:
