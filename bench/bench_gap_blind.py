@@ -357,9 +357,9 @@ def run_case(c: Case, work: Path) -> Case:
             key = MAIN[e]
             win = next((k for k in d["kept"] if k["effect"] == EXPECTED.get(e, e)), None)
             if win is not None and key in win["params"] and c.truth.get(key):
-                # a linear truth's slope is the same at every temperature: a curved fit is
-                # judged by its slope at the record's mean, not at temp_ref
-                # a line is injected at the output: compared as recorded
+                # a curved temperature fit is judged by its slope at the record's mean (a
+                # linear truth's is the same everywhere), a line as recorded (injected at
+                # the output)
                 got = (win.get("temp_slope_at_mean", win["params"][key])
                        if key == "temp_coeff"
                        else win.get(f"{key}_at_output", win["params"][key]))

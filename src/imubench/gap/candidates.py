@@ -10,6 +10,7 @@ and added; the effects of :mod:`imubench.gap.extras` are added as increments; th
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -265,6 +266,24 @@ def deterministic(effect: str, params: dict[str, float], cm: ChannelModel, serie
         return ((params["temp_coeff"] - cm.temp_coeff) * dt
                 + (params["temp_coeff2"] - cm.temp_coeff2) * dt * dt)
     return None
+
+
+def temperature_response(params: Mapping[str, float], temp_c: np.ndarray | float,
+                         temp_ref_c: float) -> np.ndarray:
+    """The model file's temperature response ``temp_coeff dT + temp_coeff2 dT^2``,
+    ``dT = T - temp_ref`` (unit), at ``temp_c``."""
+    dt = np.asarray(temp_c, dtype=np.float64) - temp_ref_c
+    return params["temp_coeff"] * dt + params.get("temp_coeff2", 0.0) * dt * dt
+
+
+def temperature_slope(params: Mapping[str, float], temp_c: float, temp_ref_c: float) -> float:
+    """The slope (unit/degC) of :func:`temperature_response` at ``temp_c``:
+    ``temp_coeff + 2 temp_coeff2 (T - temp_ref)``. The model file states both
+    coefficients at ``temp_ref``; with a curvature, ``temp_coeff`` alone is the slope
+    there, which may lie outside the record (a reviewer read -5.2e-4 dps/degC for a
+    response of +1.3e-3 dps/degC at the record's 26.5 degC, temp_ref 25 degC)."""
+    return float(params["temp_coeff"]
+                 + 2.0 * params.get("temp_coeff2", 0.0) * (temp_c - temp_ref_c))
 
 
 OUTLIER_MAX_SHARE = 0.01

@@ -71,6 +71,7 @@ from imubench.gap.candidates import (
     candidate_sims,
     deterministic,
     fit_candidates,
+    temperature_slope,
 )
 from imubench.gap.curves import (
     POOLED_DOF,
@@ -296,18 +297,13 @@ class ChannelDiagnosis:
 
     def _slope_at_mean(self, entry: dict[str, Any]) -> None:
         """Adds to a temperature effect's ``entry`` its response's slope at the record's
-        mean temperature, ``temp_slope_at_mean`` (unit/degC) at ``temp_mean_c`` (degC):
-        ``temp_coeff + 2 temp_coeff2 (T_mean - temp_ref)``. The model file states both
-        coefficients at ``temp_ref``; with a curvature, ``temp_coeff`` alone is the slope
-        there, which may lie outside the record (a reviewer read -5.2e-4 dps/degC for a
-        response of +1.3e-3 dps/degC at the record's 26.5 degC, temp_ref 25 degC)."""
-        p = entry.get("params") or {}
+        mean temperature, ``temp_slope_at_mean`` (unit/degC, :func:`imubench.gap.
+        candidates.temperature_slope`) at ``temp_mean_c`` (degC)."""
         if entry.get("effect") != "temperature" or not math.isfinite(self.temp_mean_c):
             return
-        dt = self.temp_mean_c - self.temp_ref_c
         entry["temp_mean_c"] = self.temp_mean_c
-        entry["temp_slope_at_mean"] = (p["temp_coeff"]
-                                       + 2.0 * p.get("temp_coeff2", 0.0) * dt)
+        entry["temp_slope_at_mean"] = temperature_slope(entry["params"], self.temp_mean_c,
+                                                        self.temp_ref_c)
 
 
 def _kept_dict(c: Candidate) -> dict[str, Any]:

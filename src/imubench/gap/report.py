@@ -20,6 +20,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from imubench.batch import UNITS
+from imubench.gap.candidates import temperature_response, temperature_slope
 from imubench.gap.curves import Comparison
 from imubench.gap.diagnose import ChannelDiagnosis
 from imubench.gap.errors import GapError
@@ -63,14 +64,10 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         assert w is not None
         p = w.params
         tt = np.linspace(tf.block_temp_c.min(), tf.block_temp_c.max(), 50)
-
-        def response(temp_c: np.ndarray) -> np.ndarray:  # the model file's form at temp_ref
-            dt = temp_c - d.temp_ref_c
-            return np.asarray(p["temp_coeff"] * dt + p.get("temp_coeff2", 0.0) * dt * dt)
-
-        yy = response(tt) - np.mean(response(tf.block_temp_c)) + np.mean(tf.block_rate)
+        yy = (temperature_response(p, tt, d.temp_ref_c) + np.mean(tf.block_rate)
+              - np.mean(temperature_response(p, tf.block_temp_c, d.temp_ref_c)))
         tm = float(np.mean(tf.block_temp_c))
-        slope = p["temp_coeff"] + 2.0 * p.get("temp_coeff2", 0.0) * (tm - d.temp_ref_c)
+        slope = temperature_slope(p, tm, d.temp_ref_c)
         ax.plot(tt, yy, "r-", label=f"fit: {slope:.3g} {unit}/degC at {tm:.1f} degC")
         ax.set_xlabel("temperature (degC)")
         ax.set_ylabel(f"{d.channel} block mean ({unit})")
