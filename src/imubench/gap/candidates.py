@@ -132,6 +132,10 @@ class Candidate:
     """|H(f)|^2 of the model's output filter at a sine's line or a resonance's centre
     (:func:`filter_power_gain`): the model file's amplitude or height is before the
     filter, the record shows it times this (its square root for the amplitude)."""
+    base_refit: Candidate | None = None
+    """The base model's refit fitted again with this candidate beside it (set when the
+    refit was kept before it, :func:`imubench.gap.diagnose._evaluate`); it replaces the
+    kept one when this candidate is kept."""
     accepted: bool = False
     note: str = ""
     """Why the candidate was not accepted (empty when accepted or not examined)."""

@@ -63,7 +63,7 @@ from lsm6ds_sim.model import NoiseModel
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as student_t
 
-from imubench.gap import avarfit, background, evidence, extras
+from imubench.gap import background, evidence, extras
 from imubench.gap.candidates import (
     EFFECTS,
     MAIN_PARAM,
@@ -566,13 +566,25 @@ def _acceptable(c: Candidate, st: _Step) -> str:
     return ""
 
 
-def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
-              fit: PartSetup, st: _Step, sims: np.ndarray, effects: tuple[str, ...]
+def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
+              effects: tuple[str, ...]
               ) -> tuple[list[Candidate], dict[int, np.ndarray], dict[str, Any]]:
-    """Fit, realise and score every candidate of one step.
+    """Fit, realise and score every candidate of one step, beside the ``kept`` effects
+    (``sims``: their realisations, ``st``: their step).
+
+    When the base model's refit is among ``kept``, each candidate is realised with that
+    refit fitted again beside it (:meth:`_Realiser.refit_base`, kept in
+    :attr:`Candidate.base_refit`): the refit's white level and filter took whatever short-
+    tau power the record had, the candidate's included, so a candidate judged against
+    the refit as it stands adds that power twice (blind pair filter + sine: a 3 mdps line
+    at 14.6 Hz, line z 12.7 -> -0.7, raised the Allan and band chi-squared by 63 and 114
+    at the taus and band the refit had widened for it, and was never examined).
 
     Returns the candidates ranked by score (one per effect), the realisations of the best
     HOLDOUT_TOP (keyed by ``id`` of the candidate) and the evidence of the fits."""
+    variant, _ = r.variant(kept)
+    channel, series, seeds, fit = r.channel, r.series, r.seeds, r.fit
+    base_kept = any(c.effect == "base_model" for c in kept)
     n, rate = len(series.y), series.rate_hz
     n_fit = len(fit.series.y)
     cm = variant.model[channel]
@@ -588,8 +600,13 @@ def _evaluate(variant: Variant, channel: str, series: Series, seeds: list[int],
     two_level = ev.get("two_level")
     shape_real = llr(series.y, rate, *two_level) if two_level is not None else math.nan
     for c in cands:
-        cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds, sims,
-                            local_sum)
+        if base_kept and not c.refusal:
+            joint = r.refit_base([*kept, c])
+            c.base_refit = next(x for x in joint if x.effect == "base_model")
+            cs = r.realise(joint)[1]
+        else:
+            cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds,
+                                sims, local_sum)
         c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
         c.step_z = z_against(st.step_real, st.step_stats(cs))
         det = deterministic(c.effect, c.params, cm, series)
@@ -738,17 +755,23 @@ class _Realiser:
         shortened. The white level is what trades off most with the other terms (Samsung
         S5 accelerometer: a flicker kept first took the short-tau excess of the first
         segment's model, which has no white term, so the base model's refit that followed
-        set white at half of what it sets alone)."""
+        set white at half of what it sets alone). It is fitted as the candidate is
+        (:func:`imubench.gap.candidates.fit_candidates`): to the real Allan curve less a
+        spectral line that ``kept`` does not model (blind pair filter + sine: fitted again
+        beside a negligible random walk with the line left in, the refit took the line's
+        power and lowered the fit part's chi-squared by 350, which the random walk was
+        credited with)."""
         base = next((c for c in kept if c.effect == "base_model"), None)
         if base is None:
             return kept
         rest = [c for c in kept if c is not base]
         st = self.step(rest)
-        bw, order, white = avarfit.fit_base_model(
-            self.variant(rest)[0].model[self.channel], self.fit.tau_s, self.series.rate_hz,
-            self.fit.real.avar, st.feats.avar.mean(axis=0), st.before.sigma)
-        new = Candidate("base_model", {"bandwidth_hz": bw, "filter_order": order,
-                                       "white": white}, base.n_params, accepted=True)
+        whole = dataclasses.replace(self.series, y=st.residual)
+        cands, _ = fit_candidates(self.variant(rest)[0].model[self.channel], self.fit, whole,
+                                  st.before, st.feats, ("sine", "base_model"), None,
+                                  st.temp_z)
+        new = next(c for c in cands if c.effect == "base_model")
+        new.accepted = True
         return [new if c is base else c for c in kept]
 
     def rescore(self, before: list[Candidate], c: Candidate) -> None:
@@ -855,8 +878,8 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
             others = [c for c in kept if c is not old]
             variant, sims, st = r.realise(others)
             done = {c.effect for c in others}
-            ranked, best, _ = _evaluate(variant, r.channel, r.series, r.seeds, r.fit, st,
-                                        sims, tuple(e for e in effects if e not in done))
+            ranked, best, _ = _evaluate(r, others, st, sims,
+                                        tuple(e for e in effects if e not in done))
             new, _ = _choose(ranked, best, r.hold, st, check(variant))
             if new is None or new.effect == old.effect:
                 continue
@@ -870,7 +893,7 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
                         f"effects, {new.effect} scores {new.score:.1f} against "
                         f"{old_score:.1f} and passes the held-out check")
             replaced.append(old)
-            kept, last = [*others, new], new
+            kept, last = _keep(r, others, new), new
             for i in range(len(kept)):
                 r.rescore(kept[:i], kept[i])
             changed = True
@@ -904,12 +927,13 @@ def _refit_deterministic(r: _Realiser, kept: list[Candidate],
     for old in [c for c in kept if c.effect in REFITTED]:
         others = [c for c in kept if c is not old]
         variant, sims, st = r.realise(others)
-        ranked, best, _ = _evaluate(variant, r.channel, r.series, r.seeds, r.fit, st, sims,
-                                    (old.effect,))
+        ranked, best, _ = _evaluate(r, others, st, sims, (old.effect,))
         new, _ = _choose(ranked, best, r.hold, st, check(variant))
         if new is None or new.params == old.params:
             continue
-        trial = [new if c is old else c for c in kept]
+        trial = [new if c is old
+                 else new.base_refit if c.effect == "base_model" and new.base_refit else c
+                 for c in kept]
         pen = math.log(st.before.n_terms)
         if r.step(trial).chi2() + pen * new.n_params >= r.step(kept).chi2() + pen * old.n_params:
             continue
@@ -957,6 +981,19 @@ def _fired_effects(st: _Step) -> tuple[str, ...]:
                                     (st.step_fired, "bias_step")) if fired)
 
 
+def _keep(r: _Realiser, kept: list[Candidate], c: Candidate) -> list[Candidate]:
+    """``kept`` with ``c`` added last; when ``c`` was fitted with the base model's refit
+    fitted again beside it (:attr:`Candidate.base_refit`), that refit takes the kept
+    one's place and the effects from it on are re-scored in order."""
+    if c.base_refit is None:
+        return [*kept, c]
+    out = [c.base_refit if x.effect == "base_model" else x for x in kept] + [c]
+    at = next(i for i, x in enumerate(out) if x.effect == "base_model")
+    for i in range(at, len(out)):
+        r.rescore(out[:i], out[i])
+    return out
+
+
 def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, ...],
              reps: list[tuple[PartSetup, Series]], rep_before: list[Comparison],
              fired_first: bool) -> _Path:
@@ -982,8 +1019,7 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
         chosen: Candidate | None = None
         chosen_sims: np.ndarray | None = None
         for subset in (own, todo) if own else (todo,):
-            ranked, best_sims, ev = _evaluate(variant, r.channel, r.series, r.seeds, r.fit,
-                                              st, sims, subset)
+            ranked, best_sims, ev = _evaluate(r, path.kept, st, sims, subset)
             if k == 0 and subset is todo:
                 path.ranked0, path.ev0 = ranked, ev
             chosen, chosen_sims = _choose(ranked, best_sims, r.hold, st, _check_of(
@@ -996,14 +1032,11 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
                 path.not_kept = [c for c in ranked if c.note]
             return path
         chosen.accepted = True
-        path.kept.append(chosen)
-        det = deterministic(chosen.effect, chosen.params, variant.model[r.channel], r.series)
-        if det is not None:
-            det_sum = det_sum + det
-        variant = variant.add(r.channel, chosen)
+        path.kept = _keep(r, path.kept, chosen)
+        variant, det_sum = r.variant(path.kept)
         sims = chosen_sims
-        path.rep_now = chosen.replicates or _on_replicates(variant, r.channel, reps,
-                                                           r.seeds)
+        path.rep_now = ((chosen.base_refit is None and chosen.replicates)
+                        or _on_replicates(variant, r.channel, reps, r.seeds))
     path.residual = _Step(r.fit, r.hold, sims, r.series, r.temp, det_sum).significant
     return path
 
