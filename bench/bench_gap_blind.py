@@ -141,8 +141,10 @@ PAIRS = ("temperature+sine", "ramp+sine", "bias_step+temperature", "random_walk+
 """Two withheld effects at once (``--pairs``), each at its clear magnitude; fixed before
 the first run: the issue's temperature + sine, and every other effect once beside a
 deterministic or a random one."""
-MORE_PAIRS = ("temperature+ramp", "flicker+random_walk", "telegraph+temperature")
-"""Pairs an outside blind test (its own generator) kept wrong on 2026-12-03, added after
+MORE_PAIRS = ("temperature+ramp", "flicker+random_walk", "telegraph+temperature",
+              "temperature+random_walk")
+"""Pairs an outside blind test (its own generator) kept wrong on 2026-12-03 (the first
+three) and 2026-12-04 (temperature + random walk, 2 of 6 with both kept), added after
 :data:`PAIRS` had been run for weeks (``--pairs --more-pairs``): scored apart, never
 mixed into the fixed set's figures. The seeds continue past :data:`PAIRS`'."""
 PAIR_CLOSURE = 0.8
