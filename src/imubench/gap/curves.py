@@ -821,14 +821,19 @@ def line_peaks(psd: np.ndarray) -> tuple[tuple[int, float], tuple[int, float]]:
     centre = np.arange(nb) * b + 0.5 * (b - 1)
     ln_med = np.log(np.maximum(np.median(blocks, axis=1), 1e-300) / math.log(2.0))
     cont = np.exp(np.interp(np.arange(nb * b), centre, ln_med))
+    # the first block: the local power law through each bin's neighbours (least squares
+    # in log-log), so a steep random-walk or flicker continuum is not read as a peak at
+    # its low side; all bins at once, the missing neighbours of the lowest ones as NaN
     w = LINE_LOCAL_HALF
-    for k in range(LINE_FIRST_BIN, b):
-        j = np.r_[max(1, k - w): k - 1, k + 2: k + w + 1]
-        # the local power law through the neighbours (least squares in log-log), so a
-        # steep random-walk or flicker continuum is not read as a peak at its low side
-        lf, lp = np.log(j / k), np.log(np.maximum(psd[j], 1e-300))
-        slope = float(np.polyfit(lf, lp, 1)[0])
-        cont[k] = math.exp(float(np.median(lp - slope * lf))) / math.log(2.0)
+    k = np.arange(LINE_FIRST_BIN, b)[:, None]
+    off = np.r_[-w:-1, 2:w + 1][None, :]
+    j = k + off
+    lf = np.where(j >= 1, np.log(np.maximum(j, 1) / k), np.nan)
+    lp = np.where(j >= 1, np.log(np.maximum(psd[np.maximum(j, 0)], 1e-300)), np.nan)
+    dlf = lf - np.nanmean(lf, axis=1, keepdims=True)
+    slope = (np.nansum(dlf * (lp - np.nanmean(lp, axis=1, keepdims=True)), axis=1,
+                       keepdims=True) / np.nansum(dlf * dlf, axis=1, keepdims=True))
+    cont[LINE_FIRST_BIN:b] = np.exp(np.nanmedian(lp - slope * lf, axis=1)) / math.log(2.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.log(np.where(cont > 0, psd[: nb * b] / cont, np.nan))
     r[:LINE_FIRST_BIN] = np.nan
