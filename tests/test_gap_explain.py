@@ -491,3 +491,25 @@ def test_headline_gives_the_held_out_gap_beside_the_fit_part_s() -> None:
                                  "held out 0.520 -> 0.020")
     c["holdout"] = None
     assert headline("gx", c) == "gx: verdict bias_step, gap 0.179 -> 0.179 on the fit part"
+
+
+def test_a_base_model_verdict_refitted_beside_a_later_effect_quotes_the_kept_refit() -> None:
+    """The refit kept first is fitted again beside a sine kept after it (its kept
+    bandwidth 21.65 Hz, first fitted 21.57 Hz): the verdict's sentence quotes the kept
+    one, as the headline and the kept list do, and says where the first one came from;
+    the words do not tell the user to add no effect while a sine is kept (an outside
+    reviewer read three bandwidths and 'rather than add an effect' beside a kept sine)."""
+    first = {"effect": "base_model", "n_params": 3, "score": 338.2, "chi2_closed": 1.0,
+             "evidence_closed": 1.0, "gap_after": 0.2,
+             "params": {"bandwidth_hz": 21.57, "filter_order": 2, "white": 0.004}}
+    kept = [{"effect": "base_model", "gap_after": 0.2, "evidence_closed": 1.0,
+             "params": {"bandwidth_hz": 21.65, "filter_order": 2, "white": 0.003996}},
+            {"effect": "sine", "gap_after": 0.2, "evidence_closed": 0.1,
+             "params": {"sine_amplitude": 0.0037, "sine_freq": 21.2}}]
+    c = _entry("base_model", effects=[first], kept=kept, reason="base model mismatch")
+    units = gap_units(["gx"])["params"]["gx"]  # type: ignore[index]
+    text = "\n".join(explain_channel(c, 10, units))
+    assert "Verdict base_model (bandwidth_hz = 21.65 Hz" in text
+    assert "first fitted bandwidth_hz = 21.57 Hz" in text
+    assert "rather than add an effect" not in text
+    assert "Also kept: a sinusoidal disturbance" in text

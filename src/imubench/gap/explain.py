@@ -194,7 +194,7 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
         "bias_step": f"the bias steps by {g('step_size')} at t = "
                      f"{_f(p.get('step_time_s'), 3)} s",
         "base_model": f"the base model is off (refit: white {g('white')}, {filt}); refit "
-                      "the model rather than add an effect",
+                      "the model's white level and filter",
     }.get(effect, effect)
 
 
@@ -472,7 +472,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
             after += (f" (named as the verdict: taking it out of the kept effects raises the "
                       f"fit part's chi-squared by {w['chi2_rise_without']:.1f}, against "
                       + ", ".join(rises) + ")")
-        txt = f"Verdict {verdict} ({params_text(w['params'], units)}){after}: {share}"
+        params = (kept[step] if kept and kept[step]["effect"] == verdict else w)["params"]
+        if params != w["params"]:  # the base model's refit, fitted again beside a later one
+            after += (" (as kept: fitted again beside the effects kept after it; first "
+                      f"fitted {params_text(w['params'], units)})")
+        txt = f"Verdict {verdict} ({params_text(params, units)}){after}: {share}"
         if "score" in w:
             txt += f"; score {w['score']:.1f}"
         r = next((e for e in effects if e["effect"] != verdict), None)
@@ -503,9 +507,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
         if c.get("kept") and h.get("significant_after") and not c.get("residual_significant"):
             lines.append(
                 _held_out_departure(h, after=True) + ": an effect the fit part does not "
-                "show is left there (a random walk's or a slow process's size differs from "
-                "part to part), not diagnosed; --holdout-fraction 0 diagnoses the whole "
-                "record, without a held-out check.")
+                "show is left there (the kept effects, fitted on the fit part, do not "
+                "describe it: a slow process's realisation differs from part to part, or an "
+                "effect is too weak in the fit part to be kept), not diagnosed; "
+                "--holdout-fraction 0 diagnoses the whole record, without a held-out "
+                "check.")
     reps = (h or {}).get("recordings", [])
     for r in reps:
         txt = f"Replicate {r['recording']}: gap {_f(r['gap_before'])} -> {_f(r['gap_after'])}"
