@@ -381,6 +381,12 @@ def test_a_kept_effect_says_when_the_held_out_part_still_departs_after_it() -> N
     assert ("The held-out part still departs from the model with the kept effects "
             "(78.8-315 s real above) where the fit part no longer does (systematic gap "
             "0.307 against a scatter of 0.095)") in text
+    # no Allan region after: the tests that fired are named (an outside reviewer read
+    # significant_after true with regions_after empty and no word of what fired)
+    hold["regions_after"], hold["fired_after"] = [], ["global", "temp_z"]
+    assert ("still departs from the model with the kept effects (by the whole Allan "
+            "curve's shape, a correlation with temperature) where the fit part"
+            ) in "\n".join(explain_channel(c, 10))
     hold["significant_after"] = False
     assert "still departs" not in "\n".join(explain_channel(c, 10))
 

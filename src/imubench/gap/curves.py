@@ -387,11 +387,21 @@ class Comparison:
                 "fired": self.global_fired}
 
     @property
-    def significant(self) -> bool:
+    def fired(self) -> list[str]:
+        """The tests that fired, by the names the JSON uses: ``regions`` (Allan taus),
+        ``bands`` (spectrum), ``global`` (the whole-curve test) and each statistic of
+        :data:`STAT_TESTS` beyond its threshold (``line_z``, ``tail_z``, ``temp_z``,
+        ``trend_z``, ``temp_level_z``)."""
         dof = self.realisations - 1
-        return bool(self.regions or self.bands or self.global_fired or any(
-            stat_fired(getattr(self, name), z_norm, one_sided, stat_dof(name, dof))
-            for name, z_norm, one_sided in STAT_TESTS))
+        out = [name for name, hit in (("regions", self.regions), ("bands", self.bands),
+                                      ("global", self.global_fired)) if hit]
+        return out + [name for name, z_norm, one_sided in STAT_TESTS
+                      if stat_fired(getattr(self, name), z_norm, one_sided,
+                                    stat_dof(name, dof))]
+
+    @property
+    def significant(self) -> bool:
+        return bool(self.fired)
 
 
 Z_LINE = 3.5

@@ -283,6 +283,7 @@ class ChannelDiagnosis:
                 "significant": hb.significant,
                 "regions": [r.to_dict() for r in hb.regions],
                 "significant_after": ha.significant,
+                "fired_after": ha.fired,
                 "regions_after": [r.to_dict() for r in ha.regions],
             }
         if self.replicates:

@@ -380,6 +380,13 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     return out
 
 
+FIRED_WORDS = {"regions": "the Allan curve", "bands": "the spectrum",
+               "global": "the whole Allan curve's shape", "line_z": "a spectral line",
+               "tail_z": "impulses", "temp_z": "a correlation with temperature",
+               "trend_z": "a time trend", "temp_level_z": "the temperature level test"}
+"""The held-out tests of :attr:`imubench.gap.curves.Comparison.fired`, in words."""
+
+
 def _held_out_departure(h: dict[str, Any], after: bool) -> str:
     """'The held-out part departs from the model (its regions) where the fit part does not
     (systematic gap, scatter)', before any effect or (``after``) after all kept ones."""
@@ -389,6 +396,9 @@ def _held_out_departure(h: dict[str, Any], after: bool) -> str:
     lead = ("The held-out part still departs from the model with the kept effects" if after
             else "The held-out part departs from the model")
     gap = h.get("gap_excess_after" if after else "gap_excess_before")
+    tests = [FIRED_WORDS.get(t, t) for t in h.get("fired_after", [])]
+    if after and not regs and tests:  # another test than the Allan taus' regions
+        regs = "by " + ", ".join(tests)
     return (lead + (f" ({regs})" if regs else "")
             + f" where the fit part {'no longer does' if after else 'does not'} (systematic "
             f"gap {_f(gap)} against a scatter of {_f(h.get('gap_null'))})")
