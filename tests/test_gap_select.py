@@ -583,6 +583,13 @@ def test_holdout_chi2_on_the_band_of_the_model_without_the_candidate() -> None:
         float(np.sum(wilson_hilferty_z(before.d, before.sigma) ** 2)))
     assert fixed["bands"] == own["bands"] == pytest.approx(2.5)
     assert fixed["statistics"] == own["statistics"]
+    # the same comparison as the one before drops by exactly nothing, not by rounding
+    first, same = _cmp([1.0, 2.0, -1.0, 0.5]), _cmp([1.0, 2.0, -1.0, 0.5])
+    first.z = wilson_hilferty_z(first.d, first.sigma)
+    same.d = first.d * (1.0 + 1e-15)
+    same.z = wilson_hilferty_z(same.d, same.sigma)
+    assert first.chi2_drop(same) == {"allan": 0.0, "bands": 0.0, "statistics": 0.0}
+    assert first.chi2_drop(wide)["allan"] != 0.0
 
 
 def test_tail_threshold_is_normal_not_student_t() -> None:
