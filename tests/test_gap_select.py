@@ -1391,3 +1391,20 @@ def test_the_base_model_refit_moves_smoothly_with_its_input_curve() -> None:
     bw1, _, w1 = fit_base_model(cm, tau, RATE, real, base * (1 + 1e-6 * tau / tau[-1]),
                                 sigma)
     assert bw1 == pytest.approx(bw0, rel=1e-3) and w1 == pytest.approx(w0, rel=1e-3)
+
+
+def test_the_markov_gate_says_which_of_its_two_conditions_failed() -> None:
+    """A ramp on white noise: the Gauss-Markov fit tried at the first step has no
+    turnover; ``not_fitted`` gives the fitted sigma and tau_c beside the longest tau_c
+    allowed and the share of the model at 3 tau_c (an outside reviewer read the rule, saw
+    a true tau_c under the limit, and could not tell which condition had failed)."""
+    n = int(600 * RATE)
+    y = white(np.random.default_rng(4), n) + 1e-4 * np.arange(n) / RATE
+    d = diagnose_channel(MODEL, "gx", Series(y, None, RATE, "ramp"),
+                         GapOptions(seed=1, realisations=5))
+    why = d.to_dict()["not_fitted"]["markov"]
+    assert why.startswith("no Gauss-Markov turnover on the fit part"), why
+    tc_max = float(why.split("(at most ")[1].split(" s)")[0])
+    share = float(why.split(" s), ")[1].split(" of the model")[0])
+    tc = float(why.split("fitted sigma ")[1].split("tau_c ")[1].split(" s")[0])
+    assert tc > tc_max or share < 0.5, why  # the gate's own numbers show why it shut

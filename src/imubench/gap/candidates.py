@@ -240,10 +240,10 @@ flicker B 0.009 dps mimicked by a Markov term of ratio 0.24; real Markov sigma 0
 tau_c 10 s over a model with a large flicker term: ratio 0.76; on a quieter axis 2.2."""
 
 
-def markov_dominates(sigma: float, tau_c_s: float, tau_s: np.ndarray,
-                     model_avar: np.ndarray) -> bool:
-    """Whether a fitted Gauss-Markov term's AVAR reaches MARKOV_DOMINANCE of the model's
-    at 3 tau_c.
+def markov_share(sigma: float, tau_c_s: float, tau_s: np.ndarray,
+                 model_avar: np.ndarray) -> float:
+    """A fitted Gauss-Markov term's AVAR at 3 tau_c over the model's there; it must reach
+    :data:`MARKOV_DOMINANCE`.
 
     Its descent beyond ~3 tau_c (IEEE 952 C.6) is what tells it from flicker; where the
     model's own terms (white, random walk) are much larger there, the descent is hidden
@@ -253,7 +253,7 @@ def markov_dominates(sigma: float, tau_c_s: float, tau_s: np.ndarray,
 
     t3 = np.array([3.0 * tau_c_s])
     base = float(np.exp(np.interp(np.log(t3), np.log(tau_s), np.log(model_avar)))[0])
-    return float(avar_markov(t3, sigma, tau_c_s)[0]) >= MARKOV_DOMINANCE * base
+    return float(avar_markov(t3, sigma, tau_c_s)[0]) / base
 
 
 def deterministic(effect: str, params: dict[str, float], cm: ChannelModel, series: Series
@@ -427,8 +427,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     markov: tuple[float, float] | None = None  # (sigma, tau_c), shared by the telegraph
     if {"markov", "telegraph"} & set(effects):
         sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
-        if tc * MARKOV_SPAN <= fit.tau_s[-1] and markov_dominates(sg, tc, fit.tau_s,
-                                                                  model_avar):
+        share = markov_share(sg, tc, fit.tau_s, model_avar)
+        ev["markov_fit"] = (sg, tc, float(fit.tau_s[-1]) / MARKOV_SPAN, share)
+        if tc * MARKOV_SPAN <= fit.tau_s[-1] and share >= MARKOV_DOMINANCE:
             markov = sg, tc
             ev["two_level"] = (2.0 * sg, 2.0 * tc, detrend_span(
                 2.0 * sg, 2.0 * tc, fit.tau_s, model_avar, len(s.y) / s.rate_hz))
@@ -546,7 +547,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     "direction); a transient excursion or a wandering level, not a bias "
                     "step")
     fitted = {c.effect for c in cands}
-    ev["not_fitted"] = {eff: _why_not_fitted(eff, s, before, dof, temp_record_z)
+    ev["not_fitted"] = {eff: _why_not_fitted(eff, s, before, dof, temp_record_z,
+                                             ev.get("markov_fit"))
                         for eff in effects if eff not in fitted}
     return cands, ev
 
@@ -559,13 +561,20 @@ def _temperature_gates(dof: int) -> tuple[float, float]:
 
 
 def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
-                    temp_record_z: float) -> str:
+                    temp_record_z: float,
+                    markov_fit: tuple[float, float, float, float] | None = None) -> str:
     """Why ``effect`` gave no candidate at this step: the gate of :func:`fit_candidates`
-    that stayed shut (JSON ``not_fitted``)."""
+    that stayed shut (JSON ``not_fitted``); ``markov_fit``: the Gauss-Markov fit tried
+    (sigma, tau_c, the longest tau_c allowed, its share of the model at 3 tau_c)."""
     if effect in ("markov", "telegraph"):
-        return (f"no Gauss-Markov turnover on the fit part: the fitted correlation time "
-                f"must be at most the longest tau / {MARKOV_SPAN:g} and the term must "
-                "dominate the model at 3 tau_c")
+        why = (f"no Gauss-Markov turnover on the fit part: the fitted correlation time "
+               f"must be at most the longest tau / {MARKOV_SPAN:g} and the term must "
+               f"reach {MARKOV_DOMINANCE:g} of the model's Allan variance at 3 tau_c")
+        if markov_fit is not None:  # which of the two failed (an outside reviewer asked)
+            sg, tc, tc_max, share = markov_fit
+            why += (f"; fitted sigma {sg:.3g}, tau_c {tc:.3g} s (at most {tc_max:.3g} s), "
+                    f"{share:.2f} of the model at 3 tau_c")
+        return why
     if effect == "sine":
         return (f"no spectral line (line z {before.line_z:.1f}, needs "
                 f"{Z_LINE_CANDIDATE:g})")
