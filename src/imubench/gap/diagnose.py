@@ -775,6 +775,12 @@ class _Realiser:
         new.accepted = True
         return [new if c is base else c for c in kept]
 
+    def rescore_from(self, kept: list[Candidate], at: int = 0) -> None:
+        """Re-score the effects of ``kept`` from index ``at`` on, each as the effect kept
+        after those before it (:meth:`rescore`)."""
+        for i in range(at, len(kept)):
+            self.rescore(kept[:i], kept[i])
+
     def rescore(self, before: list[Candidate], c: Candidate) -> None:
         """Recompute ``c``'s comparisons as the effect kept after ``before``."""
         st, after = self.step(before), self.step([*before, c])
@@ -835,9 +841,8 @@ def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[C
         dropped.append(c)
         at = kept.index(c)
         kept = reduced[id(c)]
-        at = min([at] + [i for i, x in enumerate(kept) if x.effect == "base_model"])
-        for i in range(at, len(kept)):
-            r.rescore(kept[:i], kept[i])
+        r.rescore_from(kept, min([at] + [i for i, x in enumerate(kept)
+                                         if x.effect == "base_model"]))
     if len(kept) == 1:
         kept[0].unique_chi2 = math.nan
     return kept, dropped
@@ -894,9 +899,8 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
                         f"effects, {new.effect} scores {new.score:.1f} against "
                         f"{old_score:.1f} and passes the held-out check")
             replaced.append(old)
-            kept, last = _keep(r, others, new), new
-            for i in range(len(kept)):
-                r.rescore(kept[:i], kept[i])
+            kept, last = [*_with_base_of(others, new), new], new
+            r.rescore_from(kept)
             changed = True
             break
         if not changed:
@@ -932,16 +936,13 @@ def _refit_deterministic(r: _Realiser, kept: list[Candidate],
         new, _ = _choose(ranked, best, r.hold, st, check(variant))
         if new is None or new.params == old.params:
             continue
-        trial = [new if c is old
-                 else new.base_refit if c.effect == "base_model" and new.base_refit else c
-                 for c in kept]
+        trial = [new if c is old else c for c in _with_base_of(kept, new)]
         pen = math.log(st.before.n_terms)
         if r.step(trial).chi2() + pen * new.n_params >= r.step(kept).chi2() + pen * old.n_params:
             continue
         new.accepted, old.accepted = True, False
         kept = trial
-        for i in range(len(kept)):
-            r.rescore(kept[:i], kept[i])
+        r.rescore_from(kept)
     return kept
 
 
@@ -982,17 +983,12 @@ def _fired_effects(st: _Step) -> tuple[str, ...]:
                                     (st.step_fired, "bias_step")) if fired)
 
 
-def _keep(r: _Realiser, kept: list[Candidate], c: Candidate) -> list[Candidate]:
-    """``kept`` with ``c`` added last; when ``c`` was fitted with the base model's refit
-    fitted again beside it (:attr:`Candidate.base_refit`), that refit takes the kept
-    one's place and the effects from it on are re-scored in order."""
+def _with_base_of(kept: list[Candidate], c: Candidate) -> list[Candidate]:
+    """``kept`` with the base model's refit replaced by the one fitted again beside ``c``
+    (:attr:`Candidate.base_refit`; ``kept`` as it is when ``c`` has none)."""
     if c.base_refit is None:
-        return [*kept, c]
-    out = [c.base_refit if x.effect == "base_model" else x for x in kept] + [c]
-    at = next(i for i, x in enumerate(out) if x.effect == "base_model")
-    for i in range(at, len(out)):
-        r.rescore(out[:i], out[i])
-    return out
+        return list(kept)
+    return [c.base_refit if x.effect == "base_model" else x for x in kept]
 
 
 def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, ...],
@@ -1033,7 +1029,10 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
                 path.not_kept = [c for c in ranked if c.note]
             return path
         chosen.accepted = True
-        path.kept = _keep(r, path.kept, chosen)
+        path.kept = [*_with_base_of(path.kept, chosen), chosen]
+        if chosen.base_refit is not None:  # the refit kept changed: re-score from it on
+            r.rescore_from(path.kept, next(i for i, x in enumerate(path.kept)
+                                           if x.effect == "base_model"))
         variant, det_sum = r.variant(path.kept)
         sims = chosen_sims
         path.rep_now = ((chosen.base_refit is None and chosen.replicates)
