@@ -159,6 +159,26 @@ def fit_markov(tau_s: np.ndarray, real_avar: np.ndarray, model_avar: np.ndarray,
     return best[1], best[2]
 
 
+def markov_over_lookalikes(tau_s: np.ndarray, real_avar: np.ndarray, model_avar: np.ndarray,
+                           sigma_ln_adev: np.ndarray, sigma: float, tau_c_s: float) -> float:
+    """How much better a fitted Gauss-Markov term (``sigma``, ``tau_c_s``) fits the Allan
+    curve than the better of its one-parameter look-alikes, a random walk and flicker,
+    each fitted the same way (:func:`fit_single`): the drop of the weighted ln-AVAR misfit
+    of :func:`fit_markov`.
+
+    A Gauss-Markov ADEV rises as a random walk's below ~tau_c and falls as white noise's
+    beyond ~3 tau_c (IEEE 952 C.6); between them it is flat like flicker. Only its
+    turnover, the rise and the descent together, tells it apart, and this is that
+    evidence: a likelihood-ratio-like statistic with one parameter more (Wilks 1938),
+    read against :data:`imubench.gap.candidates.MARKOV_DESCENT`."""
+    markov = _loss(real_avar, model_avar, avar_markov(tau_s, sigma, tau_c_s), sigma_ln_adev)
+    alike = []
+    for effect in ("random_walk", "flicker"):
+        p = fit_single(effect, tau_s, real_avar, model_avar, sigma_ln_adev)
+        alike.append(_loss(real_avar, model_avar, BASES[effect](tau_s, p), sigma_ln_adev))
+    return min(alike) - markov
+
+
 QUANTIZATION_LAW_TAUS = 4
 """Shortest taus (octaves from tau0) on which the quantization law is checked."""
 
