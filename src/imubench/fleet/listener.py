@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import ssl
 import time
 import uuid
@@ -54,6 +55,10 @@ class BrokerListener:
         self.connections = 0
         self.last_error: str | None = None
         self.subscribed = asyncio.Event()
+        self.last_retained_s = -math.inf
+        """``time.monotonic()`` of the last retained message (the broker sends the
+        retained statuses in a burst right after the subscription; live messages reach a
+        subscriber without the retain flag, MQTT 3.1.1 sec. 3.3.1.3)."""
 
     @property
     def url(self) -> str:
@@ -87,6 +92,8 @@ class BrokerListener:
                     self.subscribed.set()
                     self._changed()
                     async for msg in client.messages:
+                        if msg.retain:
+                            self.last_retained_s = time.monotonic()
                         payload = msg.payload
                         data = (bytes(payload) if isinstance(payload, bytes | bytearray)
                                 else b"" if payload is None else str(payload).encode())
