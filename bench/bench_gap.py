@@ -368,15 +368,12 @@ def timing() -> None:
     n = int(DURATION_S * RATE)
     one = model.with_channel("gy", sine_amplitude=0.003, sine_freq=2.0)
     two = model  # two effects kept on every channel
-    for ch in CHANNELS:
-        scale = 0.003 if ch.startswith("g") else 3e-4  # dps or g
-        two = two.with_channel(ch, sine_amplitude=scale, sine_freq=2.0 + CHANNELS.index(ch),
-                               temp_coeff=scale)
     three = model  # the base model's refit kept first, a sine fitted beside it after
-    for ch in CHANNELS:
-        scale = 0.003 if ch.startswith("g") else 3e-4
-        three = three.with_channel(ch, bandwidth_hz=15.0, filter_order=2,
-                                   sine_amplitude=scale, sine_freq=2.0 + CHANNELS.index(ch))
+    for i, ch in enumerate(CHANNELS):
+        scale = 0.003 if ch.startswith("g") else 3e-4  # dps or g
+        sine = {"sine_amplitude": scale, "sine_freq": 2.0 + i}
+        two = two.with_channel(ch, temp_coeff=scale, **sine)
+        three = three.with_channel(ch, bandwidth_hz=15.0, filter_order=2, **sine)
     jobs = len(os.sched_getaffinity(0))
     print(f"\n## timing: 1 h x 6 channels at {RATE:g} Hz, 10 realisations, holdout 0.5; "
           f"one process, then `imubench gap`'s default of one process per CPU ({jobs}); "

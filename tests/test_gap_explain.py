@@ -391,6 +391,14 @@ def test_a_kept_effect_says_when_the_held_out_part_still_departs_after_it() -> N
     assert "still departs" not in "\n".join(explain_channel(c, 10))
 
 
+def test_every_held_out_test_has_words() -> None:
+    """Each name :attr:`Comparison.fired` can give has its words in FIRED_WORDS."""
+    from imubench.gap.curves import STAT_TESTS
+    from imubench.gap.explain import FIRED_WORDS
+
+    assert set(FIRED_WORDS) == {"regions", "bands", "global"} | {n for n, _, _ in STAT_TESTS}
+
+
 def test_the_whole_curve_test_is_listed_beside_the_regions() -> None:
     """A reviewer found global.fired true with no mention of it next to an Allan region."""
     g = {"chi2": 30.0, "dof": 16, "threshold": 44.1, "chi2_smooth": 19.9, "dof_smooth": 3,

@@ -396,7 +396,7 @@ def _held_out_departure(h: dict[str, Any], after: bool) -> str:
     lead = ("The held-out part still departs from the model with the kept effects" if after
             else "The held-out part departs from the model")
     gap = h.get("gap_excess_after" if after else "gap_excess_before")
-    tests = [FIRED_WORDS.get(t, t) for t in h.get("fired_after", [])]
+    tests = [FIRED_WORDS[t] for t in h.get("fired_after", [])]
     if after and not regs and tests:  # another test than the Allan taus' regions
         regs = "by " + ", ".join(tests)
     return (lead + (f" ({regs})" if regs else "")
