@@ -260,18 +260,20 @@ tau_c 10 s over a model with a large flicker term: ratio 0.76; on a quieter axis
 
 
 def markov_share(sigma: float, tau_c_s: float, tau_s: np.ndarray,
-                 model_avar: np.ndarray) -> float:
-    """A fitted Gauss-Markov term's AVAR at 3 tau_c over the model's there; it must reach
+                 noise_avar: np.ndarray) -> float:
+    """A fitted Gauss-Markov term's AVAR at 3 tau_c over the model's NOISE there
+    (``noise_avar``, :attr:`imubench.gap.diagnose._Step.noise_avar`); it must reach
     :data:`MARKOV_DOMINANCE`.
 
     Its descent beyond ~3 tau_c (IEEE 952 C.6) is what tells it from flicker; where the
-    model's own terms (white, random walk) are much larger there, the descent is hidden
-    and a Markov term with a short tau_c mimics a flat flicker floor over one decade
-    (measured: flicker B 0.009 dps on an ADIS16405 hour called markov with tau_c 1.8 s)."""
+    model's own noise terms (white, random walk) are much larger there, the descent is
+    hidden and a Markov term with a short tau_c mimics a flat flicker floor over one
+    decade (measured: flicker B 0.009 dps on an ADIS16405 hour called markov with tau_c
+    1.8 s)."""
     from lsm6ds_sim.noise import avar_markov
 
     t3 = np.array([3.0 * tau_c_s])
-    base = float(np.exp(np.interp(np.log(t3), np.log(tau_s), np.log(model_avar)))[0])
+    base = float(np.exp(np.interp(np.log(t3), np.log(tau_s), np.log(noise_avar)))[0])
     return float(avar_markov(t3, sigma, tau_c_s)[0]) / base
 
 
@@ -422,7 +424,8 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
                    cur: SimFeatures, effects: tuple[str, ...], step_y: np.ndarray | None,
-                   temp_record_z: float) -> tuple[list[Candidate], dict[str, Any]]:
+                   temp_record_z: float, noise_avar: np.ndarray
+                   ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
     ``whole``: the whole record less the kept effects' deterministic parts (the bias
@@ -435,7 +438,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     fire;
     ``temp_record_z``: the whole-record temperature z
     (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
-    the fit part's level test does.
+    the fit part's level test does; ``noise_avar``: the current realisations' mean AVAR
+    at the fit part's taus without the kept effects' deterministic parts (the Markov
+    candidate's share, :func:`markov_share`).
     """
     s = fit.series
     cands: list[Candidate] = []
@@ -446,7 +451,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     markov: tuple[float, float] | None = None  # (sigma, tau_c), shared by the telegraph
     if {"markov", "telegraph"} & set(effects):
         sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
-        share = markov_share(sg, tc, fit.tau_s, model_avar)
+        share = markov_share(sg, tc, fit.tau_s, noise_avar)
         descent = avarfit.markov_over_lookalikes(fit.tau_s, fit.real.avar, model_avar, sig,
                                                  sg, tc)
         ev["markov_fit"] = (sg, tc, float(fit.tau_s[-1]) / MARKOV_SPAN, share, descent)
