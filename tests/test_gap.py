@@ -276,7 +276,8 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
     for ch, c in doc["channels"].items():
         assert set(c) >= CONTRACT_KEYS, ch
         assert set(c["holdout"]) >= {"gap_before", "gap_after", "gap_excess_before",
-                                     "gap_excess_after", "gap_null"}
+                                     "gap_excess_after", "gap_null", "gap_null_after"}
+        assert "gap_null_after" in c
         for r_ in c["regions"]:
             assert {"tau_min_s", "tau_max_s", "direction"} <= set(r_)
         for e in c["effects"]:

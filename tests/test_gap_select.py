@@ -1452,6 +1452,10 @@ def test_a_second_effect_is_tried_while_the_held_out_part_departs(
     walk = d.kept[1]
     assert walk.holdout is not None and walk.holdout_dchi2 > 0
     assert 1e-4 < walk.params["random_walk"] < 6e-4
+    # the kept processes widen the model's own scatter, against which the excess after is
+    # measured: the JSON states both
+    h = d.to_dict()["holdout"]
+    assert h["gap_null_after"] > h["gap_null"]
 
 
 def test_the_markov_gate_says_which_of_its_conditions_failed() -> None:
