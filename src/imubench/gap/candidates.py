@@ -424,7 +424,7 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
                    cur: SimFeatures, effects: tuple[str, ...], step_y: np.ndarray | None,
-                   temp_record_z: float, noise_avar: np.ndarray
+                   temp_record_z: float, noise_avar: np.ndarray | None
                    ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
@@ -440,7 +440,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
     the fit part's level test does; ``noise_avar``: the current realisations' mean AVAR
     at the fit part's taus without the kept effects' deterministic parts (the Markov
-    candidate's share, :func:`markov_share`).
+    candidate's share, :func:`markov_share`), needed when ``effects`` holds ``markov`` or
+    ``telegraph`` (None otherwise).
     """
     s = fit.series
     cands: list[Candidate] = []
@@ -450,6 +451,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     dof = cur.k - 1
     markov: tuple[float, float] | None = None  # (sigma, tau_c), shared by the telegraph
     if {"markov", "telegraph"} & set(effects):
+        if noise_avar is None:
+            raise ValueError("fit_candidates: the Markov share needs the noise AVAR")
         sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
         share = markov_share(sg, tc, fit.tau_s, noise_avar)
         descent = avarfit.markov_over_lookalikes(fit.tau_s, fit.real.avar, model_avar, sig,

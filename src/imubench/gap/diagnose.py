@@ -348,25 +348,7 @@ class _Step:
         self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
                      if hold is not None else None)
         self.det_sum = det_sum
-        self.noise_avar = (self.feats.avar.mean(axis=0) if np.ndim(det_sum) == 0 else
-                           np.mean([oavar_at(x - np.asarray(det_sum)[:n_fit], rate, fit.afs)
-                                    for x in sims[:, :n_fit]], axis=0))
-        """The realisations' mean AVAR at the fit part's taus without the kept effects'
-        deterministic parts (temperature response, ramp, bias step): each realisation less
-        :attr:`det_sum` (the realisations' mean AVAR itself when there are none).
-
-        Such a part is the same in every realisation and in the record, so its Allan
-        variance hides no descent of a noise term as a noise term of that size would
-        (:func:`imubench.gap.candidates.markov_share`). An outside reviewer's Markov
-        sigma 4.6 mdps, tau_c 30 s, beside a temperature response of 6e-3 dps/degC on
-        +-3 degC: once the response was kept the Markov fit was right (4.07 mdps, 33 s),
-        but its share of the realisations' AVAR at 3 tau_c was 0.23, most of it the
-        response's, so the candidate was never tried and a random walk of 8e-4
-        dps/sqrt(s) was kept in its place. The realisations' AVAR less the response's
-        own is no estimate of the rest where the response dominates: their cross term
-        does not average out over K realisations (it went negative at 3 tau_c on the
-        reviewer's second seed). Computed here, not on demand: a step is cached
-        (:meth:`_Realiser.step`) and must not hold its realisations."""
+        self._fit_afs = fit.afs
         self.rate_hz = rate
         self.series_parts = (fit.series, None if hold is None else hold.series)
         """The fit and held-out parts' series (the latter None without a held-out part)."""
@@ -384,6 +366,31 @@ class _Step:
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
+
+    def noise_avar(self, sims: np.ndarray) -> np.ndarray:
+        """The realisations' mean AVAR at the fit part's taus without the kept effects'
+        deterministic parts (temperature response, ramp, bias step): each realisation less
+        :attr:`det_sum` (the realisations' mean AVAR itself when there are none).
+
+        Such a part is the same in every realisation and in the record, so its Allan
+        variance hides no descent of a noise term as a noise term of that size would
+        (:func:`imubench.gap.candidates.markov_share`). An outside reviewer's Markov
+        sigma 4.6 mdps, tau_c 30 s, beside a temperature response of 6e-3 dps/degC on
+        +-3 degC: once the response was kept the Markov fit was right (4.07 mdps, 33 s),
+        but its share of the realisations' AVAR at 3 tau_c was 0.23, most of it the
+        response's, so the candidate was never tried and a random walk of 8e-4
+        dps/sqrt(s) was kept in its place. The realisations' AVAR less the response's
+        own is no estimate of the rest where the response dominates: their cross term
+        does not average out over K realisations (it went negative at 3 tau_c on the
+        reviewer's second seed). ``sims``: the realisations this step was built from
+        (a cached step does not hold them); 10 Allan curves, asked for only where a
+        Markov candidate is fitted."""
+        if np.ndim(self.det_sum) == 0:
+            return self.feats.avar.mean(axis=0)
+        n_fit = len(self.series_parts[0].y)
+        det = np.asarray(self.det_sum)[:n_fit]
+        return np.mean([oavar_at(x - det, self.rate_hz, self._fit_afs)
+                        for x in sims[:, :n_fit]], axis=0)
 
     def hold_drift(self) -> tuple[float, int]:
         """The held-out part's own drift test (:func:`imubench.gap.evidence.
@@ -617,7 +624,8 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     whole = dataclasses.replace(series, y=st.residual)
     cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects,
                                st.step_y if st.step_fired else None, st.temp_z,
-                               st.noise_avar)
+                               st.noise_avar(sims) if {"markov", "telegraph"} & set(effects)
+                               else None)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
@@ -796,7 +804,7 @@ class _Realiser:
         whole = dataclasses.replace(self.series, y=st.residual)
         cands, _ = fit_candidates(self.variant(rest)[0].model[self.channel], self.fit, whole,
                                   st.before, st.feats, ("sine", "base_model"), None,
-                                  st.temp_z, st.noise_avar)
+                                  st.temp_z, None)
         new = next(c for c in cands if c.effect == "base_model")
         new.accepted = True
         return [new if c is base else c for c in kept]
