@@ -1461,7 +1461,7 @@ def test_a_second_effect_is_tried_while_the_held_out_part_departs(
 def test_the_markov_gate_says_which_of_its_conditions_failed() -> None:
     """A ramp on white noise: the Gauss-Markov fit tried at the first step has no
     turnover; ``not_fitted`` gives the fitted sigma and tau_c beside the longest tau_c
-    allowed and the share of the model at 3 tau_c (an outside reviewer read the rule, saw
+    allowed and the share of the model's noise at 3 tau_c (an outside reviewer read the rule, saw
     a true tau_c under the limit, and could not tell which condition had failed)."""
     n = int(600 * RATE)
     y = white(np.random.default_rng(4), n) + 1e-4 * np.arange(n) / RATE

@@ -597,20 +597,20 @@ def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
                     ) -> str:
     """Why ``effect`` gave no candidate at this step: the gate of :func:`fit_candidates`
     that stayed shut (JSON ``not_fitted``); ``markov_fit``: the Gauss-Markov fit tried
-    (sigma, tau_c, the longest tau_c allowed, its share of the model at 3 tau_c, its
+    (sigma, tau_c, the longest tau_c allowed, its share of the model's noise at 3 tau_c, its
     misfit drop below the better look-alike)."""
     if effect in ("markov", "telegraph"):
         why = (f"no Gauss-Markov turnover on the fit part: the fitted correlation time "
                f"must be at most the longest tau / {MARKOV_SPAN:g} (or / "
                f"{MARKOV_SPAN_SHOWN:g} when it fits the Allan curve better than a random "
                f"walk or flicker by {MARKOV_DESCENT:.1f}) and the term must reach "
-               f"{MARKOV_DOMINANCE:g} of the model's Allan variance at 3 tau_c")
+               f"{MARKOV_DOMINANCE:g} of the Allan variance of the model's noise at 3 tau_c")
         if markov_fit is not None:  # which condition failed (an outside reviewer asked)
             sg, tc, tc_max, share, descent = markov_fit
             shown_max = tc_max * MARKOV_SPAN / MARKOV_SPAN_SHOWN
             why += (f"; fitted sigma {sg:.3g}, tau_c {tc:.3g} s (at most {tc_max:.3g} s, or "
-                    f"{shown_max:.3g} s with its turnover), {share:.2f} of the model at "
-                    f"3 tau_c, better than a random walk or flicker by {descent:.1f}")
+                    f"{shown_max:.3g} s with its turnover), {share:.2f} of the model's "
+                    f"noise at 3 tau_c, better than a random walk or flicker by {descent:.1f}")
         return why
     if effect == "sine":
         return (f"no spectral line (line z {before.line_z:.1f}, needs "

@@ -383,8 +383,8 @@ class _Step:
         own is no estimate of the rest where the response dominates: their cross term
         does not average out over K realisations (it went negative at 3 tau_c on the
         reviewer's second seed). ``sims``: the realisations this step was built from
-        (a cached step does not hold them); 10 Allan curves, asked for only where a
-        Markov candidate is fitted."""
+        (a cached step does not hold them): one Allan curve per realisation, asked for only
+        where a Markov candidate is fitted."""
         if np.ndim(self.det_sum) == 0:
             return self.feats.avar.mean(axis=0)
         n_fit = len(self.series_parts[0].y)
