@@ -208,13 +208,15 @@ def generate(rng: np.random.Generator, effects: list[tuple[str, dict[str, float]
     y = WHITE / math.sqrt(tau0) * rng.standard_normal(n) + spectral(rng, n, fs,
                                                                    FLICKER**2 * fl)
     truth: dict[str, float] = {}
-    for effect, p in sorted(effects, key=lambda e: e[0] == "quantization"):
-        if effect == "quantization":
-            truth.update(p)
-            y, truth["quantization"] = _angle_quantizer(rng, y, fs, p["quantization"])
-            return y, truth
-        y = _add(rng, effect, p, y, fs, fl, temp, truth)
-    return np.round(y / LSB) * LSB, truth
+    for effect, p in effects:
+        if effect != "quantization":
+            y = _add(rng, effect, p, y, fs, fl, temp, truth)
+    quantizer = dict(effects).get("quantization")
+    if quantizer is None:
+        return np.round(y / LSB) * LSB, truth
+    truth.update(quantizer)
+    y, truth["quantization"] = _angle_quantizer(rng, y, fs, quantizer["quantization"])
+    return y, truth
 
 
 def _angle_quantizer(rng: np.random.Generator, y: np.ndarray, fs: float, q: float
