@@ -21,8 +21,9 @@ Schwarz 1978, Ann. Statist. 6(2)), and keep the best candidate that
    fitted too large widens its realisations' spread, which lowers its own chi-squared
    while the curves move apart (Samsung S5 accelerometer null: a random walk with
    held-out systematic gap 0 -> 0.35 lowered its own Allan term by 3.1); a noise process
-   or the base model's refit must also not raise the held-out systematic Allan gap
-   (:attr:`~imubench.gap.curves.Comparison.gap_excess`) by more than its scatter
+   or the base model's refit must also not raise the held-out Allan gap's excess over
+   its scatter (:attr:`~imubench.gap.curves.Comparison.excess_moment`) by more than that
+   scatter
    (``gap_null``, :data:`NOISE_PROCESSES`). The held-out chi-squared
    (:meth:`~imubench.gap.curves.Comparison.chi2_check`) counts the Allan curve as the
    whole-curve Mahalanobis statistic (each tau once, with the correlation of the Allan
@@ -252,6 +253,8 @@ class ChannelDiagnosis:
             "gap_null_after": ff.gap_null,
             "gap_excess_before": self.before.gap_excess,
             "gap_excess_after": ff.gap_excess,
+            "gap_excess_floor": self.before.gap_excess_floor,
+            "gap_excess_floor_after": ff.gap_excess_floor,
             "holdout": None,
             "bands": self.before.bands,
             "line": {"f_hz": self.before.line_f_hz, "z": self.before.line_z},
@@ -284,6 +287,8 @@ class ChannelDiagnosis:
                 "gap_null_after": ha.gap_null,
                 "gap_excess_before": hb.gap_excess,
                 "gap_excess_after": ha.gap_excess,
+                "gap_excess_floor": hb.gap_excess_floor,
+                "gap_excess_floor_after": ha.gap_excess_floor,
                 "chi2_check_before": hb.chi2_check,
                 "chi2_check_after": ha.chi2_check,
                 "significant": hb.significant,
@@ -590,12 +595,12 @@ def _acceptable(c: Candidate, st: _Step) -> str:
                 return (f"the held-out part drifts the other way (drift t {t_hold:.1f} "
                         f"on its own, against a ramp of {c.params['ramp']:.3g}), whatever "
                         "the Allan curve, which cannot see a drift's sign")
-        before, after = st.hold.gap_excess, c.holdout.gap_excess
+        before, after = st.hold.excess_moment, c.holdout.excess_moment
         noise = c.effect in NOISE_PROCESSES or c.effect == "base_model"
         if noise and after - before > st.hold.gap_null:
-            return (f"makes the held-out Allan curve depart more: its systematic gap rises "
-                    f"{before:.3f} -> {after:.3f}, by more than the scatter "
-                    f"{st.hold.gap_null:.3f}")
+            return (f"makes the held-out Allan curve depart more: the excess of its gap "
+                    f"over the scatter, sqrt(gap^2 - scatter^2), rises {before:.3f} -> "
+                    f"{after:.3f}, by more than the scatter {st.hold.gap_null:.3f}")
     return ""
 
 
@@ -729,10 +734,11 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
         return ""
     c.replicates = _on_replicates(variant.add(channel, c), channel, reps, seeds)
     for (_, rep), b, a in zip(reps, now, c.replicates, strict=True):
-        if a.gap_excess - b.gap_excess > b.gap_null:
-            return (f"replicate {rep.name} does not share it: its systematic Allan gap "
-                    f"rises {b.gap_excess:.3f} -> {a.gap_excess:.3f}, by more than the "
-                    f"scatter {b.gap_null:.3f} (recording-to-recording variation)")
+        if a.excess_moment - b.excess_moment > b.gap_null:
+            return (f"replicate {rep.name} does not share it: the excess of its Allan gap "
+                    f"over the scatter rises {b.excess_moment:.3f} -> "
+                    f"{a.excess_moment:.3f}, by more than the scatter {b.gap_null:.3f} "
+                    "(recording-to-recording variation)")
     return ""
 
 
@@ -1106,8 +1112,9 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     held-out check when it was kept, so both are valid selections; ``alt`` is taken when
     its kept effects score lower on the fit part (chi-squared with the whole-record tests
     plus the BIC penalty of all their parameters, as each step's score) and its held-out
-    systematic Allan gap is not above ``main``'s by more than the held-out scatter (the
-    rule of :func:`_acceptable` for a noise process). The held-out chi-squared is not the
+    Allan gap's excess over the scatter (:attr:`~imubench.gap.curves.Comparison.
+    excess_moment`) is not above ``main``'s by more than the held-out scatter (the rule of
+    :func:`_acceptable` for a noise process). The held-out chi-squared is not the
     judge between the two: a noise process widens its realisations' spread of the held-out
     temperature and trend statistics, which lowers their z without bringing the curves
     closer (fresh blind pair: held-out statistics drop 112.6 with the random walk against
@@ -1121,7 +1128,7 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     def score(p: _Path) -> tuple[float, float]:
         st = r.step(p.kept)
         bic = st.chi2() + math.log(st.before.n_terms) * sum(c.n_params for c in p.kept)
-        return bic, st.hold.gap_excess if st.hold is not None else 0.0
+        return bic, st.hold.excess_moment if st.hold is not None else 0.0
 
     if not alt.kept or [c.effect for c in alt.kept] == [c.effect for c in main.kept]:
         return main, []
@@ -1136,8 +1143,8 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     for c in gone:  # an effect both kept is not said to be replaced (by itself)
         c.note = (f"replaced by {names}, kept with the effects whose own whole-record tests "
                   f"fired examined first: score {s_alt:.1f} against {s_main:.1f} on the fit "
-                  f"part, held-out systematic gap {h_alt:.3f} against {h_main:.3f} (scatter "
-                  f"{scatter:.3f})")
+                  f"part, held-out gap's excess over its scatter {h_alt:.3f} against "
+                  f"{h_main:.3f} (scatter {scatter:.3f})")
     alt.ranked0, alt.ev0 = main.ranked0, main.ev0
     return alt, gone
 
