@@ -287,17 +287,17 @@ def deterministic(effect: str, params: dict[str, float], cm: ChannelModel, serie
     if effect == "bias_step":
         return extras.increment(effect, params, n, series.rate_hz, 0)
     if effect == "temperature" and series.temp_c is not None:
-        dt = np.nan_to_num(series.temp_c - cm.temp_ref, nan=0.0)
-        return ((params["temp_coeff"] - cm.temp_coeff) * dt
-                + (params["temp_coeff2"] - cm.temp_coeff2) * dt * dt)
+        return temperature_response({"temp_coeff": params["temp_coeff"] - cm.temp_coeff,
+                                     "temp_coeff2": params["temp_coeff2"] - cm.temp_coeff2},
+                                    series.temp_c, cm.temp_ref)
     return None
 
 
 def temperature_response(params: Mapping[str, float], temp_c: np.ndarray | float,
                          temp_ref_c: float) -> np.ndarray:
     """The model file's temperature response ``temp_coeff dT + temp_coeff2 dT^2``,
-    ``dT = T - temp_ref`` (unit), at ``temp_c``."""
-    dt = np.asarray(temp_c, dtype=np.float64) - temp_ref_c
+    ``dT = T - temp_ref`` (unit), at ``temp_c``; 0 where the temperature is missing (NaN)."""
+    dt = np.nan_to_num(np.asarray(temp_c, dtype=np.float64) - temp_ref_c, nan=0.0)
     return params["temp_coeff"] * dt + params.get("temp_coeff2", 0.0) * dt * dt
 
 
@@ -458,7 +458,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
         descent = avarfit.markov_over_lookalikes(fit.tau_s, fit.real.avar, model_avar, sig,
                                                  sg, tc)
         ev["markov_fit"] = (sg, tc, float(fit.tau_s[-1]) / MARKOV_SPAN, share, descent)
-        shown = tc * MARKOV_SPAN <= fit.tau_s[-1] or (
+        shown = (tc * MARKOV_SPAN <= fit.tau_s[-1] and descent > 0.0) or (
             tc * MARKOV_SPAN_SHOWN <= fit.tau_s[-1] and descent > MARKOV_DESCENT)
         if shown and share >= MARKOV_DOMINANCE:
             markov = sg, tc
@@ -525,8 +525,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                 # the coefficients the model lacks: the regression of the fit part less
                 # the kept effects' deterministic parts (a kept bias step biased it) and
                 # less the model's own temperature response (its realisations carry it)
-                dt = np.nan_to_num(s.temp_c - cm.temp_ref, nan=0.0)
-                lacking = whole.y[:len(s.y)] - cm.temp_coeff * dt - cm.temp_coeff2 * dt * dt
+                lacking = whole.y[:len(s.y)] - temperature_response(
+                    {"temp_coeff": cm.temp_coeff, "temp_coeff2": cm.temp_coeff2}, s.temp_c,
+                    cm.temp_ref)
                 tf = evidence.fit_temperature(lacking, s.temp_c, s.rate_hz, cm.temp_ref)
                 gls = (float(fit.temp.slopes(lacking[None, :])[0]) if fit.temp is not None
                        else math.nan)
@@ -601,9 +602,10 @@ def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
     misfit drop below the better look-alike)."""
     if effect in ("markov", "telegraph"):
         why = (f"no Gauss-Markov turnover on the fit part: the fitted correlation time "
-               f"must be at most the longest tau / {MARKOV_SPAN:g} (or / "
-               f"{MARKOV_SPAN_SHOWN:g} when it fits the Allan curve better than a random "
-               f"walk or flicker by {MARKOV_DESCENT:.1f}) and the term must reach "
+               f"must be at most the longest tau / {MARKOV_SPAN:g} with the term fitting "
+               f"the Allan curve better than a random walk or flicker (or at most / "
+               f"{MARKOV_SPAN_SHOWN:g} when better by {MARKOV_DESCENT:.1f}), and the term "
+               f"must reach "
                f"{MARKOV_DOMINANCE:g} of the Allan variance of the model's noise at 3 tau_c")
         if markov_fit is not None:  # which condition failed (an outside reviewer asked)
             sg, tc, tc_max, share, descent = markov_fit

@@ -684,6 +684,14 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     return ranked, best, ev
 
 
+def _holdout_drop(before: Comparison, c: Candidate, hold: PartSetup) -> dict[str, float]:
+    """The held-out check's chi-squared drop by source from ``before`` to ``c.holdout``
+    (:meth:`~imubench.gap.curves.Comparison.chi2_drop`, a sine's line band left to the
+    line statistic)."""
+    assert c.holdout is not None
+    return before.chi2_drop(c.holdout, line_bands(c.effect, c.params, hold.edges))
+
+
 def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetup | None,
             st: _Step, replicate_check: Callable[[Candidate], str] | None = None
             ) -> tuple[Candidate | None, np.ndarray | None]:
@@ -705,8 +713,7 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
         if hold is not None and st.hold is not None:
             n_fit = cs.shape[1] - len(hold.series.y)
             c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]))
-            c.holdout_dparts = st.hold.chi2_drop(c.holdout,
-                                                 line_bands(c.effect, c.params, hold.edges))
+            c.holdout_dparts = _holdout_drop(st.hold, c, hold)
         c.note = _acceptable(c, st)
         if not c.note and replicate_check is not None:
             c.note = replicate_check(c)
@@ -829,8 +836,7 @@ class _Realiser:
         c.evidence_closed = st.evidence_closed(c)
         if self.hold is not None and st.hold is not None and after.hold is not None:
             c.holdout = after.hold
-            c.holdout_dparts = st.hold.chi2_drop(
-                c.holdout, line_bands(c.effect, c.params, self.hold.edges))
+            c.holdout_dparts = _holdout_drop(st.hold, c, self.hold)
 
 
 def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[Candidate]]:
