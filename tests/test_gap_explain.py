@@ -47,7 +47,7 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     assert "Allan curve real above over 20-315 s (largest |z| 7.4" in text
     assert ("Verdict temperature (temp_coeff = 0.0081 dps/degC): it removes 97% of the "
             f"significant excess chi-squared (the share criterion is {MIN_CLOSURE:.0%}; 93% "
-            "of the total); score 40.2;") in text
+            "of the fit part's total); score 40.2;") in text
     assert "other criterion" not in text
     assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
     assert "runner-up random_walk scores 71.0" in text
@@ -527,3 +527,47 @@ def test_a_base_model_verdict_refitted_beside_a_later_effect_quotes_the_kept_ref
     assert "first fitted bandwidth_hz = 21.57 Hz" in text
     assert "rather than add an effect" not in text
     assert "Also kept: a sinusoidal disturbance" in text
+
+
+def test_the_text_says_why_a_better_scoring_first_step_effect_is_not_the_verdict() -> None:
+    """An outside reviewer read "the runner-up random_walk scores 81.8" beside a verdict
+    scoring 172.2 with nothing said (the walk was kept second, the order chosen with the
+    temperature examined first); and "markov kept at step 2, after sine" where the Markov
+    had replaced a flicker kept first."""
+    units = gap_units(["gx"])["params"]["gx"]  # type: ignore[index]
+    rw_first = {**RW_EFFECT, "score": 30.0}
+    kept = [{**TEMP_EFFECT, "holdout_gap_after": 0.1}, {**RW_EFFECT, "holdout_gap_after": 0.1}]
+    text = "\n".join(explain_channel(_entry("temperature", effects=[rw_first, TEMP_EFFECT],
+                                             kept=kept), 10, units))
+    assert ("the runner-up random_walk scores 30.0 (lower is better; BIC penalty ln(n) per "
+            "parameter, 1 against 1), better at the first step, and is kept as well "
+            "(step 2)") in text
+    flicker = {"effect": "flicker", "params": {"flicker": 0.002}, "reason":
+               "replaced by markov: fitted again beside the other kept effects, markov "
+               "scores 77.6 against 78.1 and passes the held-out check"}
+    markov = {"effect": "markov", "params": {"markov_sigma": 0.003, "markov_tau": 33.0},
+              "gap_after": 0.1, "n_params": 2, "score": 77.6, "evidence_closed": 0.9}
+    sine = {"effect": "sine", "params": {"sine_amplitude": 0.004, "sine_freq": 12.3},
+            "gap_after": 0.5, "n_params": 2, "score": 81.6, "evidence_closed": 0.9}
+    text = "\n".join(explain_channel(_entry("markov", effects=[sine], kept=[sine, markov],
+                                             dropped=[flicker]), 10, units))
+    assert "kept at step 2, after sine, in place of flicker, kept first and then replaced" \
+        in text
+
+
+def test_a_null_whose_held_out_part_passes_its_floor_says_so() -> None:
+    """A perfect model passes the held-out floor of the systematic gap 4-9 % of the time:
+    the headline must not say the model explains the whole recording there (an outside
+    reviewer's null: "within the scatter" beside "systematic 0.285")."""
+    hold = {"gap_before": 0.307, "gap_after": 0.307, "region_gap_before": 0.3,
+            "region_gap_after": 0.3, "gap_excess_before": 0.285, "gap_excess_after": 0.285,
+            "gap_excess_floor": 0.176, "gap_null": 0.1, "significant": False}
+    c = _entry("none", gap_excess_before=0.0, gap_excess_after=0.0, gap_excess_floor=0.134,
+               holdout=hold)
+    text = explain_channel(c, 10)
+    assert "the model explains the recording" not in text[0]
+    assert "systematic gap 0.285 above its floor 0.176" in text[0]
+    assert any("systematic (0 below 0.176) 0.285 -> 0.285" in t for t in text)
+    assert any("the systematic part (0 below 0.134) is 0 -> 0" in t for t in text)
+    quiet = _entry("none", holdout={**hold, "gap_excess_before": 0.0})
+    assert "the model explains the recording" in explain_channel(quiet, 10)[0]

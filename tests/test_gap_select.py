@@ -1534,3 +1534,48 @@ def test_a_step_hidden_in_white_noise_on_single_blocks_is_seen_across_several() 
     d = diagnose_channel(model, "gx", Series(y, None, RATE, "step"),
                          GapOptions(seed=1, realisations=5))
     assert d.verdict == "bias_step", d.to_dict()["not_fitted"]
+
+
+def test_a_markov_candidate_must_fit_the_allan_curve_better_than_its_look_alikes() -> None:
+    """Flicker three times the model's (textbook FFT generator, white 4.9 mdps/sqrt(Hz),
+    1 h at 104 Hz) is fitted by a Gauss-Markov term of tau_c 10-17 s, inside the span
+    (longest tau / 8 = 39 s), that fits the Allan curve worse than flicker itself (by 8.6
+    and 19.1): no Markov candidate. An outside reviewer's flicker beside a sine was
+    replaced by such a Markov on a realisation score 0.5 lower. A true Markov of 4 mdps
+    and 30 s (AR(1)) fits it better by far and is a candidate."""
+    from lsm6ds_sim.model import ChannelModel
+
+    from imubench.gap.candidates import fit_candidates
+    from imubench.gap.parts import PartSetup
+
+    white_d, b0 = 0.0049, 0.00076
+    cm = ChannelModel().replace(white=white_d, flicker=b0)
+    n = int(3600 * RATE)
+    nf = n // 2
+
+    def markov(rng: np.random.Generator, sigma: float, tau_c: float) -> np.ndarray:
+        phi = math.exp(-1.0 / (RATE * tau_c))
+        e = rng.normal(0.0, sigma * math.sqrt(1.0 - phi * phi), n)
+        e[0] = rng.normal(0.0, sigma)
+        return lfilter([1.0], [1.0, -phi], e)
+
+    def first_step(y: np.ndarray, rng: np.random.Generator) -> tuple[list[str], Any]:
+        fit = PartSetup(Series(y[:nf], None, RATE, "fit"), cm)
+        cur = fit.sim_features(np.array([white_flicker(rng, nf, RATE, white_d, b0)
+                                         for _ in range(10)]))
+        cands, ev = fit_candidates(cm, fit, Series(y, None, RATE, "whole"),
+                                   fit.compare(cur), cur, ("markov", "flicker", "random_walk"),
+                                   None, math.nan, cur.avar.mean(axis=0))
+        return [c.effect for c in cands], ev["markov_fit"]
+
+    for seed in (0, 2):
+        rng = np.random.default_rng(seed)
+        names, (_, tau_c, tau_c_max, share, descent) = first_step(
+            white_flicker(rng, n, RATE, white_d, 3.0 * b0), rng)
+        assert tau_c <= tau_c_max and share >= 0.5  # passed the span and the share
+        assert descent < 0.0
+        assert "markov" not in names and "flicker" in names
+    rng = np.random.default_rng(0)
+    names, (_, tau_c, tau_c_max, _, descent) = first_step(
+        white_flicker(rng, n, RATE, white_d, b0) + markov(rng, 0.004, 30.0), rng)
+    assert "markov" in names and descent > 10.0 and tau_c <= tau_c_max

@@ -124,9 +124,11 @@ def gap_units(channels: list[str]) -> dict[str, object]:
 
     ln = "1 (RMS over taus of ln(ADEV_real/ADEV_sim))"
     return {"rate_hz": "Hz", "samples": "samples", "holdout_fraction": "1",
-            **{k: ln for k in ("gap_before", "gap_after", "gap_null", "gap_excess_before",
-                               "gap_excess_after", "holdout_gap_after",
+            **{k: ln for k in ("gap_before", "gap_after", "gap_null", "gap_null_after",
+                               "gap_excess_before", "gap_excess_after", "gap_excess_floor",
+                               "gap_excess_floor_after", "holdout_gap_after",
                                "holdout_gap_excess_after")},
+            "lost_samples": "samples",
             "params": {ch: {**param_units(ch), **effect_units(ch)}
                        for ch in channels if ch != "temp"}}
 
