@@ -541,7 +541,7 @@ def test_the_text_says_why_a_better_scoring_first_step_effect_is_not_the_verdict
                                              kept=kept), 10, units))
     assert ("the runner-up random_walk scores 30.0 (lower is better; BIC penalty ln(n) per "
             "parameter, 1 against 1), better at the first step, and is kept as well "
-            "(step 2)") in text
+            "(step 2, fitted again there)") in text
     flicker = {"effect": "flicker", "params": {"flicker": 0.002}, "reason":
                "replaced by markov: fitted again beside the other kept effects, markov "
                "scores 77.6 against 78.1 and passes the held-out check"}
@@ -569,5 +569,22 @@ def test_a_null_whose_held_out_part_passes_its_floor_says_so() -> None:
     assert "systematic gap 0.285 above its floor 0.176" in text[0]
     assert any("systematic (0 below 0.176) 0.285 -> 0.285" in t for t in text)
     assert any("the systematic part (0 below 0.134) is 0 -> 0" in t for t in text)
-    quiet = _entry("none", holdout={**hold, "gap_excess_before": 0.0})
+    quiet = _entry("none", gap_excess_before=0.0, holdout={**hold, "gap_excess_before": 0.0})
     assert "the model explains the recording" in explain_channel(quiet, 10)[0]
+    fit_only = _entry("none", gap_excess_before=0.177, gap_excess_floor=0.131,
+                      holdout={**hold, "gap_excess_before": 0.0})
+    assert ("departs more than scatter usually takes it on the fit part (systematic gap "
+            "0.177 above its floor 0.131)") in explain_channel(fit_only, 10)[0]
+
+
+def test_a_bias_steps_held_out_closure_is_not_called_independent() -> None:
+    """A bias step is located on the whole record, so its held-out closure is not an
+    independent check (an outside reviewer: a step at 1914 s of a record split at 1800 s
+    read "closes 100 % ... on the held-out part (never used for the fit)")."""
+    step = {"effect": "bias_step", "params": {"step_size": -0.031, "step_time_s": 1913.8},
+            "gap_after": 0.19, "n_params": 2, "score": 290.3, "evidence_closed": 0.8,
+            "chi2_closed": 0.0, "holdout_gap_after": 0.08, "holdout_gap_excess_after": 0.0}
+    text = explain_channel(_entry("bias_step", effects=[step], kept=[step]), 10)
+    assert text[0].startswith("The bias steps by -0.031 at t = 1914 s; modelling it closes")
+    assert "so for it this is not an independent check" in text[0]
+    assert "0% of the fit part's total, the step test being on the whole record" in "\n".join(text)

@@ -198,6 +198,10 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     }.get(effect, effect)
 
 
+STEP_NOT_INDEPENDENT = ("a bias step is located on the whole record, the held-out part "
+                        "included, so for it this is not an independent check")
+
+
 def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
     """What modelling the effect does on the held-out part, in words: 'closes N % of the
     systematic gap' (or of the gap, when it has no systematic part), or, when the
@@ -269,13 +273,14 @@ def headline(c: dict[str, Any], realisations: int,
             return (f"No unmodelled effect on the fit part (within the scatter of "
                     f"{realisations} realisations), but the held-out part departs from the "
                     "model.")
-        if (h.get("gap_excess_before") or 0.0) > 0.0 and h.get("gap_excess_floor"):
-            return (f"No unmodelled effect on the fit part (within the scatter of "
-                    f"{realisations} realisations); the held-out part's Allan curve departs "
-                    f"more than scatter usually takes it (systematic gap "
-                    f"{_f(h['gap_excess_before'])} above its floor "
-                    f"{_f(h.get('gap_excess_floor'))}, which a perfect model passes 4-9 % "
-                    "of the time), though none of its tests fires.")
+        above = [f"the {name} part (systematic gap {_f(x['gap_excess_before'])} above its "
+                 f"floor {_f(x['gap_excess_floor'])})" for name, x in (("fit", c), ("held-out", h))
+                 if (x.get("gap_excess_before") or 0.0) > 0.0 and x.get("gap_excess_floor")]
+        if above:
+            return (f"No test finds an unmodelled effect (within the scatter of "
+                    f"{realisations} realisations), but the Allan curve departs more than "
+                    f"scatter usually takes it on " + " and ".join(above) + ", which a "
+                    "perfect model passes 4-9 % of the time.")
         return (f"No unmodelled effect: the model explains the recording within the scatter "
                 f"of {realisations} realisations.")
     if verdict == "unexplained":
@@ -290,6 +295,8 @@ def headline(c: dict[str, Any], realisations: int,
     if others and alone.startswith("; on the held-out part"):  # the others close the rest
         alone = alone.replace("; on the held-out part", "; on its own, on the held-out part",
                               1)
+    if verdict == "bias_step" and alone.startswith("; modelling it closes "):
+        alone += f" ({STEP_NOT_INDEPENDENT})"
     text = text[0].upper() + text[1:] + alone + "."
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units, k)
@@ -297,7 +304,10 @@ def headline(c: dict[str, Any], realisations: int,
         together = _closed(c.get("holdout"), None)
         if together.startswith("; modelling it closes "):
             text += (" (all kept effects together close "
-                     + together.removeprefix("; modelling it closes ") + ").")
+                     + together.removeprefix("; modelling it closes ")
+                     + (f"; {STEP_NOT_INDEPENDENT}"
+                        if any(k["effect"] == "bias_step" for k in kept) else "") + ").")
+
         elif together:
             text += " (with all kept effects" + together.lstrip(";").replace(";", ",") + ")."
         else:
@@ -403,9 +413,10 @@ def _better_runner_up(effect: str, c: dict[str, Any]) -> str:
     kept = c.get("kept") or []
     at = next((i for i, k in enumerate(kept) if k["effect"] == effect), None)
     if at is not None:
-        return (f", better at the first step, and is kept as well (step {at + 1}): in the "
-                "order kept, with the effects whose own whole-record tests fired examined "
-                "first, the kept effects together score lower on the fit part")
+        return (f", better at the first step, and is kept as well (step {at + 1}, fitted "
+                "again there): the selection that examines first the effects whose own "
+                "whole-record tests fired kept the same effects in this order, with a "
+                "lower score on the fit part")
     gone = next((x for x in [*c.get("dropped", []), *c.get("not_kept", [])]
                  if x["effect"] == effect), None)
     return (f", better at the first step, but is not kept: {gone['reason']}"
@@ -413,10 +424,13 @@ def _better_runner_up(effect: str, c: dict[str, Any]) -> str:
 
 
 def _floor(part: dict[str, Any]) -> str:
-    """' (0 below F)': the floor under which a part's systematic gap is reported as 0
-    (``gap_excess_floor``), or nothing when the JSON lacks it."""
-    f = part.get("gap_excess_floor")
-    return f" (0 below {_f(f)})" if f is not None else ""
+    """' (0 below F before, G after)': the floors under which a part's systematic gap is
+    reported as 0 (``gap_excess_floor``, ``_after``: the model without and with the kept
+    effects), or nothing when the JSON lacks them."""
+    f, fa = part.get("gap_excess_floor"), part.get("gap_excess_floor_after")
+    if f is None:
+        return ""
+    return f" (0 below {_f(f)})" if fa is None else f" (0 below {_f(f)} before, {_f(fa)} after)"
 
 
 def _held_out_departure(h: dict[str, Any], after: bool) -> str:
@@ -462,7 +476,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
         lines.append("Verdict none: " + (
             "the departure is within the recording's own variation."
             if c.get("reason") == "replicate variation" else
-            f"the model explains the fit part within the scatter of {realisations} "
+            f"no test on the fit part departs beyond the scatter of {realisations} "
             "realisations."))
         h = c.get("holdout") or {}
         if h.get("significant") and c.get("reason") != "replicate variation":
@@ -510,7 +524,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
         after = ("" if step == 0 else " kept at step " + str(step + 1) + ", after "
                  + ", ".join(k["effect"] for k in kept[:step]))
         swapped = [d["effect"] for d in c.get("dropped", [])
-                   if str(d.get("reason", "")).startswith(f"replaced by {verdict}")]
+                   if str(d.get("reason", "")).startswith(f"replaced by {verdict}:")]
         if swapped:  # the sequential replacement puts the newcomer last
             after += (f"{',' if after else ''} in place of {' and '.join(swapped)}, kept "
                       "first and then replaced (below)")
@@ -532,8 +546,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
             txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
                     f"BIC penalty ln(n) per parameter, {w['n_params']} against "
                     f"{r['n_params']})")
-            if r.get("rejected_because"):
-                txt += f" but was refused: {r['rejected_because']}"
+            why = str(r.get("rejected_because") or "")
+            if why.startswith("replaced by"):
+                txt += f", kept first but then {why}"
+            elif why:
+                txt += f" but was refused: {why}"
             elif "score" in w and r["score"] < w["score"]:
                 txt += _better_runner_up(r["effect"], c)
         lines.append(txt + ".")
