@@ -90,8 +90,10 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
         z = _stat(c, key)
         if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
             kind = "z" if key in POOLED_STATS else "t"
-            out.append(f"{names[key]} ({kind} {z:.1f} against the threshold "
-                       f"{t_threshold(z_norm, stat_dof(key, dof)):.1f})")
+            thr = t_threshold(z_norm, stat_dof(key, dof))
+            nd = 1 if f"{abs(z):.1f}" != f"{thr:.1f}" else 2  # 3.60 over 3.56, not 3.6 / 3.6
+            out.append(f"{names[key]} ({kind} {z:.{nd}f} against the threshold "
+                       f"{thr:.{nd}f})")
     g = c.get("global") or {}
     if g.get("fired"):
         out.append(f"the whole Allan curve's shape (chi-squared {g['chi2_smooth']:.1f} "
