@@ -524,7 +524,7 @@ def test_a_base_model_verdict_refitted_beside_a_later_effect_quotes_the_kept_ref
     units = gap_units(["gx"])["params"]["gx"]  # type: ignore[index]
     text = "\n".join(explain_channel(c, 10, units))
     assert "Verdict base_model (bandwidth_hz = 21.65 Hz" in text
-    assert "first fitted bandwidth_hz = 21.57 Hz" in text
+    assert "the share and score that follow are of its first fit, bandwidth_hz = 21.57 Hz" in text
     assert "rather than add an effect" not in text
     assert "Also kept: a sinusoidal disturbance" in text
 

@@ -538,8 +538,9 @@ def explain_channel(c: dict[str, Any], realisations: int,
                       + ", ".join(rises) + ")")
         params = (kept[step] if kept and kept[step]["effect"] == verdict else w)["params"]
         if params != w["params"]:  # the base model's refit, fitted again beside a later one
-            after += (" (as kept: fitted again beside the effects kept after it; first "
-                      f"fitted {params_text(w['params'], units)})")
+            after += (" (as kept: fitted again beside the effects kept after it; the "
+                      "share and score that follow are of its first fit, "
+                      f"{params_text(w['params'], units)})")
         txt = f"Verdict {verdict} ({params_text(params, units)}){after}: {share}"
         if "score" in w:
             txt += f"; score {w['score']:.1f}"
