@@ -515,7 +515,8 @@ def explain_channel(c: dict[str, Any], realisations: int,
         w = (next((e for e in effects if e["effect"] == verdict), None) if step == 0
              else None) or (kept[step] if kept else {})
         ec = w.get("evidence_closed")
-        share = (f"it {removes(ec)} the significant excess chi-squared (the "
+        left = ("" if step == 0 else " left by " + ", ".join(k["effect"] for k in kept[:step]))
+        share = (f"it {removes(ec)} the significant excess chi-squared{left} (the "
                  f"share criterion is {MIN_CLOSURE:.0%}")
         share += ((f"; {_pct(w.get('chi2_closed'))} of the fit part's total"
                    + (", the step test being on the whole record" if verdict == "bias_step"
