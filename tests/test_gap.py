@@ -328,7 +328,7 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
         assert (rep / f).stat().st_size > 0, f
     index = (rep / "index.html").read_text()
     assert "Verdict temperature (temp_coeff = " in index  # the reasons, not only plots
-    assert "Verdict none: the model explains the fit part" in index
+    assert "Verdict none: no test on the fit part departs beyond the scatter" in index
     assert "Held-out part (never used for the fit)" in index
     assert "  Verdict temperature (temp_coeff = " in r.stdout  # and on the terminal
 
