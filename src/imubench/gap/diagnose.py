@@ -749,6 +749,18 @@ def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
     return ""
 
 
+REPLACED = "replaced by"
+"""How the note of a kept effect that others replaced starts: by the sequential
+replacement (:func:`exchanged_by`) or by the selection with the effects whose own
+whole-record tests fired examined first (:func:`_better_start`, "replaced by X + Y, ...")."""
+
+
+def exchanged_by(effect: str) -> str:
+    """The start of the note of an effect the sequential replacement (:func:`_exchange`)
+    swapped for ``effect``."""
+    return f"{REPLACED} {effect}:"
+
+
 PRUNE_REASON = "made redundant by the effects kept after it"
 
 
@@ -941,7 +953,7 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
             if new.score >= old_score:
                 continue
             new.accepted, old.accepted = True, False
-            old.note = (f"replaced by {new.effect}: fitted again beside the other kept "
+            old.note = (f"{exchanged_by(new.effect)} fitted again beside the other kept "
                         f"effects, {new.effect} scores {new.score:.1f} against "
                         f"{old_score:.1f} and passes the held-out check")
             replaced.append(old)
@@ -1147,7 +1159,7 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     for c in main.kept:
         c.accepted = False
     for c in gone:  # an effect both kept is not said to be replaced (by itself)
-        c.note = (f"replaced by {names}, kept with the effects whose own whole-record tests "
+        c.note = (f"{REPLACED} {names}, kept with the effects whose own whole-record tests "
                   f"fired examined first: score {s_alt:.1f} against {s_main:.1f} on the fit "
                   f"part, held-out gap's excess over its scatter {h_alt:.3f} against "
                   f"{h_main:.3f} (scatter {scatter:.3f})")

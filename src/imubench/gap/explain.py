@@ -29,7 +29,7 @@ from imubench.gap.curves import (
     stat_fired,
     t_threshold,
 )
-from imubench.gap.diagnose import MAX_EFFECTS, MIN_CLOSURE, removes
+from imubench.gap.diagnose import MAX_EFFECTS, MIN_CLOSURE, REPLACED, exchanged_by, removes
 
 
 def _f(v: float | None, digits: int = 3) -> str:
@@ -527,7 +527,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
         after = ("" if step == 0 else " kept at step " + str(step + 1) + ", after "
                  + ", ".join(k["effect"] for k in kept[:step]))
         swapped = [d["effect"] for d in c.get("dropped", [])
-                   if str(d.get("reason", "")).startswith(f"replaced by {verdict}:")]
+                   if str(d.get("reason", "")).startswith(exchanged_by(verdict))]
         if swapped:  # the sequential replacement puts the newcomer last
             after += (f"{',' if after else ''} in place of {' and '.join(swapped)}, kept "
                       "first and then replaced (below)")
@@ -551,7 +551,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
                     f"BIC penalty ln(n) per parameter, {w['n_params']} against "
                     f"{r['n_params']})")
             why = str(r.get("rejected_because") or "")
-            if why.startswith("replaced by"):
+            if why.startswith(REPLACED):
                 txt += f", kept first but then {why}"
             elif why:
                 txt += f" but was refused: {why}"
