@@ -332,6 +332,8 @@ class Case:
     kept: list[str] = field(default_factory=list)
     closed: float = float("nan")
     param_error: float = float("nan")
+    param_z: list[float] = field(default_factory=list)
+    """Each named effect's main-parameter error in its standard errors (``params_se``)."""
     seconds: float = 0.0
     detail: str = ""
     error: str = ""
@@ -414,6 +416,11 @@ def run_case(c: Case, work: Path) -> Case:
                        if key == "temp_coeff"
                        else win.get(f"{key}_at_output", win["params"][key]))
                 errors.append(abs(abs(got) - abs(c.truth[key])) / abs(c.truth[key]))
+                se = (win.get("params_se") or {}).get(key)
+                if se and not (key == "temp_coeff" and win["params"].get("temp_coeff2")):
+                    # a line as recorded: its SE scaled as the amplitude is
+                    se *= abs(got / win["params"][key])
+                    c.param_z.append((abs(got) - abs(c.truth[key])) / se)
         if errors:  # a pair: the worse of the two
             c.param_error = max(errors)
     top = [(e["effect"], e.get("rejected_because", "")[:60]) for e in d["effects"][:3]]
@@ -429,8 +436,10 @@ def run_case(c: Case, work: Path) -> Case:
 
 def show(c: Case) -> None:
     ok = "OK " if c.right else "BAD"
+    zs = " ".join(f"{z:+.1f}" for z in c.param_z)
     print(f"  {c.split:7s} {c.effect:12s} {c.size:5s} verdict={c.verdict:12s} kept={c.kept} "
-          f"closed={c.closed:5.2f} perr={c.param_error:5.2f} {ok} ({c.seconds:.0f} s) "
+          f"closed={c.closed:5.2f} perr={c.param_error:5.2f} z=[{zs}] {ok} "
+          f"({c.seconds:.0f} s) "
           f"{c.error or c.detail} {c.params}", flush=True)
 
 
@@ -497,6 +506,14 @@ def summarise(name: str, cs: list[Case]) -> None:
                           + (f" kept {'+'.join(c.kept)} closed {c.closed:.2f}"
                              if len(c.names) == 2 else "")
                           for c in eff if not c.right))
+        zs = np.abs([z for c in eff for z in c.param_z])
+        if zs.size:
+            print(f"  main-parameter error in standard errors (params_se): within 1 SE "
+                  f"{np.sum(zs <= 1)}/{zs.size}, within 2 SE {np.sum(zs <= 2)}/{zs.size} "
+                  f"(68 % and 95 % if the SE is right); median |z| {np.median(zs):.2f} "
+                  f"(0.67); largest: " + ", ".join(
+                      f"{c.effect}/{c.size} {z:+.1f}" for c in eff for z in c.param_z
+                      if abs(z) > 2))
     if nul:
         strict = sum(c.verdict != "none" for c in nul)
         named = sum(c.verdict not in ("none", "base_model", "unexplained") for c in nul)

@@ -161,6 +161,13 @@ class Candidate:
     replicates: list[Comparison] = field(default_factory=list)
     """The replicate recordings against the model with this candidate (filled by the
     replicate check of a noise process; empty otherwise)."""
+    estimator: str = ""
+    """Which estimator fitted a temperature response: ``gls`` (the block-mean increments'
+    GLS slope), ``levels`` or ``levels_quadratic`` (least squares of the block-mean
+    levels); empty for the other effects, which have one estimator each."""
+    params_se: dict[str, float] = field(default_factory=dict)
+    """Standard error of each fitted parameter (:func:`imubench.gap.uncertainty.
+    standard_errors`); filled for the kept effects once the selection is over."""
 
     def to_dict(self, before: Comparison) -> dict[str, Any]:
         assert self.fit is not None
@@ -535,15 +542,18 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     # the model-GLS slope beside a trend (the level test's), which a ramp
                     # or a slow wander does not bias as it does the levels' least squares
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + gls,
-                                                 "temp_coeff2": cm.temp_coeff2}, 1))
+                                                 "temp_coeff2": cm.temp_coeff2}, 1,
+                                           estimator="gls"))
                 if tf is not None:
                     ev["temperature"] = tf
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff
                                                  + tf.temp_coeff_linear,
-                                                 "temp_coeff2": cm.temp_coeff2}, 1))
+                                                 "temp_coeff2": cm.temp_coeff2}, 1,
+                                           estimator="levels"))
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + tf.temp_coeff,
                                                  "temp_coeff2": cm.temp_coeff2
-                                                 + tf.temp_coeff2}, 2))
+                                                 + tf.temp_coeff2}, 2,
+                                           estimator="levels_quadratic"))
                     cands[-1].refusal = (
                         _curvature_refusal(tf.block_temp_c, cm.temp_ref,
                                            cands[-1].params["temp_coeff"])
@@ -633,7 +643,9 @@ def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
                 f"and whole-record z {z(temp_record_z)} (need {gate_level:.1f})")
     if effect == "outliers":
         return (f"no excess of impulses (tail z {before.tail_z:.1f}, needs "
-                f"{Z_TAIL_CANDIDATE:g}) or fewer than 3 found")
+                f"{Z_TAIL_CANDIDATE:g}), fewer than 3 found, or the samples beyond the "
+                "threshold no wider than a normal law's tail there (no impulse amplitude "
+                "fits them)")
     if effect == "bias_step":
         return "the whole-record bias-step test did not fire"
     return "no fit"

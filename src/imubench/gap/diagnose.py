@@ -87,6 +87,7 @@ from imubench.gap.curves import (
 from imubench.gap.errors import GapError
 from imubench.gap.parts import PartSetup, RecordTemperature, Series, seeds_of, simulate_channel
 from imubench.gap.two_level import two_level_llr as llr
+from imubench.gap.uncertainty import Refit, standard_errors
 
 MIN_CLOSURE = 1.0 / 3.0
 """Share of the significant excess chi-squared (over the taus, bands and statistics that
@@ -320,10 +321,15 @@ class ChannelDiagnosis:
 
 def _kept_dict(c: Candidate) -> dict[str, Any]:
     assert c.fit is not None
-    d: dict[str, Any] = {"effect": c.effect, "params": c.params, "gap_after": c.fit.gap,
+    d: dict[str, Any] = {"effect": c.effect, "params": c.params,
+                         "params_se": {k: (v if math.isfinite(v) else None)
+                                       for k, v in c.params_se.items()},
+                         "gap_after": c.fit.gap,
                          "gap_excess_after": c.fit.gap_excess,
                          "evidence_closed": c.evidence_closed, **c.at_output(),
                          **c.holdout_dict()}
+    if c.estimator:
+        d["estimator"] = c.estimator
     if math.isfinite(c.unique_chi2):
         d["chi2_rise_without"] = c.unique_chi2
     return d
@@ -794,16 +800,52 @@ class _Realiser:
             self.realise(kept)
         return self._steps[key]
 
-    def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, _Step]:
-        """The model with ``kept``, its realisations (the run's seeds) and its step; the
-        step is built from these realisations when it is not cached yet."""
-        variant, det_sum = self.variant(kept)
-        sims = variant.realise(self.channel, self.series, self.seeds)
+    def step_of(self, kept: list[Candidate], sims: np.ndarray) -> _Step:
+        """The step against the model with ``kept``, whose realisations ``sims`` are (the
+        run's seeds); built from them when it is not cached yet."""
         key = self._key(kept)
         if key not in self._steps:
             self._steps[key] = _Step(self.fit, self.hold, sims, self.series, self.temp,
-                                     det_sum)
-        return variant, sims, self._steps[key]
+                                     self.variant(kept)[1])
+        return self._steps[key]
+
+    def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, _Step]:
+        """The model with ``kept``, its realisations (the run's seeds) and its step; the
+        step is built from these realisations when it is not cached yet."""
+        variant, _ = self.variant(kept)
+        sims = variant.realise(self.channel, self.series, self.seeds)
+        return variant, sims, self.step_of(kept, sims)
+
+    def set_standard_errors(self, kept: list[Candidate]) -> None:
+        """Each kept effect's :attr:`Candidate.params_se`
+        (:func:`imubench.gap.uncertainty.standard_errors`): refitted on the realisations
+        of the model with all of ``kept``, against the model of the effects kept before
+        it. The realisations' samples are drawn again once, and only for an estimator
+        that needs them."""
+        final = self.step(kept)
+        drawn: list[np.ndarray] = []
+        dets: list[np.ndarray | float] = []
+        variant = Variant(self.model)
+        for c in kept:
+            det = deterministic(c.effect, c.params, variant.model[self.channel], self.series)
+            dets.append(0.0 if det is None else det)
+            variant = variant.add(self.channel, c)
+
+        def raw_less_others(j: int) -> Callable[[], np.ndarray]:
+            def raw() -> np.ndarray:
+                if not drawn:
+                    drawn.append(self.realise(kept)[1])
+                others = sum((d for i, d in enumerate(dets) if i != j), start=0.0)
+                return drawn[0] - others
+            return raw
+
+        variant = Variant(self.model)
+        for j, c in enumerate(kept):
+            ref = self.step(kept[:j])
+            c.params_se = standard_errors(c, Refit(
+                self.fit, final.feats, ref.feats, ref.before.sigma,
+                variant.model[self.channel], raw_less_others(j)))
+            variant = variant.add(self.channel, c)
 
     @staticmethod
     def _key(kept: list[Candidate]) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ...]:
@@ -1071,12 +1113,11 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
     fires (:func:`_fired_effects`) are examined alone first, and the others only when none
     of those is acceptable (the second start of :func:`_better_start`)."""
     variant = Variant(r.model)
-    det_sum: np.ndarray | float = 0.0
     path = _Path([], [], False, rep_before, [], {})
     st = first
     for k in range(MAX_EFFECTS):
         if k > 0:
-            st = _Step(r.fit, r.hold, sims, r.series, r.temp, det_sum)
+            st = r.step_of(path.kept, sims)
         if not _goes_on(st, k):
             return path
         todo = tuple(e for e in effects if e not in {c.effect for c in path.kept})
@@ -1101,11 +1142,11 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
         if chosen.base_refit is not None:  # the refit kept changed: re-score from it on
             r.rescore_from(path.kept, next(i for i, x in enumerate(path.kept)
                                            if x.effect == "base_model"))
-        variant, det_sum = r.variant(path.kept)
+        variant, _ = r.variant(path.kept)
         sims = chosen_sims
         path.rep_now = ((chosen.base_refit is None and chosen.replicates)
                         or _on_replicates(variant, r.channel, reps, r.seeds))
-    path.residual = _Step(r.fit, r.hold, sims, r.series, r.temp, det_sum).significant
+    path.residual = r.step_of(path.kept, sims).significant
     return path
 
 
@@ -1237,7 +1278,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     rtemp = RecordTemperature(cm0, series)
     rep_before = _on_replicates(Variant(model), channel, rep_setups, seeds)
     realiser = _Realiser(model, channel, series, seeds, fit, hold, rtemp)
-    first = _Step(fit, hold, sims, series, rtemp, 0.0)
+    first = realiser.step_of([], sims)
     bg_rep = background.from_replicates(first.before, rep_before)
     bg_summary: dict[str, Any] | None = None
     check_of = functools.partial(_check_of, channel=channel, reps=rep_setups, seeds=seeds)
@@ -1271,6 +1312,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             residual = realiser.step(kept).significant
             rep_now = _on_replicates(realiser.variant(kept)[0], channel, rep_setups, seeds)
 
+    if kept:
+        realiser.set_standard_errors(kept)
     if not first.significant:
         verdict, reason = "none", "within the scatter of the realisations"
     elif reason == "replicate variation":

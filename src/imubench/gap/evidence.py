@@ -109,7 +109,10 @@ class OutlierFit:
 
 def fit_outliers(y: np.ndarray, rate_hz: float, false_per_record: float = 0.0
                  ) -> OutlierFit | None:
-    """Rate (1/s) and amplitude of impulses from the detected tail (None if < 3 found)."""
+    """Rate (1/s) and amplitude of impulses from the detected tail; None if fewer than 3
+    are found or their second moment is not above the threshold's normal-law tail (no
+    impulse amplitude fits it: u = T / v beyond 30, where a rate of n / Q(u) would be
+    astronomical)."""
     r = highpass_residual(y)
     sigma = robust_sigma(r)
     if not sigma > 0:
@@ -124,10 +127,10 @@ def fit_outliers(y: np.ndarray, rate_hz: float, false_per_record: float = 0.0
         v2 = (thr / u) ** 2
         return v2 * (1.0 + u * norm.pdf(u) / norm.sf(u)) - m2
 
-    try:  # excess falls monotonically in u from +inf (u -> 0) to thr^2 - m2 < 0
-        u = brentq(excess, 1e-3, 30.0)
-    except ValueError:
-        u = 30.0
+    if excess(30.0) >= 0.0:  # the tail is no heavier than a normal law's beyond thr
+        return None
+    # excess falls monotonically in u from +inf (u -> 0) to thr^2 - m2 < 0
+    u = brentq(excess, 1e-3, 30.0)
     v = thr / u
     amp = math.sqrt(max(v * v - sigma * sigma, 0.0))
     duration = np.isfinite(y).sum() / rate_hz

@@ -53,14 +53,19 @@ def _span(lo: float, hi: float, unit: str) -> str:
 
 
 def _valued(p: dict[str, Any], key: str, units: Mapping[str, str] | None,
-            digits: int = 3) -> str:
-    """``p[key]`` followed by its unit from ``units`` (none for a dimensionless '1')."""
+            digits: int = 3, se: Mapping[str, float | None] | None = None) -> str:
+    """``p[key]`` followed by its unit from ``units`` (none for a dimensionless '1'), and
+    by ``+- SE`` when ``se`` (the JSON's ``params_se``) holds one for ``key``."""
     unit = (units or {}).get(key, "1")
-    return _f(p.get(key), digits) + ("" if unit == "1" else f" {unit}")
+    err = (se or {}).get(key)
+    pm = "" if err is None else f" +- {_f(err, 2)}"
+    return _f(p.get(key), digits) + pm + ("" if unit == "1" else f" {unit}")
 
 
-def params_text(p: dict[str, Any], units: Mapping[str, str] | None) -> str:
-    """``key = value unit, ...`` of an effect's parameters (no filter: said so)."""
+def params_text(p: dict[str, Any], units: Mapping[str, str] | None,
+                se: Mapping[str, float | None] | None = None) -> str:
+    """``key = value unit, ...`` of an effect's parameters (no filter: said so), each
+    with ``+- SE`` where ``se`` (a kept effect's ``params_se``) has it."""
     out = []
     for k, v in p.items():
         if k == "filter_order" and not (p.get("bandwidth_hz") or 0) > 0:
@@ -68,7 +73,7 @@ def params_text(p: dict[str, Any], units: Mapping[str, str] | None) -> str:
         if k == "bandwidth_hz" and not (v or 0) > 0:
             out.append("no output filter")
             continue
-        out.append(f"{k} = {_valued(p, k, units, 4)}")
+        out.append(f"{k} = {_valued(p, k, units, 4, se)}")
     return ", ".join(out)
 
 
@@ -151,9 +156,10 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     ``entry``: the effect's JSON entry, whose ``temp_slope_at_mean`` states a curved
     temperature response at the record's mean temperature rather than at temp_ref, and
     whose ``sine_amplitude_at_output`` a line as recorded beside the model file's
-    amplitude before the output filter."""
+    amplitude before the output filter; a kept effect's ``params_se`` puts ``+- SE``
+    after each value that has one."""
     def g(k: str) -> str:
-        return _valued(p, k, units)
+        return _valued(p, k, units, se=e.get("params_se"))
 
     def like(value: Any, key: str) -> str:  # another value in the unit of ``key``
         return _valued({key: value}, key, units)
@@ -376,13 +382,16 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
                for d in c.get("dropped", [])]
     parts = []
     for i, k in enumerate(kept, 1):
-        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units)}): fit-part gap "
+        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units, k.get('params_se'))}): "
+               "fit-part gap "
                f"{_f(k['gap_after'])}")
         if k.get("holdout_gap_after") is not None:
             txt += f", held-out gap {_f(k['holdout_gap_after'])}"
         parts.append(txt)
-    first = (f"Effects kept in order (held-out gap before: {_f(h.get('gap_before'))}): "
-             if h else "Effects kept in order: ")
+    se = (", values +- one standard error (refitted on the realisations)"
+          if any(k.get("params_se") for k in kept) else "")
+    first = (f"Effects kept in order (held-out gap before: {_f(h.get('gap_before'))}{se}): "
+             if h else f"Effects kept in order{f' ({se[2:]})' if se else ''}: ")
     out = [first + "; ".join(parts) + "."]
     out.extend(_check_lines(kept, h))
     if dropped:
@@ -537,12 +546,14 @@ def explain_channel(c: dict[str, Any], realisations: int,
             after += (f" (named as the verdict: taking it out of the kept effects raises the "
                       f"fit part's chi-squared by {w['chi2_rise_without']:.1f}, against "
                       + ", ".join(rises) + ")")
-        params = (kept[step] if kept and kept[step]["effect"] == verdict else w)["params"]
+        shown = kept[step] if kept and kept[step]["effect"] == verdict else w
+        params = shown["params"]
         if params != w["params"]:  # the base model's refit, fitted again beside a later one
             after += (" (as kept: fitted again beside the effects kept after it; the "
                       "share and score that follow are of its first fit, "
                       f"{params_text(w['params'], units)})")
-        txt = f"Verdict {verdict} ({params_text(params, units)}){after}: {share}"
+        txt = (f"Verdict {verdict} ({params_text(params, units, shown.get('params_se'))})"
+               f"{after}: {share}")
         if "score" in w:
             txt += f"; score {w['score']:.1f}"
         r = next((e for e in effects if e["effect"] != verdict), None)

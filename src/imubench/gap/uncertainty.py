@@ -1,0 +1,169 @@
+"""Standard errors of a kept effect's parameters: a parametric bootstrap.
+
+The model with every kept effect is the best description of the record there is; its K
+realisations (the run's seeds) are K records that this model could have produced. Each
+kept effect's estimator, the one that fitted it to the real record, is applied again to
+each realisation, against the same reference it was fitted against (the realisations of
+the model it was added to), and the standard deviation of the K estimates is the
+parameter's standard error (Efron & Tibshirani, An Introduction to the Bootstrap, 1993,
+ch. 6, "the parametric bootstrap"). It holds the noise of the record, of the other
+effects and of the estimator itself; it does not hold the choice of WHICH effects were
+kept (an effect kept because its estimate came out large is biased high by that
+selection, and the error does not show it). With K realisations the standard error is
+itself uncertain by about 1 / sqrt(2 (K - 1)) (24 % at K = 10).
+
+Each effect's estimator, as in :func:`imubench.gap.candidates.fit_candidates`:
+
+* ``flicker``, ``random_walk``, ``quantization``: the added term's 1-D fit to the Allan
+  curve (:func:`imubench.gap.avarfit.fit_single`), the total ``sqrt(p0^2 + p^2)``;
+* ``markov``, ``telegraph``: the Gauss-Markov fit (:func:`imubench.gap.avarfit.
+  fit_markov`; the telegraph's step and dwell are twice its sigma and tau_c);
+* ``base_model``: the white level and the output bandwidth of the refit
+  (:func:`imubench.gap.avarfit.fit_base_model`); the filter order is a choice, not an
+  estimate, and has none;
+* ``ramp``: the least-squares slope of the block means against time;
+* ``temperature``: the coefficient from the estimator that gave it (the GLS slope of the
+  block-mean increments, or least squares of the block-mean levels, linear or quadratic);
+* ``sine``: the zero-padded periodogram's frequency and the least-squares amplitude
+  (:func:`imubench.gap.evidence.fit_sine`);
+* ``resonance``: the Lorentzian fit to the spectral excess
+  (:func:`imubench.gap.evidence.fit_resonance`);
+* ``outliers``: the truncated-normal tail fit (:func:`imubench.gap.evidence.fit_outliers`);
+* ``bias_step``: the change point and the local size (:func:`imubench.gap.evidence.
+  fit_bias_step`) on the whole realisation less the other kept effects' deterministic
+  parts.
+
+An estimator that finds nothing on a realisation (no resonance peak, fewer than three
+impulses) leaves that realisation out; with fewer than MIN_REFITS left the error is NaN
+(reported as null).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from lsm6ds_sim.model import ChannelModel
+
+from imubench.gap import avarfit, evidence
+from imubench.gap.candidates import Candidate, filter_power_gain
+from imubench.gap.curves import SimFeatures, gls_slopes, line_segment
+from imubench.gap.parts import PartSetup
+from imubench.noisefit.spectral_line import SCAN_LOW_FRACTION
+
+MIN_REFITS = 5
+"""Fewest realisations on which the estimator must find the effect for a standard error."""
+
+
+@dataclass(frozen=True)
+class Refit:
+    """What the bootstrap of one kept effect needs.
+
+    ``final``: the fit part's features of the realisations of the model with every kept
+    effect; ``reference``: those of the model the effect was added to (the effects kept
+    before it), with ``sigma`` (ln ADEV, per tau) and ``cm`` (its channel model) as the
+    fit of that step saw them; ``raw``: the final model's realisations over the whole
+    record (k, n), each less the deterministic parts of the OTHER kept effects, made on
+    demand (only the sine, outliers and bias-step estimators need samples)."""
+
+    fit: PartSetup
+    final: SimFeatures
+    reference: SimFeatures
+    sigma: np.ndarray
+    cm: ChannelModel
+    raw: Callable[[], np.ndarray]
+
+
+def standard_errors(c: Candidate, r: Refit) -> dict[str, float]:
+    """One standard error per fitted parameter of ``c`` (same keys as ``c.params``, the
+    filter order excepted; NaN where too few realisations gave an estimate)."""
+    rows = _refits(c, r)
+    out: dict[str, float] = {}
+    for key, values in rows.items():
+        v = np.asarray([x for x in values if math.isfinite(x)])
+        out[key] = float(np.std(v, ddof=1)) if len(v) >= MIN_REFITS else math.nan
+    return out
+
+
+def _refits(c: Candidate, r: Refit) -> dict[str, list[float]]:
+    """Each parameter's estimate on each realisation of the final model."""
+    fit, s = r.fit, r.fit.series
+    ref_avar = r.reference.avar.mean(axis=0)
+    eff = c.effect
+    if eff in avarfit.BASES:
+        p0 = float(getattr(r.cm, eff))
+        return {eff: [math.hypot(p0, avarfit.fit_single(eff, fit.tau_s, a, ref_avar, r.sigma))
+                      for a in r.final.avar]}
+    if eff in ("markov", "telegraph"):
+        fits = [avarfit.fit_markov(fit.tau_s, a, ref_avar, r.sigma) for a in r.final.avar]
+        if eff == "markov":
+            return {"markov_sigma": [f[0] for f in fits], "markov_tau": [f[1] for f in fits]}
+        return {"telegraph_step": [2.0 * f[0] for f in fits],
+                "telegraph_dwell_s": [2.0 * f[1] for f in fits]}
+    if eff == "base_model":
+        refits = [avarfit.fit_base_model(r.cm, fit.tau_s, s.rate_hz, a, ref_avar, r.sigma)
+                  for a in r.final.avar]
+        return {"bandwidth_hz": [f[0] for f in refits], "white": [f[2] for f in refits]}
+    if eff == "ramp":
+        return {"ramp": list(r.final.trend_slope)}
+    if eff == "temperature":
+        return _temperature(c, fit, r.final, r.cm.temp_ref)
+    if eff == "resonance":
+        ref_psd = r.reference.psd.mean(axis=0)
+        g2 = c.output_gain2
+        out: dict[str, list[float]] = {"resonance_freq_hz": [], "resonance_width_hz": [],
+                                       "resonance_height": []}
+        for p in r.final.psd:
+            rf = evidence.fit_resonance(fit.f_hz, p, ref_psd, SCAN_LOW_FRACTION * s.rate_hz)
+            if rf is not None:
+                out["resonance_freq_hz"].append(rf.resonance_freq_hz)
+                out["resonance_width_hz"].append(rf.resonance_width_hz)
+                out["resonance_height"].append(rf.resonance_height / g2)
+        return out
+    n_fit = len(s.y)
+    raw = r.raw()
+    if eff == "sine":
+        bin_hz = s.rate_hz / line_segment(n_fit)
+        f0 = c.params["sine_freq"]
+        sines = [evidence.fit_sine(y[:n_fit], s.rate_hz, f0, bin_hz) for y in raw]
+        gain = math.sqrt(filter_power_gain(f0, r.cm, s.rate_hz))
+        return {"sine_amplitude": [f.sine_amplitude / gain for f in sines],
+                "sine_freq": [f.sine_freq for f in sines]}
+    if eff == "outliers":
+        false_hits = float(r.reference.impulses.mean())
+        found = [evidence.fit_outliers(y[:n_fit], s.rate_hz, false_hits) for y in raw]
+        return {"outlier_rate": [f.outlier_rate for f in found if f is not None],
+                "outlier_amplitude": [f.outlier_amplitude for f in found if f is not None]}
+    if eff == "bias_step":
+        steps = [evidence.fit_bias_step(y, s.rate_hz) for y in raw]
+        return {"step_time_s": [f.step_time_s for f in steps],
+                "step_size": [f.step_size for f in steps]}
+    raise ValueError(f"standard_errors: no estimator for the effect {eff!r}")
+
+
+def _temperature(c: Candidate, fit: PartSetup, final: SimFeatures, temp_ref_c: float
+                 ) -> dict[str, list[float]]:
+    """The temperature coefficients of each realisation's block means (the blocks of
+    :func:`imubench.gap.curves.temperature_blocks`), by the estimator that fitted ``c``:
+    ``gls`` (:meth:`imubench.gap.parts.RecordTemperature.slopes`: increments, the base
+    model's covariance), ``levels`` or ``levels_quadratic`` (least squares of the levels
+    on dT, and dT^2, beside a constant, :func:`imubench.gap.evidence.fit_temperature`)."""
+    yb, tb = final.temp_yb, fit.real.temp_tb
+    empty: dict[str, list[float]] = {k: [] for k in c.params}
+    if yb is None or tb is None or yb.shape[1] != len(tb):
+        return empty
+    if c.estimator == "gls":
+        temp = fit.temp
+        if temp is None or temp.chol is None or temp.tb is None or len(temp.tb) != len(tb):
+            return empty
+        return {"temp_coeff": list(gls_slopes(np.diff(yb, axis=1), np.diff(tb),
+                                              temp.chol)[0])}
+    dt = tb - temp_ref_c
+    cols = [np.ones_like(dt), dt] + ([dt**2] if c.estimator == "levels_quadratic" else [])
+    coef, *_ = np.linalg.lstsq(np.column_stack(cols), yb.T, rcond=None)
+    out = {"temp_coeff": list(coef[1])}
+    if c.estimator == "levels_quadratic":
+        out["temp_coeff2"] = list(coef[2])
+    return out

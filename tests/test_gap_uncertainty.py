@@ -1,0 +1,81 @@
+"""Standard errors of the gap diagnosis' kept effects (imubench.gap.uncertainty).
+
+The parametric bootstrap is checked against textbook variances of the same estimators on
+records drawn here with numpy (not by the simulator): least squares of a sine in white
+noise, var(A) = 2 sigma^2 / N (Kay, Fundamentals of Statistical Signal Processing:
+Estimation Theory, 1993, example 3.14), and the least-squares slope of a ramp in white
+noise, var(b) = sigma^2 / sum (t - t_mean)^2 (Draper & Smith, Applied Regression
+Analysis, sec. 1.4). With K realisations the bootstrap's standard error is itself
+uncertain by 1 / sqrt(2 (K - 1)): 13 % at K = 30, so the tolerance is 3 of those.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from lsm6ds_sim.model import NoiseModel
+
+from imubench.gap import GapOptions, Series, diagnose_channel
+from imubench.gap.curves import TAIL_SIGMAS, highpass_residual, robust_sigma
+from imubench.gap.evidence import fit_outliers
+from imubench.gap.explain import explain_channel
+
+RATE = 104.0
+WHITE = 0.004
+"""White density of the model and of the records (dps/sqrt(Hz)): per-sample sigma
+WHITE sqrt(RATE)."""
+K = 30
+TOLERANCE = 3.0 / math.sqrt(2 * (K - 1))
+
+
+def _white_record(n: int, seed: int) -> np.ndarray:
+    return WHITE * math.sqrt(RATE) * np.random.default_rng(seed).standard_normal(n)
+
+
+def test_sine_amplitude_error_is_the_least_squares_variance() -> None:
+    n = int(600 * RATE)
+    t = np.arange(n) / RATE
+    y = _white_record(n, 41) + 0.01 * np.sin(2 * math.pi * 3.3 * t + 0.7)
+    model = NoiseModel.single_term("gx", white=WHITE)
+    d = diagnose_channel(model, "gx", Series(y, None, RATE, "sine"),
+                         GapOptions(seed=5, realisations=K, effects=("sine",)))
+    assert [c.effect for c in d.kept] == ["sine"]
+    se = d.kept[0].params_se
+    n_fit = n // 2
+    kay = math.sqrt(2.0 * (WHITE * WHITE * RATE) / n_fit)
+    assert se["sine_amplitude"] == pytest.approx(kay, rel=TOLERANCE)
+    assert abs(d.kept[0].params["sine_amplitude"] - 0.01) < 4.0 * se["sine_amplitude"]
+    out = d.to_dict()
+    assert set(out["kept"][0]["params_se"]) == {"sine_amplitude", "sine_freq"}
+    text = "\n".join(explain_channel(out, K))
+    assert f"+- {se['sine_amplitude']:.2g}" in text
+
+
+def test_ramp_error_is_the_least_squares_slope_variance() -> None:
+    n = int(1200 * RATE)
+    t = np.arange(n) / RATE
+    y = _white_record(n, 43) + 2e-4 * t
+    model = NoiseModel.single_term("gx", white=WHITE)
+    d = diagnose_channel(model, "gx", Series(y, None, RATE, "ramp"),
+                         GapOptions(seed=6, realisations=K, effects=("ramp",)))
+    assert [c.effect for c in d.kept] == ["ramp"]
+    tf = t[:n // 2]
+    textbook = math.sqrt(WHITE * WHITE * RATE / float(np.sum((tf - tf.mean()) ** 2)))
+    assert d.kept[0].params_se["ramp"] == pytest.approx(textbook, rel=TOLERANCE)
+
+
+def test_a_tail_no_heavier_than_a_normal_law_fits_no_impulses() -> None:
+    """Ten samples 0.05 % beyond the threshold (TAIL_SIGMAS robust sigmas of the high-
+    passed series) have about the second moment of a normal law's tail there: no
+    impulse amplitude fits them. The fit used to take the bound u = 30 and report a rate
+    of 6e194 per second."""
+    y = 0.01 * np.random.default_rng(7).standard_normal(200_000)
+    at = np.arange(10_000, 200_000, 20_000)
+    for _ in range(4):  # each spike moves the robust sigma a little
+        r = highpass_residual(y)
+        y[at] += 1.0005 * TAIL_SIGMAS * robust_sigma(r) - r[at]
+    r = highpass_residual(y)
+    assert np.all(np.abs(r[at]) > TAIL_SIGMAS * robust_sigma(r))
+    assert fit_outliers(y, RATE) is None
