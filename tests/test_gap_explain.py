@@ -588,3 +588,42 @@ def test_a_bias_steps_held_out_closure_is_not_called_independent() -> None:
     assert text[0].startswith("The bias steps by -0.031 at t = 1914 s; modelling it closes")
     assert "so for it this is not an independent check" in text[0]
     assert "0% of the fit part's total, the step test being on the whole record" in "\n".join(text)
+
+
+def test_a_held_out_departure_at_a_line_is_not_blamed_on_a_slow_process() -> None:
+    """An outside reviewer's sine kept on the fit part left the held-out part departing
+    at 0.02-0.04 s and by the line test; the text blamed a slow process's realisation."""
+    sine = {"effect": "sine", "params": {"sine_amplitude": 0.005, "sine_freq": 12.0},
+            "gap_after": 0.1, "n_params": 2, "score": 30.0, "chi2_closed": 0.9,
+            "evidence_closed": 0.95}
+    hold = {"gap_before": 0.5, "gap_after": 0.3, "region_gap_before": 0.9,
+            "region_gap_after": 0.4, "gap_excess_before": 0.48, "gap_excess_after": 0.25,
+            "gap_null": 0.1, "chi2_closed": 0.6, "significant": True,
+            "significant_after": True, "fired_after": ["regions", "line_z"],
+            "regions_after": [{"tau_min_s": 0.0192, "tau_max_s": 0.0385,
+                               "direction": "real_above", "gap": 0.4, "z_max": 6.0}]}
+    c = _entry("sine", effects=[sine], kept=[dict(sine)], holdout=hold,
+               residual_significant=False)
+    text = "\n".join(explain_channel(c, 10))
+    assert "a kept line whose amplitude or frequency changes in time" in text
+    assert "slow process" not in text
+    hold["regions_after"][0].update(tau_min_s=78.8, tau_max_s=315.0)
+    text = "\n".join(explain_channel(c, 10))
+    assert "a slow process's realisation differs" in text
+
+
+def test_kept_effects_after_a_replacement_are_said_to_be_in_the_final_order() -> None:
+    """The sequential replacement puts the newcomer last; "Effects kept in order" then
+    read as the order of selection (an outside reviewer)."""
+    rw = dict(RW_EFFECT, gap_after=0.1)
+    temp = dict(TEMP_EFFECT, params_se={"temp_coeff": 0.0004})
+    c = _entry("temperature", effects=[TEMP_EFFECT, RW_EFFECT], kept=[rw, temp],
+               dropped=[{"effect": "flicker", "params": {"flicker": 0.002},
+                         "reason": "replaced by random_walk: it lowers the total"}])
+    text = "\n".join(explain_channel(c, 10))
+    assert ("Effects kept, in the final model's order after the replacement below "
+            "(held-out gap before: 0.4, values +- one standard error") in text
+    assert "temp_coeff = 0.0081 +- 0.0004" in text
+    c["dropped"] = []
+    assert "Effects kept in order (held-out gap before: 0.4, values +- one" in "\n".join(
+        explain_channel(c, 10))

@@ -388,10 +388,17 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
         if k.get("holdout_gap_after") is not None:
             txt += f", held-out gap {_f(k['holdout_gap_after'])}"
         parts.append(txt)
-    se = (", values +- one standard error (refitted on the realisations)"
-          if any(k.get("params_se") for k in kept) else "")
-    first = (f"Effects kept in order (held-out gap before: {_f(h.get('gap_before'))}{se}): "
-             if h else f"Effects kept in order{f' ({se[2:]})' if se else ''}: ")
+    # the sequential replacement puts the newcomer last: the list is the final model's
+    lead = ("Effects kept, in the final model's order after the replacement below"
+            if any(str(d.get("reason", "")).startswith(REPLACED)
+                   for d in c.get("dropped", []))
+            else "Effects kept in order")
+    notes = []
+    if h:
+        notes.append(f"held-out gap before: {_f(h.get('gap_before'))}")
+    if any(k.get("params_se") for k in kept):
+        notes.append("values +- one standard error (refitted on the realisations)")
+    first = lead + (f" ({', '.join(notes)})" if notes else "") + ": "
     out = [first + "; ".join(parts) + "."]
     out.extend(_check_lines(kept, h))
     if dropped:
@@ -442,6 +449,28 @@ def _floor(part: dict[str, Any]) -> str:
     if f is None:
         return ""
     return f" (0 below {_f(f)})" if fa is None else f" (0 below {_f(f)} before, {_f(fa)} after)"
+
+
+SHORT_TAU_S = 1.0
+"""Held-out departures all below this tau (s), or only in the spectrum, a line or the
+tails, are not a slow process's (:func:`_held_out_causes`)."""
+
+
+def _held_out_causes(h: dict[str, Any]) -> str:
+    """What can leave the held-out part departing after the kept effects, by where it
+    departs: at short taus, in the spectrum, a line or the tails, a line or the noise
+    level that changes between the parts; at longer taus (or by the level, trend or
+    temperature tests), a slow process or a weak effect."""
+    regs = h.get("regions_after", [])
+    fired = set(h.get("fired_after", [])) - {"regions", "global"}
+    fast = (all(r["tau_max_s"] < SHORT_TAU_S for r in regs)
+            and fired <= {"bands", "line_z", "tail_z"} and (regs or fired))
+    if fast:
+        return ("a line, the short-tau noise or the impulses differ between the parts: a "
+                "kept line whose amplitude or frequency changes in time, a resonance that "
+                "moves, a white level or output filter that changes")
+    return ("a slow process's realisation differs from part to part, or an effect is too "
+            "weak in the fit part to be kept")
 
 
 def _held_out_departure(h: dict[str, Any], after: bool) -> str:
@@ -590,8 +619,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
             lines.append(
                 _held_out_departure(h, after=True) + ": an effect the fit part does not "
                 "show is left there (the kept effects, fitted on the fit part, do not "
-                "describe it: a slow process's realisation differs from part to part, or an "
-                "effect is too weak in the fit part to be kept), not diagnosed; "
+                f"describe it: {_held_out_causes(h)}), not diagnosed; "
                 "--holdout-fraction 0 diagnoses the whole record, without a held-out "
                 "check.")
     reps = (h or {}).get("recordings", [])
