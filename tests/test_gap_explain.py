@@ -172,6 +172,14 @@ def test_held_out_check_and_unmoved_gap_are_reconciled() -> None:
     text = "\n".join(explain_channel(_entry("base_model", kept=[kept2], holdout=h), 10))
     assert "Held-out check of base_model: chi-squared fell by 9.0" in text
     assert "did not fall" not in text
+    # a second effect is measured from the gap the first left (an outside reviewer: the
+    # note came for some kept lines and not others, each against the gap before any)
+    sine = {**kept, "effect": "sine", "params": {"sine_amplitude": 0.003, "sine_freq": 9.0},
+            "holdout_gap_after": 0.1, "holdout_chi2_drop": 40.0,
+            "holdout_chi2_drop_parts": {"allan": -0.4, "bands": 0.0, "statistics": 40.4}}
+    text = "\n".join(explain_channel(_entry("base_model", kept=[kept2, sine], holdout=h), 10))
+    assert "held-out gap (0.1 -> 0.1) did not fall" in text
+    assert "its largest drop is in the line, tail" in text
 
 
 def test_headline_never_claims_a_negative_closure() -> None:

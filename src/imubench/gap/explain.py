@@ -329,7 +329,8 @@ PART_NAMES = {"allan": "Allan curve", "bands": "spectrum bands", "statistics":
 
 def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
     """What the held-out check measured for each kept effect, and why the held-out gap
-    shown may not move when the check passes.
+    shown may not move when the check passes (each effect's gap after it against the gap
+    after the effects before it).
 
     The check is a chi-squared over the Allan curve (whole-curve statistic, each tau once
     with the correlation of the estimates), the spectrum bands and the single statistics;
@@ -343,6 +344,8 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
     out = []
     before = h.get("gap_before")
     for k in kept:
+        after = k.get("holdout_gap_after")
+        prev, before = before, after if after is not None else before
         drop, parts = k.get("holdout_chi2_drop"), k.get("holdout_chi2_drop_parts") or {}
         if drop is None or not math.isfinite(drop):
             continue
@@ -353,18 +356,17 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
         txt = (f"Held-out check of {k['effect']}: chi-squared fell by {drop:.1f}"
                + (" (" + ", ".join(f"{PART_NAMES.get(n, n)} {v:.1f}"
                                    for n, v in parts.items()) + ")" if parts else ""))
-        after = k.get("holdout_gap_after")
-        if (parts and before is not None and after is not None and drop > 0
-                and after >= before - 0.01):
+        if (parts and prev is not None and after is not None and drop > 0
+                and after >= prev - 0.01):
             main = max(parts, key=lambda n: parts[n])
-            txt += (f"; the held-out gap ({_f(before)} -> {_f(after)}) "
-                    + ("did not fall" if after < before + 0.01 else "rose")
+            txt += (f"; the held-out gap ({_f(prev)} -> {_f(after)}) "
+                    + ("did not fall" if after < prev + 0.01 else "rose")
                     + ": it is the Allan curve's RMS of ln ratios with every tau weighted "
                     "equally (the scatter of the long taus dominates it), while the check "
                     "weighs each term by its precision (the Allan curve's on the scatter "
                     "of the model without the effect) and adds the spectrum and the "
                     f"statistics; its largest drop is in the {PART_NAMES.get(main, main)}")
-            if main == "allan" and after >= before + 0.01:
+            if main == "allan" and after >= prev + 0.01:
                 txt += (" (the whole-curve statistic compares with the realisations' mean "
                         "ln ADEV and counts correlated taus once; the gap compares with "
                         "their mean Allan variance, which a few realisations with large "
