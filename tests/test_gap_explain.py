@@ -630,8 +630,29 @@ def test_kept_effects_after_a_replacement_are_said_to_be_in_the_final_order() ->
                          "reason": "replaced by random_walk: it lowers the total"}])
     text = "\n".join(explain_channel(c, 10))
     assert ("Effects kept, in the final model's order after the replacement below "
-            "(held-out gap before: 0.4, values +- one standard error") in text
+            "(held-out gap before: 0.4, values +- one standard error, refitted") in text
     assert "temp_coeff = 0.0081 +- 0.0004" in text
     c["dropped"] = []
     assert "Effects kept in order (held-out gap before: 0.4, values +- one" in "\n".join(
         explain_channel(c, 10))
+
+
+def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
+    """An outside reviewer: a temperature-level test that fired beside a bias step was
+    never mentioned again once the step was kept (it explained it)."""
+    step = {"effect": "bias_step", "params": {"step_time_s": 1933.0, "step_size": 0.029},
+            "gap_after": 0.04, "n_params": 2, "score": 102.0, "chi2_closed": 0.9,
+            "evidence_closed": 0.99}
+    c = _entry("bias_step", effects=[step], kept=[dict(step)], temperature_level_z=5.9,
+               whole_record={"step_fired": True, "drift_fired": False,
+                             "temperature_fired": False}, bias_step_z=51.8,
+               statistics_after={"line_z": 0.1, "tail_z": 0.0, "temp_z": 0.3,
+                                 "trend_z": 0.2, "temp_level_z": -0.19},
+               whole_record_after={"bias_step_z": -1.4, "drift_t": 0.2,
+                                   "temperature_record_z": 0.5})
+    text = "\n".join(explain_channel(c, 10))
+    assert ("After the kept effects, the statistics that fired read: the temperature "
+            "response of the block means z 5.9 -> -0.19; the whole-record bias step "
+            "51.8 -> -1.4.") in text
+    c["kept"] = []
+    assert "After the kept effects" not in "\n".join(explain_channel(c, 10))

@@ -77,6 +77,7 @@ from imubench.gap.candidates import (
 )
 from imubench.gap.curves import (
     POOLED_DOF,
+    STAT_TESTS,
     Z_SLOPE,
     Comparison,
     line_bands,
@@ -266,6 +267,8 @@ class ChannelDiagnosis:
             "bias_step_z": self.step_z,
             "drift_t": self.drift_t,
             "temperature_record_z": self.temp_record_z,
+            "statistics_after": {key: getattr(ff, key) for key, _, _ in STAT_TESTS},
+            "whole_record_after": self._whole_record_after(),
             "temperature_note": self.temp_note or None,
             "not_fitted": dict(self.evidence.get("not_fitted", {})),
             "global": self.before.global_dict(),
@@ -307,6 +310,16 @@ class ChannelDiagnosis:
             out["holdout"] = dict(out["holdout"] or {})
             out["holdout"]["recordings"] = reps
         return out
+
+    def _whole_record_after(self) -> dict[str, float]:
+        """The whole-record statistics against the model with all kept effects
+        (``bias_step_z``, ``drift_t``, ``temperature_record_z``; the first step's without
+        a kept effect)."""
+        last = self.kept[-1] if self.kept else None
+        return {"bias_step_z": self.step_z if last is None else last.step_z,
+                "drift_t": self.drift_t if last is None else last.drift_t,
+                "temperature_record_z": (self.temp_record_z if last is None
+                                         else last.temp_record_z)}
 
     def _slope_at_mean(self, entry: dict[str, Any]) -> None:
         """Adds to a temperature effect's ``entry`` its response's slope at the record's

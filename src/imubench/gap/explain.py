@@ -122,6 +122,34 @@ def _whole_record(c: dict[str, Any]) -> list[str]:
     return out
 
 
+def _after_kept(c: dict[str, Any], dof: int) -> str:
+    """'After the kept effects: name before -> after, ...' for each single statistic and
+    whole-record test that fired at the first step (empty without a kept effect or the
+    JSON's ``statistics_after``): how far the kept effects explain each detection."""
+    after, whole_after = c.get("statistics_after"), c.get("whole_record_after")
+    if not c.get("kept") or after is None or whole_after is None:
+        return ""
+    names = {"line_z": "the spectral line", "tail_z": "the tails",
+             "temp_z": "the correlation with temperature",
+             "temp_level_z": "the temperature response of the block means",
+             "trend_z": "the time trend"}
+    out = []
+    for key, z_norm, one_sided in STAT_TESTS:
+        z = _stat(c, key)
+        if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
+            kind = "z" if key in POOLED_STATS else "t"
+            out.append(f"{names[key]} {kind} {z:.1f} -> {_f(after.get(key), 2)}")
+    whole = c.get("whole_record") or {}
+    for fired, key, name in (("step_fired", "bias_step_z", "the whole-record bias step"),
+                             ("drift_fired", "drift_t", "the whole-record drift"),
+                             ("temperature_fired", "temperature_record_z",
+                              "the whole-record temperature response")):
+        if whole.get(fired) and c.get(key) is not None:
+            out.append(f"{name} {c[key]:.1f} -> {_f(whole_after.get(key), 2)}")
+    return ("After the kept effects, the statistics that fired read: " + "; ".join(out)
+            + ".") if out else ""
+
+
 def _stat(c: dict[str, Any], key: str) -> float:
     """A :data:`STAT_TESTS` statistic from the JSON entry (NaN when absent or null)."""
     v = {"line_z": c["line"]["z"], "tail_z": c["impulses_z"],
@@ -399,7 +427,7 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if h:
         notes.append(f"held-out gap before: {_f(h.get('gap_before'))}")
     if any(k.get("params_se") for k in kept):
-        notes.append("values +- one standard error (refitted on the realisations)")
+        notes.append("values +- one standard error, refitted on the realisations")
     first = lead + (f" ({', '.join(notes)})" if notes else "") + ": "
     out = [first + "; ".join(parts) + "."]
     out.extend(_check_lines(kept, h))
@@ -513,6 +541,8 @@ def explain_channel(c: dict[str, Any], realisations: int,
                      + _strongest(c, dof) + ".")
     if c.get("temperature_note"):
         lines.append(f"Temperature: {c['temperature_note']}.")
+    if followed := _after_kept(c, dof):
+        lines.append(followed)
     effects = c["effects"]
     if verdict == "none":
         lines.append("Verdict none: " + (
