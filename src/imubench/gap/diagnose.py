@@ -135,6 +135,10 @@ class GapOptions:
     seed: int = 0
     holdout_fraction: float = 0.5
     effects: tuple[str, ...] = EFFECTS
+    standard_errors: bool = True
+    """Refit the kept effects on the realisations for their ``params_se``
+    (:func:`imubench.gap.uncertainty.standard_errors`); off where only the verdict is
+    used (the detection limits' injections)."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.holdout_fraction < 1.0:
@@ -1325,7 +1329,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
             residual = realiser.step(kept).significant
             rep_now = _on_replicates(realiser.variant(kept)[0], channel, rep_setups, seeds)
 
-    if kept:
+    if kept and opt.standard_errors:
         realiser.set_standard_errors(kept)
     if not first.significant:
         verdict, reason = "none", "within the scatter of the realisations"

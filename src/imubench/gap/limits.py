@@ -125,7 +125,8 @@ def _hits(model: NoiseModel, channel: str, series: Series, opt: GapOptions, effe
         rng = np.random.default_rng([*key, i])
         inj = Series(inject(series, effect, size, rng), series.temp_c, series.rate_hz,
                      series.name)
-        d = diagnose_channel(model, channel, inj, replace(opt, seed=opt.seed + i))
+        d = diagnose_channel(model, channel, inj,
+                             replace(opt, seed=opt.seed + i, standard_errors=False))
         hits += any(c.effect == effect for c in d.kept)
     return hits
 
