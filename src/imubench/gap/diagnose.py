@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from lsm6ds_sim.model import NoiseModel
+from lsm6ds_sim.model import ChannelModel, NoiseModel
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as student_t
 
@@ -841,10 +841,12 @@ class _Realiser:
         that needs them."""
         final = self.step(kept)
         drawn: list[np.ndarray] = []
+        cms: list[ChannelModel] = []  # the model each effect was added to
         dets: list[np.ndarray | float] = []
         variant = Variant(self.model)
         for c in kept:
-            det = deterministic(c.effect, c.params, variant.model[self.channel], self.series)
+            cms.append(variant.model[self.channel])
+            det = deterministic(c.effect, c.params, cms[-1], self.series)
             dets.append(0.0 if det is None else det)
             variant = variant.add(self.channel, c)
 
@@ -856,13 +858,11 @@ class _Realiser:
                 return drawn[0] - others
             return raw
 
-        variant = Variant(self.model)
         for j, c in enumerate(kept):
             ref = self.step(kept[:j])
-            c.params_se = standard_errors(c, Refit(
-                self.fit, final.feats, ref.feats, ref.before.sigma,
-                variant.model[self.channel], raw_less_others(j)))
-            variant = variant.add(self.channel, c)
+            c.params_se = standard_errors(c, Refit(self.fit, final.feats, ref.feats,
+                                                   ref.before.sigma, cms[j],
+                                                   raw_less_others(j)))
 
     @staticmethod
     def _key(kept: list[Candidate]) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ...]:
