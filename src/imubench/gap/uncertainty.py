@@ -151,7 +151,8 @@ def _temperature(c: Candidate, fit: PartSetup, final: SimFeatures, temp_ref_c: f
     model's covariance), ``levels`` or ``levels_quadratic`` (least squares of the levels
     on dT, and dT^2, beside a constant, :func:`imubench.gap.evidence.fit_temperature`)."""
     yb, tb = final.temp_yb, fit.real.temp_tb
-    empty: dict[str, list[float]] = {k: [] for k in c.params}
+    fitted = ["temp_coeff"] + ["temp_coeff2"] * (c.estimator == "levels_quadratic")
+    empty: dict[str, list[float]] = {k: [] for k in fitted}
     if yb is None or tb is None or yb.shape[1] != len(tb):
         return empty
     if c.estimator == "gls":
