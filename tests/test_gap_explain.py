@@ -11,7 +11,7 @@ from imubench.commands.gap import gap_units, headline
 from imubench.gap.candidates import DENSE_TAIL
 from imubench.gap.curves import Z_SLOPE, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
-from imubench.gap.explain import explain_channel
+from imubench.gap.explain import describe, explain_channel
 
 
 def _entry(verdict: str, **kw: Any) -> dict[str, Any]:
@@ -656,3 +656,13 @@ def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
             "51.8 -> -1.4.") in text
     c["kept"] = []
     assert "After the kept effects" not in "\n".join(explain_channel(c, 10))
+
+
+def test_plain_words_give_each_fitted_value_its_standard_error() -> None:
+    params = {"outlier_rate": 0.1158, "outlier_amplitude": 0.5092}
+    entry = {"params": params, "params_se": {"outlier_rate": 0.0069,
+                                             "outlier_amplitude": 0.034}}
+    text = describe("outliers", params, {"outlier_amplitude": "dps"}, entry)
+    assert text == "impulsive outliers, 0.116 +- 0.0069 per s of amplitude 0.509 +- 0.034 dps"
+    assert describe("outliers", params, {"outlier_amplitude": "dps"}) == (
+        "impulsive outliers, 0.116 per s of amplitude 0.509 dps")
