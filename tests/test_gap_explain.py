@@ -11,7 +11,7 @@ from imubench.commands.gap import gap_units, headline
 from imubench.gap.candidates import DENSE_TAIL
 from imubench.gap.curves import Z_SLOPE, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
-from imubench.gap.explain import describe, explain_channel
+from imubench.gap.explain import describe, explain_channel, params_text
 
 
 def _entry(verdict: str, **kw: Any) -> dict[str, Any]:
@@ -630,11 +630,14 @@ def test_kept_effects_after_a_replacement_are_said_to_be_in_the_final_order() ->
                          "reason": "replaced by random_walk: it lowers the total"}])
     text = "\n".join(explain_channel(c, 10))
     assert ("Effects kept, in the final model's order after the replacement below "
-            "(held-out gap before: 0.4, values +- one standard error, refitted") in text
-    assert "temp_coeff = 0.0081 +- 0.0004" in text
+            "(held-out gap before: 0.4, values +- one standard error)") in text
+    assert "temp_coeff = 0.00810 +- 0.0004" in text
+    assert "Values +- one standard error: each kept effect refitted the same way on 10" in text
     c["dropped"] = []
     assert "Effects kept in order (held-out gap before: 0.4, values +- one" in "\n".join(
         explain_channel(c, 10))
+    c["kept"] = [rw, TEMP_EFFECT]
+    assert "Values +- one standard error" not in "\n".join(explain_channel(c, 10))
 
 
 def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
@@ -652,8 +655,8 @@ def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
                                    "temperature_record_z": 0.5})
     text = "\n".join(explain_channel(c, 10))
     assert ("After the kept effects, the statistics that fired read: the temperature "
-            "response of the block means z 5.9 -> -0.19; the whole-record bias step "
-            "51.8 -> -1.4.") in text
+            "response of the block means z 5.90 -> -0.19; the whole-record bias step z "
+            "51.80 -> -1.4.") in text
     c["kept"] = []
     assert "After the kept effects" not in "\n".join(explain_channel(c, 10))
 
@@ -663,6 +666,31 @@ def test_plain_words_give_each_fitted_value_its_standard_error() -> None:
     entry = {"params": params, "params_se": {"outlier_rate": 0.0069,
                                              "outlier_amplitude": 0.034}}
     text = describe("outliers", params, {"outlier_amplitude": "dps"}, entry)
-    assert text == "impulsive outliers, 0.116 +- 0.0069 per s of amplitude 0.509 +- 0.034 dps"
+    assert text == ("impulsive outliers, 0.1158 +- 0.0069 per s of amplitude "
+                    "0.509 +- 0.034 dps")
     assert describe("outliers", params, {"outlier_amplitude": "dps"}) == (
         "impulsive outliers, 0.116 per s of amplitude 0.509 dps")
+
+
+def test_values_are_printed_to_their_standard_errors_precision() -> None:
+    """An outside reviewer: 'sine_freq = 7.3 +- 7.9e-06 Hz' for 7.299983 Hz; a linear
+    temperature fit's 'temp_coeff2 = 0' read as fitted; a bias the refits showed (a walk
+    kept before a temperature response took part of it) was not reported."""
+    entry = {"params": {"sine_amplitude": 0.003001, "sine_freq": 7.299983114},
+             "params_se": {"sine_amplitude": 0.00014, "sine_freq": 7.9e-6}}
+    assert params_text(entry["params"], {"sine_amplitude": "dps"}, entry) == (
+        "sine_amplitude = 0.00300 +- 0.00014 dps, sine_freq = 7.2999831 +- 7.9e-06")
+    temp = {"params": {"temp_coeff": 0.001008, "temp_coeff2": 0.0},
+            "params_se": {"temp_coeff": 6.2e-5}}
+    assert params_text(temp["params"], None, temp) == (
+        "temp_coeff = 0.001008 +- 6.2e-05, temp_coeff2 = 0 (the model's, not fitted)")
+    walk = {"params": {"random_walk": 4.52e-4}, "params_se": {"random_walk": 4.9e-5},
+            "params_bias": {"random_walk": 8.9e-5}}
+    assert params_text(walk["params"], None, walk) == (
+        "random_walk = 0.000452 +- 4.9e-05, refits biased by +8.9e-05")
+    walk["params_bias"] = {"random_walk": 2e-5}  # within the error: not shown
+    assert params_text(walk["params"], None, walk) == "random_walk = 0.000452 +- 4.9e-05"
+    step = {"params": {"step_time_s": 1932.692, "step_size": 0.0289},
+            "params_se": {"step_time_s": 0.187, "step_size": 0.00075}}
+    assert params_text(step["params"], None, step) == (
+        "step_time_s = 1932.69 +- 0.19, step_size = 0.02890 +- 0.00075")

@@ -168,6 +168,9 @@ class Candidate:
     params_se: dict[str, float] = field(default_factory=dict)
     """Standard error of each fitted parameter (:func:`imubench.gap.uncertainty.
     standard_errors`); filled for the kept effects once the selection is over."""
+    params_bias: dict[str, float] = field(default_factory=dict)
+    """The bootstrap bias of each fitted parameter (the refits' mean less the value),
+    filled with :attr:`params_se`."""
 
     def to_dict(self, before: Comparison) -> dict[str, Any]:
         assert self.fit is not None

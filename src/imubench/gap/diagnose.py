@@ -341,6 +341,8 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
     d: dict[str, Any] = {"effect": c.effect, "params": c.params,
                          "params_se": {k: (v if math.isfinite(v) else None)
                                        for k, v in c.params_se.items()},
+                         "params_bias": {k: (v if math.isfinite(v) else None)
+                                         for k, v in c.params_bias.items()},
                          "gap_after": c.fit.gap,
                          "gap_excess_after": c.fit.gap_excess,
                          "evidence_closed": c.evidence_closed, **c.at_output(),
@@ -860,9 +862,9 @@ class _Realiser:
 
         for j, c in enumerate(kept):
             ref = self.step(kept[:j])
-            c.params_se = standard_errors(c, Refit(self.fit, final.feats, ref.feats,
-                                                   ref.before.sigma, cms[j],
-                                                   raw_less_others(j)))
+            c.params_se, c.params_bias = standard_errors(
+                c, Refit(self.fit, final.feats, ref.feats, ref.before.sigma, cms[j],
+                         raw_less_others(j)))
 
     @staticmethod
     def _key(kept: list[Candidate]) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ...]:

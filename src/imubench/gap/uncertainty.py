@@ -78,15 +78,23 @@ class Refit:
     raw: Callable[[], np.ndarray]
 
 
-def standard_errors(c: Candidate, r: Refit) -> dict[str, float]:
-    """One standard error per fitted parameter of ``c`` (same keys as ``c.params``; none
-    for the base model's refit; NaN where too few realisations gave an estimate)."""
-    rows = _refits(c, r)
-    out: dict[str, float] = {}
-    for key, values in rows.items():
+def standard_errors(c: Candidate, r: Refit) -> tuple[dict[str, float], dict[str, float]]:
+    """The standard error and the bootstrap bias of each fitted parameter of ``c`` (the
+    keys of ``c.params`` that its estimator fits; none for the base model's refit; NaN
+    where too few realisations gave an estimate).
+
+    The bias is the refits' mean less the estimate (Efron & Tibshirani 1993, sec. 10.2):
+    what the estimator does on the fitted model, e.g. a random walk kept before a
+    temperature response, refitted beside the response it took part of (an outside
+    reviewer: K 4.52e-4 +- 0.49e-4 for 3e-4, refits averaging 5.41e-4)."""
+    se: dict[str, float] = {}
+    bias: dict[str, float] = {}
+    for key, values in _refits(c, r).items():
         v = np.asarray([x for x in values if math.isfinite(x)])
-        out[key] = float(np.std(v, ddof=1)) if len(v) >= MIN_REFITS else math.nan
-    return out
+        ok = len(v) >= MIN_REFITS
+        se[key] = float(np.std(v, ddof=1)) if ok else math.nan
+        bias[key] = float(np.mean(v)) - c.params[key] if ok else math.nan
+    return se, bias
 
 
 def _refits(c: Candidate, r: Refit) -> dict[str, list[float]]:
