@@ -2,11 +2,12 @@
 
 The parametric bootstrap is checked against textbook variances of the same estimators on
 records drawn here with numpy (not by the simulator): least squares of a sine in white
-noise, var(A) = 2 sigma^2 / N (Kay, Fundamentals of Statistical Signal Processing:
-Estimation Theory, 1993, example 3.14), and the least-squares slope of a ramp in white
-noise, var(b) = sigma^2 / sum (t - t_mean)^2 (Draper & Smith, Applied Regression
-Analysis, sec. 1.4). With K realisations the bootstrap's standard error is itself
-uncertain by 1 / sqrt(2 (K - 1)): 13 % at K = 30, so the tolerance is 3 of those.
+noise, var(A) = 2 sigma^2 / N, and the periodogram's frequency at the Cramer-Rao bound
+(Kay, Fundamentals of Statistical Signal Processing: Estimation Theory, 1993, example
+3.14); the least-squares slope of a ramp in white noise, var(b) = sigma^2 / sum (t -
+t_mean)^2 (Draper & Smith, Applied Regression Analysis, sec. 1.4). With K realisations
+the bootstrap's standard error is itself uncertain by 1 / sqrt(2 (K - 1)): 13 % at
+K = 30, so the tolerance is 3 of those.
 """
 
 from __future__ import annotations
@@ -46,6 +47,11 @@ def test_sine_amplitude_error_is_the_least_squares_variance() -> None:
     n_fit = n // 2
     kay = math.sqrt(2.0 * (WHITE * WHITE * RATE) / n_fit)
     assert se["sine_amplitude"] == pytest.approx(kay, rel=TOLERANCE)
+    # the periodogram's frequency is efficient: the Cramer-Rao bound of a real sinusoid,
+    # var f = 12 (2 sigma^2) fs^2 / ((2 pi A)^2 N (N^2 - 1)) (Kay 1993, example 3.14)
+    crb = RATE * math.sqrt(24.0 * WHITE * WHITE * RATE
+                           / ((2 * math.pi * 0.01) ** 2 * n_fit * (n_fit**2 - 1)))
+    assert se["sine_freq"] == pytest.approx(crb, rel=TOLERANCE)
     assert abs(d.kept[0].params["sine_amplitude"] - 0.01) < 4.0 * se["sine_amplitude"]
     out = d.to_dict()
     assert set(out["kept"][0]["params_se"]) == {"sine_amplitude", "sine_freq"}
@@ -64,6 +70,8 @@ def test_ramp_error_is_the_least_squares_slope_variance() -> None:
     tf = t[:n // 2]
     textbook = math.sqrt(WHITE * WHITE * RATE / float(np.sum((tf - tf.mean()) ** 2)))
     assert d.kept[0].params_se["ramp"] == pytest.approx(textbook, rel=TOLERANCE)
+    # least squares is unbiased: the refits' mean is the value within its own scatter
+    assert abs(d.kept[0].params_bias["ramp"]) < 3.0 * textbook / math.sqrt(K)
 
 
 def test_a_tail_no_heavier_than_a_normal_law_fits_no_impulses() -> None:
