@@ -682,12 +682,13 @@ def test_values_are_printed_to_their_standard_errors_precision() -> None:
         "sine_amplitude = 0.00300 +- 0.00014 dps, sine_freq = 7.2999831 +- 7.9e-06")
     temp = {"params": {"temp_coeff": 0.001008, "temp_coeff2": 0.0},
             "params_se": {"temp_coeff": 6.2e-5}}
-    assert params_text(temp["params"], None, temp) == (
-        "temp_coeff = 0.001008 +- 6.2e-05, temp_coeff2 = 0 (the model's, not fitted)")
+    assert params_text(temp["params"], {"temp_coeff2": "dps/degC^2"}, temp) == (
+        "temp_coeff = 0.001008 +- 6.2e-05, temp_coeff2 = 0 dps/degC^2 (the model's, not "
+        "fitted)")
     walk = {"params": {"random_walk": 4.52e-4}, "params_se": {"random_walk": 4.9e-5},
             "params_bias": {"random_walk": 8.9e-5}}
-    assert params_text(walk["params"], None, walk) == (
-        "random_walk = 0.000452 +- 4.9e-05, refits biased by +8.9e-05")
+    assert params_text(walk["params"], {"random_walk": "dps/sqrt(s)"}, walk) == (
+        "random_walk = 0.000452 +- 4.9e-05 dps/sqrt(s), refits biased by +8.9e-05")
     walk["params_bias"] = {"random_walk": 2e-5}  # within the error: not shown
     assert params_text(walk["params"], None, walk) == "random_walk = 0.000452 +- 4.9e-05"
     step = {"params": {"step_time_s": 1932.692, "step_size": 0.0289},

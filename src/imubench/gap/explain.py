@@ -19,6 +19,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from scipy.stats import t as student_t
+
 from imubench.gap.candidates import DENSE_TAIL
 from imubench.gap.curves import (
     POOLED_DOF,
@@ -67,21 +69,20 @@ Uncertainty = Mapping[str, float | None]
 
 
 def _number(p: Mapping[str, Any], key: str, digits: int, se: Uncertainty | None,
-            bias: Uncertainty | None) -> str:
-    """``p[key]`` to ``digits`` significant digits, or ``+- SE`` to the SE's precision
-    when ``se`` has one, followed by the bootstrap bias where it exceeds the SE;
-    '(the model's, not fitted)' for a key the estimator did not fit (absent from a
-    non-empty ``se``)."""
+            bias: Uncertainty | None) -> tuple[str, str]:
+    """(value, note) of ``p[key]``: the value to ``digits`` significant digits, or with
+    ``+- SE`` to the SE's precision when ``se`` has one; the note (after the unit) gives
+    the bootstrap bias where it exceeds the SE, or '(the model's, not fitted)' for a key
+    the estimator did not fit (absent from a non-empty ``se``)."""
     v, err = p.get(key), (se or {}).get(key)
     if se and key not in se:
-        return f"{_f(v, digits)} (the model's, not fitted)"
+        return _f(v, digits), " (the model's, not fitted)"
     if v is None or err is None or not (math.isfinite(v) and math.isfinite(err) and err > 0):
-        return _f(v, digits)
-    out = _with_error(float(v), float(err))
+        return _f(v, digits), ""
     b = (bias or {}).get(key)
-    if b is not None and math.isfinite(b) and abs(b) > err:
-        out += f", refits biased by {b:+.2g}"
-    return out
+    note = (f", refits biased by {b:+.2g}"
+            if b is not None and math.isfinite(b) and abs(b) > err else "")
+    return _with_error(float(v), float(err)), note
 
 
 def _valued(p: Mapping[str, Any], key: str, units: Mapping[str, str] | None,
@@ -91,7 +92,8 @@ def _valued(p: Mapping[str, Any], key: str, units: Mapping[str, str] | None,
     ``+- SE`` (and a bias beyond it) when ``se`` (the JSON's ``params_se``) holds one
     for ``key`` (:func:`_number`)."""
     unit = (units or {}).get(key, "1")
-    return _number(p, key, digits, se, bias) + ("" if unit == "1" else f" {unit}")
+    value, note = _number(p, key, digits, se, bias)
+    return value + ("" if unit == "1" else f" {unit}") + note
 
 
 def params_text(p: dict[str, Any], units: Mapping[str, str] | None,
@@ -224,7 +226,8 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
         return _valued(p, k, units, se=e.get("params_se"), bias=e.get("params_bias"))
 
     def num(k: str, digits: int = 3) -> str:  # a value whose unit the sentence gives
-        return _number(p, k, digits, e.get("params_se"), e.get("params_bias"))
+        value, note = _number(p, k, digits, e.get("params_se"), e.get("params_bias"))
+        return value + note
 
     def like(value: Any, key: str) -> str:  # another value in the unit of ``key``
         return _valued({key: value}, key, units)
@@ -563,15 +566,15 @@ def explain_channel(c: dict[str, Any], realisations: int,
     dof = max(int(realisations) - 1, 1)
     lines: list[str] = [headline(c, realisations, units)]
     if any(k.get("params_se") for k in c.get("kept", [])):
+        k = max(int(realisations), 2)
         lines.append(
-            f"Values +- one standard error: each kept effect refitted the same way on "
-            f"{realisations} simulated records of the fitted model, over the fit part "
-            "(itself uncertain by about 1 / sqrt(2 (K - 1)), "
-            f"{1 / math.sqrt(2 * max(realisations - 1, 1)):.0%} here; +-2 of them cover "
-            "the truth about 92 % of the time at K = 10). It leaves out which effects "
-            "were chosen and any error of the model's form; 'refits biased by' gives "
-            "the refits' mean less the value where that exceeds the error (an effect "
-            "kept before another can take part of it).")
+            f"Values +- one standard error: each kept effect refitted the same way on {k} "
+            "simulated records of the fitted model, over the fit part. The error is itself "
+            f"uncertain by about {1 / math.sqrt(2 * (k - 1)):.0%}, so +-2 of them cover the "
+            f"truth about {1 - 2 * student_t.sf(2.0, k - 1):.0%} of the time; it leaves "
+            "out which effects were chosen and any error of the model's form. 'Refits "
+            "biased by' gives the refits' mean less the value where that exceeds the "
+            "error (an effect kept before another can take part of it).")
     found = _detections(c, dof)
     verdict = c["verdict"]
     whole = _whole_record(c)
