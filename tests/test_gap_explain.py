@@ -695,3 +695,15 @@ def test_values_are_printed_to_their_standard_errors_precision() -> None:
             "params_se": {"step_time_s": 0.187, "step_size": 0.00075}}
     assert params_text(step["params"], None, step) == (
         "step_time_s = 1932.69 +- 0.19, step_size = 0.02890 +- 0.00075")
+
+
+def test_report_lists_the_kept_effects_with_their_standard_errors() -> None:
+    from imubench.gap.report import _kept_table
+
+    walk = {"effect": "random_walk", "params": {"random_walk": 4.52e-4},
+            "params_se": {"random_walk": 4.9e-5}, "params_bias": {"random_walk": 8.9e-5},
+            "gap_after": 0.17, "holdout_gap_after": 0.3}
+    table = _kept_table([walk], {"random_walk": "dps/sqrt(s)"})
+    assert ("<td>1</td><td>random_walk</td><td>random_walk = 0.000452 +- 4.9e-05 "
+            "dps/sqrt(s), refits biased by +8.9e-05</td><td>0.17</td><td>0.3</td>") in table
+    assert _kept_table([], {}) == ""

@@ -191,6 +191,8 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
                              for s in explain_channel(c, result["realisations"], units))
             + "</ul>"
             f"<img src='{ch}_adev.png'><img src='{ch}_evidence.png'>"
+            + _kept_table(c.get("kept", []), units)
+            + "<h3>First step's candidates</h3>"
             "<table border=1><tr><th>effect</th><th>params</th><th>gap after</th>"
             f"<th>held-out gap after</th><th>score</th><th>kept?</th></tr>{eff_rows}</table>"
             + _limits_table(c.get("limits"))
@@ -204,6 +206,21 @@ def write_report(out_dir: Path, result: dict[str, Any], diags: dict[str, Channel
         f"{result['realisations']} realisations, seed {result['seed']}</p>"
         + "".join(rows) + "</body></html>\n", encoding="utf-8")
     return index
+
+
+def _kept_table(kept: list[dict[str, Any]], units: dict[str, str]) -> str:
+    """The kept effects in order, each with its parameters +- their standard errors (and
+    a bootstrap bias beyond them) and the gaps after it; empty when none was kept."""
+    if not kept:
+        return ""
+    rows = "".join(
+        f"<tr><td>{i}</td><td>{html.escape(k['effect'])}</td>"
+        f"<td>{html.escape(params_text(k['params'], units, k))}</td>"
+        f"<td>{_num(k['gap_after'])}</td><td>{_num(k.get('holdout_gap_after'))}</td></tr>"
+        for i, k in enumerate(kept, 1))
+    return ("<h3>Kept effects (values +- one standard error)</h3><table border=1><tr>"
+            "<th>step</th><th>effect</th><th>params</th><th>gap after</th>"
+            f"<th>held-out gap after</th></tr>{rows}</table>")
 
 
 def _num(v: Any) -> str:
