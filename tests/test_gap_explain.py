@@ -654,9 +654,14 @@ def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
                whole_record_after={"bias_step_z": -1.4, "drift_t": 0.2,
                                    "temperature_record_z": 0.5})
     text = "\n".join(explain_channel(c, 10))
-    assert ("After the kept effects, the statistics that fired read: the temperature "
+    assert ("After the kept effects, the tests that fired read: the temperature "
             "response of the block means z 5.90 -> -0.19; the whole-record bias step z "
             "51.80 -> -1.4.") in text
+    c["regions"] = [{"tau_min_s": 78.8, "tau_max_s": 315.0, "direction": "real_above",
+                     "gap": 0.729, "gap_after": 0.05, "z_max": 4.0}]
+    assert ("After the kept effects, the tests that fired read: the Allan curve real "
+            "above over 78.8-315 s, region gap 0.729 -> 0.05; the temperature") in "\n".join(
+        explain_channel(c, 10))
     c["kept"] = []
     assert "After the kept effects" not in "\n".join(explain_channel(c, 10))
 

@@ -159,9 +159,10 @@ def _whole_record(c: dict[str, Any]) -> list[str]:
 
 
 def _after_kept(c: dict[str, Any], dof: int) -> str:
-    """'After the kept effects: name before -> after, ...' for each single statistic and
-    whole-record test that fired at the first step (empty without a kept effect or the
-    JSON's ``statistics_after``): how far the kept effects explain each detection."""
+    """'After the kept effects: name before -> after, ...' for each Allan region (its
+    gap), single statistic and whole-record test that fired at the first step (empty
+    without a kept effect or the JSON's ``statistics_after``): how far the kept effects
+    explain each detection."""
     after, whole_after = c.get("statistics_after"), c.get("whole_record_after")
     if not c.get("kept") or after is None or whole_after is None:
         return ""
@@ -169,7 +170,9 @@ def _after_kept(c: dict[str, Any], dof: int) -> str:
              "temp_z": "the correlation with temperature",
              "temp_level_z": "the temperature response of the block means",
              "trend_z": "the time trend"}
-    out = []
+    out = [f"the Allan curve {r['direction'].replace('_', ' ')} "
+           f"{_span(r['tau_min_s'], r['tau_max_s'], 's')}, region gap {_f(r['gap'])} -> "
+           f"{_f(r['gap_after'])}" for r in c["regions"] if r.get("gap_after") is not None]
     for key, z_norm, one_sided in STAT_TESTS:
         z = _stat(c, key)
         if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
@@ -182,7 +185,7 @@ def _after_kept(c: dict[str, Any], dof: int) -> str:
                               "the whole-record temperature response z")):
         if whole.get(fired) and c.get(key) is not None:
             out.append(f"{name} {c[key]:.2f} -> {_f(whole_after.get(key), 2)}")
-    return ("After the kept effects, the statistics that fired read: " + "; ".join(out)
+    return ("After the kept effects, the tests that fired read: " + "; ".join(out)
             + ".") if out else ""
 
 
