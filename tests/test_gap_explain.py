@@ -655,8 +655,8 @@ def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
                                    "temperature_record_z": 0.5})
     text = "\n".join(explain_channel(c, 10))
     assert ("After the kept effects, the tests that fired read: the temperature "
-            "response of the block means z 5.90 -> -0.19; the whole-record bias step z "
-            "51.80 -> -1.4.") in text
+            "response of the block means z 5.9 -> -0.2; the whole-record bias step z "
+            "51.8 -> -1.4.") in text
     c["regions"] = [{"tau_min_s": 78.8, "tau_max_s": 315.0, "direction": "real_above",
                      "gap": 0.729, "gap_after": 0.05, "z_max": 4.0}]
     assert ("After the kept effects, the tests that fired read: the Allan curve real "
@@ -684,18 +684,21 @@ def test_values_are_printed_to_their_standard_errors_precision() -> None:
     entry = {"params": {"sine_amplitude": 0.003001, "sine_freq": 7.299983114},
              "params_se": {"sine_amplitude": 0.00014, "sine_freq": 7.9e-6}}
     assert params_text(entry["params"], {"sine_amplitude": "dps"}, entry) == (
-        "sine_amplitude = 0.00300 +- 0.00014 dps, sine_freq = 7.2999831 +- 7.9e-06")
+        "sine_amplitude = 0.00300 +- 0.00014 dps, sine_freq = 7.2999831 +- 0.0000079")
     temp = {"params": {"temp_coeff": 0.001008, "temp_coeff2": 0.0},
             "params_se": {"temp_coeff": 6.2e-5}}
     assert params_text(temp["params"], {"temp_coeff2": "dps/degC^2"}, temp) == (
-        "temp_coeff = 0.001008 +- 6.2e-05, temp_coeff2 = 0 dps/degC^2 (the model's, not "
+        "temp_coeff = 0.001008 +- 0.000062, temp_coeff2 = 0 dps/degC^2 (the model's, not "
         "fitted)")
     walk = {"params": {"random_walk": 4.52e-4}, "params_se": {"random_walk": 4.9e-5},
             "params_bias": {"random_walk": 8.9e-5}}
     assert params_text(walk["params"], {"random_walk": "dps/sqrt(s)"}, walk) == (
-        "random_walk = 0.000452 +- 4.9e-05 dps/sqrt(s), refits biased by +8.9e-05")
-    walk["params_bias"] = {"random_walk": 2e-5}  # within the error: not shown
-    assert params_text(walk["params"], None, walk) == "random_walk = 0.000452 +- 4.9e-05"
+        "random_walk = 0.000452 +- 0.000049 dps/sqrt(s), refits read 8.9e-05 high "
+        "(corrected 0.000363)")
+    walk["params_bias"] = {"random_walk": 2e-5}  # within its own scatter: not shown
+    assert params_text(walk["params"], None, walk) == "random_walk = 0.000452 +- 0.000049"
+    tiny = {"params": {"quantization": 3.21e-7}, "params_se": {"quantization": 4.4e-8}}
+    assert params_text(tiny["params"], None, tiny) == "quantization = (3.21 +- 0.44)e-07"
     step = {"params": {"step_time_s": 1932.692, "step_size": 0.0289},
             "params_se": {"step_time_s": 0.187, "step_size": 0.00075}}
     assert params_text(step["params"], None, step) == (
@@ -709,6 +712,7 @@ def test_report_lists_the_kept_effects_with_their_standard_errors() -> None:
             "params_se": {"random_walk": 4.9e-5}, "params_bias": {"random_walk": 8.9e-5},
             "gap_after": 0.17, "holdout_gap_after": 0.3}
     table = _kept_table([walk], {"random_walk": "dps/sqrt(s)"})
-    assert ("<td>1</td><td>random_walk</td><td>random_walk = 0.000452 +- 4.9e-05 "
-            "dps/sqrt(s), refits biased by +8.9e-05</td><td>0.17</td><td>0.3</td>") in table
+    assert ("<td>1</td><td>random_walk</td><td>random_walk = 0.000452 +- 0.000049 "
+            "dps/sqrt(s), refits read 8.9e-05 high (corrected 0.000363)</td><td>0.17</td>"
+            "<td>0.3</td>") in table
     assert _kept_table([], {}) == ""
