@@ -245,9 +245,9 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     def g(k: str) -> str:
         return _valued(p, k, units, se=e.get("params_se"), bias=e.get("params_bias"))
 
-    def num(k: str, digits: int = 3) -> str:  # a value whose unit the sentence gives
+    def num(k: str, unit: str, digits: int = 3) -> str:  # in a unit of the sentence's
         value, note = _number(p, k, digits, e.get("params_se"), e.get("params_bias"))
-        return value + note
+        return f"{value} {unit}{note}"
 
     def like(value: Any, key: str) -> str:  # another value in the unit of ``key``
         return _valued({key: value}, key, units)
@@ -256,7 +256,7 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     if effect == "sine" and e.get("sine_amplitude_at_output") is not None:
         return (f"a sinusoidal disturbance of amplitude "
                 f"{like(e['sine_amplitude_at_output'], 'sine_amplitude')} at "
-                f"{num('sine_freq')} Hz as recorded ({g('sine_amplitude')} before "
+                f"{num('sine_freq', 'Hz')} as recorded ({g('sine_amplitude')} before "
                 "the model's output filter, the model file's value)")
     if effect == "temperature" and p.get("temp_coeff2") and \
             e.get("temp_slope_at_mean") is not None:
@@ -271,7 +271,7 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     return {
         "temperature": f"the rate drifts with temperature, {g('temp_coeff')}",
         "sine": f"a sinusoidal disturbance of amplitude {g('sine_amplitude')} at "
-                f"{num('sine_freq')} Hz",
+                f"{num('sine_freq', 'Hz')}",
         "random_walk": f"the bias wanders as a random walk (K = {g('random_walk')})",
         "flicker": f"the bias instability (flicker) is larger than modelled (B = "
                    f"{g('flicker')})",
@@ -279,16 +279,16 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
         "quantization": f"quantization noise is larger than modelled (Q = "
                         f"{g('quantization')})",
         "markov": f"a correlated bias (Gauss-Markov) of sigma {g('markov_sigma')} with "
-                  f"correlation time {num('markov_tau')} s",
+                  f"correlation time {num('markov_tau', 's')}",
         "telegraph": f"the bias jumps between two levels {g('telegraph_step')} apart "
-                     f"(telegraph noise), mean dwell {num('telegraph_dwell_s')} s",
-        "resonance": f"a narrowband resonance at {num('resonance_freq_hz')} Hz, "
-                     f"width {num('resonance_width_hz')} Hz, peak PSD "
+                     f"(telegraph noise), mean dwell {num('telegraph_dwell_s', 's')}",
+        "resonance": f"a narrowband resonance at {num('resonance_freq_hz', 'Hz')}, "
+                     f"width {num('resonance_width_hz', 'Hz')}, peak PSD "
                      f"{g('resonance_height')} above the model",
-        "outliers": f"impulsive outliers, {num('outlier_rate')} per s of amplitude "
+        "outliers": f"impulsive outliers, {num('outlier_rate', 'per s')} of amplitude "
                     f"{g('outlier_amplitude')}",
         "bias_step": f"the bias steps by {g('step_size')} at t = "
-                     f"{num('step_time_s', 4)} s",
+                     f"{num('step_time_s', 's', 4)}",
         "base_model": f"the base model is off (refit: white {g('white')}, {filt}); refit "
                       "the model's white level and filter",
     }.get(effect, effect)
