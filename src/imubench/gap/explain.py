@@ -447,10 +447,17 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
         if (parts and prev is not None and after is not None and drop > 0
                 and after >= prev - 0.01):
             main = max(parts, key=lambda n: parts[n])
+            left = k.get("holdout_gap_excess_after") or 0.0
+            dominated = (f"here dominated by a systematic departure this effect does not "
+                         f"touch (held-out systematic part {_f(left)} after it"
+                         + (", closed by the effects kept after it)"
+                            if k is not kept[-1] and not h.get("gap_excess_after")
+                            else ")")
+                         if left > 0 else "which the scatter of the long taus dominates")
             txt += (f"; the held-out gap ({_f(prev)} -> {_f(after)}) "
                     + ("did not fall" if after < prev + 0.01 else "rose")
                     + ": it is the Allan curve's RMS of ln ratios with every tau weighted "
-                    "equally (the scatter of the long taus dominates it), while the check "
+                    f"equally, {dominated}, while the check "
                     "weighs each term by its precision (the Allan curve's on the scatter "
                     "of the model without the effect) and adds the spectrum and the "
                     f"statistics; its largest drop is in the {PART_NAMES.get(main, main)}")
