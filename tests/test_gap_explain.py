@@ -172,6 +172,11 @@ def test_held_out_check_and_unmoved_gap_are_reconciled() -> None:
     assert ("equally, here dominated by a systematic departure this effect does not "
             "touch (held-out systematic part 0.15 after it)") in text
     assert "its largest drop is in the spectrum bands" in text
+    # the pass level is given beside the drop (a second outside reviewer: 6.1 against
+    # an unstated 3.8 read as a clear pass)
+    kept3 = {**kept, "n_params": 3}
+    text3 = "\n".join(explain_channel(_entry("base_model", kept=[kept3], holdout=h), 10))
+    assert "statistics 0.3; needs more than 7.8 for 3 parameters)" in text3
     # a gap that fell with the check needs no reconciliation
     kept2 = {**kept, "holdout_gap_after": 0.1}
     text = "\n".join(explain_channel(_entry("base_model", kept=[kept2], holdout=h), 10))

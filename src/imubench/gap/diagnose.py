@@ -338,7 +338,7 @@ class ChannelDiagnosis:
 
 def _kept_dict(c: Candidate) -> dict[str, Any]:
     assert c.fit is not None
-    d: dict[str, Any] = {"effect": c.effect, "params": c.params,
+    d: dict[str, Any] = {"effect": c.effect, "params": c.params, "n_params": c.n_params,
                          "params_se": {k: (v if math.isfinite(v) else None)
                                        for k, v in c.params_se.items()},
                          "params_bias": {k: (v if math.isfinite(v) else None)

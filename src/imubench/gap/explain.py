@@ -19,6 +19,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as student_t
 
 from imubench.gap.candidates import DENSE_TAIL
@@ -31,7 +32,14 @@ from imubench.gap.curves import (
     stat_fired,
     t_threshold,
 )
-from imubench.gap.diagnose import MAX_EFFECTS, MIN_CLOSURE, REPLACED, exchanged_by, removes
+from imubench.gap.diagnose import (
+    HOLDOUT_ALPHA,
+    MAX_EFFECTS,
+    MIN_CLOSURE,
+    REPLACED,
+    exchanged_by,
+    removes,
+)
 
 
 def _f(v: float | None, digits: int = 3) -> str:
@@ -441,9 +449,12 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
             out.append("Held-out check of bias_step: not applied (the step is located and "
                        "tested on the whole record).")
             continue
+        need = (f"; needs more than {chi2_dist.isf(HOLDOUT_ALPHA, k['n_params']):.1f} "
+                f"for {k['n_params']} parameter{'s' * (k['n_params'] > 1)}"
+                if "n_params" in k else "")
         txt = (f"Held-out check of {k['effect']}: chi-squared fell by {drop:.1f}"
                + (" (" + ", ".join(f"{PART_NAMES.get(n, n)} {v:.1f}"
-                                   for n, v in parts.items()) + ")" if parts else ""))
+                                   for n, v in parts.items()) + f"{need})" if parts else ""))
         if (parts and prev is not None and after is not None and drop > 0
                 and after >= prev - 0.01):
             main = max(parts, key=lambda n: parts[n])
@@ -470,6 +481,12 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
     return out
 
 
+ESTIMATOR_WORDS = {"gls": "GLS of the block-mean increments on the temperature's",
+                   "levels": "least squares of the block-mean levels, linear",
+                   "levels_quadratic": "least squares of the block-mean levels, quadratic"}
+"""A kept temperature response's ``estimator``, in words."""
+
+
 def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> list[str]:
     kept = c.get("kept", [])
     if not kept:
@@ -479,8 +496,10 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
                for d in c.get("dropped", [])]
     parts = []
     for i, k in enumerate(kept, 1):
-        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units, k)}): fit-part gap "
-               f"{_f(k['gap_after'])}")
+        how = (f"; by {ESTIMATOR_WORDS[k['estimator']]}" if k.get("estimator") in
+               ESTIMATOR_WORDS else "")
+        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units, k)}{how}): fit-part "
+               f"gap {_f(k['gap_after'])}")
         if k.get("holdout_gap_after") is not None:
             txt += f", held-out gap {_f(k['holdout_gap_after'])}"
         parts.append(txt)
