@@ -648,6 +648,11 @@ def test_kept_effects_after_a_replacement_are_said_to_be_in_the_final_order() ->
             "(held-out gap before: 0.4, values +- one standard error)") in text
     assert "temp_coeff = 0.00810 +- 0.0004" in text
     assert "Values +- one standard error: each kept effect refitted the same way on 10" in text
+    assert "Fewer refits" not in text
+    temp["params_n"] = {"temp_coeff": 7}
+    assert "Fewer refits gave an estimate for: temperature temp_coeff 7 of 10." in "\n".join(
+        explain_channel(c, 10))
+    temp.pop("params_n")
     c["dropped"] = []
     assert "Effects kept in order (held-out gap before: 0.4, values +- one" in "\n".join(
         explain_channel(c, 10))

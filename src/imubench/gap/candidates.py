@@ -171,6 +171,9 @@ class Candidate:
     params_bias: dict[str, float] = field(default_factory=dict)
     """The bootstrap bias of each fitted parameter (the refits' mean less the value),
     filled with :attr:`params_se`."""
+    params_n: dict[str, int] = field(default_factory=dict)
+    """How many of the K refits gave each parameter an estimate (filled with
+    :attr:`params_se`)."""
 
     def to_dict(self, before: Comparison) -> dict[str, Any]:
         assert self.fit is not None

@@ -343,6 +343,7 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
                                        for k, v in c.params_se.items()},
                          "params_bias": {k: (v if math.isfinite(v) else None)
                                          for k, v in c.params_bias.items()},
+                         "params_n": c.params_n,
                          "gap_after": c.fit.gap,
                          "gap_excess_after": c.fit.gap_excess,
                          "evidence_closed": c.evidence_closed, **c.at_output(),
@@ -862,9 +863,9 @@ class _Realiser:
 
         for j, c in enumerate(kept):
             ref = self.step(kept[:j])
-            c.params_se, c.params_bias = standard_errors(
-                c, Refit(self.fit, final.feats, ref.feats, ref.before.sigma, cms[j],
-                         raw_less_others(j)))
+            boot = standard_errors(c, Refit(self.fit, final.feats, ref.feats,
+                                            ref.before.sigma, cms[j], raw_less_others(j)))
+            c.params_se, c.params_bias, c.params_n = boot.se, boot.bias, boot.n
 
     @staticmethod
     def _key(kept: list[Candidate]) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ...]:

@@ -487,6 +487,14 @@ ESTIMATOR_WORDS = {"gls": "GLS of the block-mean increments on the temperature's
 """A kept temperature response's ``estimator``, in words."""
 
 
+def _fewer_refits(kept: list[dict[str, Any]], k: int) -> str:
+    """' Fewer refits gave an estimate for: X n of K, ...' (the JSON's ``params_n``; an
+    estimator that finds nothing on a realisation leaves it out), or nothing."""
+    few = [f"{e['effect']} {key} {n} of {k}" for e in kept
+           for key, n in (e.get("params_n") or {}).items() if n < k]
+    return (" Fewer refits gave an estimate for: " + ", ".join(few) + ".") if few else ""
+
+
 def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> list[str]:
     kept = c.get("kept", [])
     if not kept:
@@ -625,7 +633,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
             "'Refits read ... high (or low)' is the refits' mean less the value where that "
             "bias is beyond its own scatter, with the value less it (a first-order "
             "correction); an effect that took part of another, or the estimator itself, "
-            "biases it.")
+            "biases it." + _fewer_refits(c["kept"], k))
     found = _detections(c, dof)
     verdict = c["verdict"]
     whole = _whole_record(c)

@@ -78,23 +78,33 @@ class Refit:
     raw: Callable[[], np.ndarray]
 
 
-def standard_errors(c: Candidate, r: Refit) -> tuple[dict[str, float], dict[str, float]]:
-    """The standard error and the bootstrap bias of each fitted parameter of ``c`` (the
-    keys of ``c.params`` that its estimator fits; none for the base model's refit; NaN
-    where too few realisations gave an estimate).
+@dataclass(frozen=True)
+class Bootstrap:
+    """The bootstrap of one kept effect, by parameter: ``se`` the standard error,
+    ``bias`` the refits' mean less the value (Efron & Tibshirani 1993, sec. 10.2), ``n``
+    the refits that gave an estimate (NaN error and bias below MIN_REFITS)."""
 
-    The bias is the refits' mean less the estimate (Efron & Tibshirani 1993, sec. 10.2):
-    what the estimator does on the fitted model, e.g. a random walk kept before a
-    temperature response, refitted beside the response it took part of (an outside
-    reviewer: K 4.52e-4 +- 0.49e-4 for 3e-4, refits averaging 5.41e-4)."""
-    se: dict[str, float] = {}
-    bias: dict[str, float] = {}
+    se: dict[str, float]
+    bias: dict[str, float]
+    n: dict[str, int]
+
+
+def standard_errors(c: Candidate, r: Refit) -> Bootstrap:
+    """The standard error, bootstrap bias and refit count of each fitted parameter of
+    ``c`` (the keys of ``c.params`` that its estimator fits; none for the base model's
+    refit).
+
+    The bias is what the estimator does on the fitted model, e.g. a random walk kept
+    before a temperature response, refitted beside the response it took part of (an
+    outside reviewer: K 4.52e-4 +- 0.49e-4 for 3e-4, refits averaging 5.41e-4)."""
+    out = Bootstrap({}, {}, {})
     for key, values in _refits(c, r).items():
         v = np.asarray([x for x in values if math.isfinite(x)])
         ok = len(v) >= MIN_REFITS
-        se[key] = float(np.std(v, ddof=1)) if ok else math.nan
-        bias[key] = float(np.mean(v)) - c.params[key] if ok else math.nan
-    return se, bias
+        out.se[key] = float(np.std(v, ddof=1)) if ok else math.nan
+        out.bias[key] = float(np.mean(v)) - c.params[key] if ok else math.nan
+        out.n[key] = len(v)
+    return out
 
 
 def _refits(c: Candidate, r: Refit) -> dict[str, list[float]]:
