@@ -548,6 +548,10 @@ def test_a_base_model_verdict_refitted_beside_a_later_effect_quotes_the_kept_ref
     text = "\n".join(explain_channel(c, 10, units))
     assert "Verdict base_model (bandwidth_hz = 21.65 Hz" in text
     assert "the share and score that follow are of its first fit, bandwidth_hz = 21.57 Hz" in text
+    # only what moved, to 6 digits (a step time 1932.69 s read '1933 s' beside the kept
+    # '1932.69 +- 0.19 s', as if it had moved)
+    assert "first fit, bandwidth_hz = 21.57 Hz, white = 0.004 dps/sqrt(Hz))" in text
+    assert "filter_order" not in text.split("first fit, ")[1].split(")")[0]
     assert "rather than add an effect" not in text
     assert "Also kept: a sinusoidal disturbance" in text
 

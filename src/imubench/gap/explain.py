@@ -117,10 +117,10 @@ def _valued(p: Mapping[str, Any], key: str, units: Mapping[str, str] | None,
 
 
 def params_text(p: dict[str, Any], units: Mapping[str, str] | None,
-                entry: Mapping[str, Any] | None = None) -> str:
+                entry: Mapping[str, Any] | None = None, digits: int = 4) -> str:
     """``key = value unit, ...`` of an effect's parameters (no filter: said so), each
     with ``+- SE`` where ``entry`` (a kept effect's JSON entry) has ``params_se`` for it
-    (:func:`_number`)."""
+    (:func:`_number`), else to ``digits`` significant digits."""
     se, bias = (entry or {}).get("params_se"), (entry or {}).get("params_bias")
     out = []
     for k, v in p.items():
@@ -129,7 +129,7 @@ def params_text(p: dict[str, Any], units: Mapping[str, str] | None,
         if k == "bandwidth_hz" and not (v or 0) > 0:
             out.append("no output filter")
             continue
-        out.append(f"{k} = {_valued(p, k, units, 4, se, bias)}")
+        out.append(f"{k} = {_valued(p, k, units, digits, se, bias)}")
     return ", ".join(out)
 
 
@@ -353,7 +353,7 @@ def _holdout_evidence(after: dict[str, Any] | None) -> str:
         return ""
     text = (f"; the held-out check's evidence for it is in the {PART_NAMES[best]} "
             f"(chi-squared falls by {parts[best]:.1f}")
-    return text + (", the short taus weighing most)" if best == "allan" else ")")
+    return text + ")"
 
 
 def headline(c: dict[str, Any], realisations: int,
@@ -716,9 +716,10 @@ def explain_channel(c: dict[str, Any], realisations: int,
         shown = kept[step] if kept and kept[step]["effect"] == verdict else w
         params = shown["params"]
         if params != w["params"]:  # the base model's refit, fitted again beside a later one
+            moved = {key: v for key, v in w["params"].items() if params.get(key) != v}
             after += (" (as kept: fitted again beside the effects kept after it; the "
                       "share and score that follow are of its first fit, "
-                      f"{params_text(w['params'], units)})")
+                      f"{params_text(moved, units, digits=6)})")
         txt = f"Verdict {verdict} ({params_text(params, units, shown)}){after}: {share}"
         if "score" in w:
             txt += f"; score {w['score']:.1f}"
