@@ -686,6 +686,11 @@ def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
     assert ("After the kept effects, the tests that fired read: the Allan curve real "
             "above over 78.8-315 s, region gap 0.729 -> 0.05; the temperature") in "\n".join(
         explain_channel(c, 10))
+    c["global"] = {"fired": True, "chi2_smooth": 170.7, "threshold_smooth": 16.5,
+                   "chi2": 180.0, "threshold": 44.1, "dof": 16}
+    c["global_after"] = {"fired": False, "chi2_smooth": 4.0, "threshold_smooth": 16.5}
+    assert ("region gap 0.729 -> 0.05; the whole Allan curve's shape chi-squared 170.7 -> "
+            "4.0 (threshold 16.5); the temperature") in "\n".join(explain_channel(c, 10))
     c["kept"] = []
     assert "After the kept effects" not in "\n".join(explain_channel(c, 10))
 

@@ -273,6 +273,7 @@ class ChannelDiagnosis:
             "temperature_record_z": self.temp_record_z,
             "statistics_after": {key: getattr(ff, key) for key, _, _ in STAT_TESTS},
             "whole_record_after": self._whole_record_after(),
+            "global_after": ff.global_dict(),
             "temperature_note": self.temp_note or None,
             "not_fitted": dict(self.evidence.get("not_fitted", {})),
             "global": self.before.global_dict(),
