@@ -314,6 +314,11 @@ STEP_NOT_INDEPENDENT = ("a bias step is located on the whole record, the held-ou
                         "included, so for it this is not an independent check")
 
 
+UNMOVED = 0.05
+"""A held-out gap that moves by less than this share is said not to close (or to
+widen beyond it): one rule for the headline and the held-out check lines."""
+
+
 def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
     """What modelling the effect does on the held-out part, in words: 'closes N % of the
     systematic gap' (or of the gap, when it has no systematic part), or, when the
@@ -333,20 +338,21 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         text = (f"; the held-out Allan curve is within its scatter before and after "
                 f"(systematic gap {_f(eb)} -> {_f(ea)}")
         gb = h.get("gap_before")
-        if ga is not None and gb and ga > 1.05 * gb:
+        if ga is not None and gb and ga > (1.0 + UNMOVED) * gb:
             text += f"; its gap widens {_f(gb)} -> {_f(ga)}"
         return text + ")" + _holdout_evidence(after)
     elif ga is not None and h["gap_before"]:
         frac, what = 1.0 - ga / h["gap_before"], "the Allan-curve gap"
     else:
         return ""
-    if frac >= 0.05:
+    if frac >= UNMOVED:
         return f"; modelling it closes {_pct(frac)} of {what} on the held-out part"
     if (after or {}).get("effect") == "bias_step":
         return ("; the step is located on the whole record, so the held-out part is not "
                 "its test")
     ga = ga if ga is not None else h.get("gap_after")
-    moves = "widens" if ga is not None and ga > 1.05 * h["gap_before"] else "does not close"
+    moves = ("widens" if ga is not None and ga > (1.0 + UNMOVED) * h["gap_before"]
+             else "does not close")
     text = (f"; on the held-out part the Allan-curve gap {moves} "
             f"({_f(h['gap_before'])} -> {_f(ga)})")
     return text + _holdout_evidence(after)
@@ -464,7 +470,7 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
                + (" (" + ", ".join(f"{PART_NAMES.get(n, n)} {v:.1f}"
                                    for n, v in parts.items()) + f"{need})" if parts else ""))
         if (parts and prev is not None and after is not None and drop > 0
-                and after >= prev - 0.01):
+                and after >= (1.0 - UNMOVED) * prev):
             main = max(parts, key=lambda n: parts[n])
             left = k.get("holdout_gap_excess_after") or 0.0
             dominated = (f"here dominated by a systematic departure this effect does not "
@@ -474,13 +480,13 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
                             else ")")
                          if left > 0 else "which the scatter of the long taus dominates")
             txt += (f"; the held-out gap ({_f(prev)} -> {_f(after)}) "
-                    + ("did not fall" if after < prev + 0.01 else "rose")
+                    + ("did not fall" if after <= (1.0 + UNMOVED) * prev else "rose")
                     + ": it is the Allan curve's RMS of ln ratios with every tau weighted "
                     f"equally, {dominated}, while the check "
                     "weighs each term by its precision (the Allan curve's on the scatter "
                     "of the model without the effect) and adds the spectrum and the "
                     f"statistics; its largest drop is in the {PART_NAMES.get(main, main)}")
-            if main == "allan" and after >= prev + 0.01:
+            if main == "allan" and after > (1.0 + UNMOVED) * prev:
                 txt += (" (the whole-curve statistic compares with the realisations' mean "
                         "ln ADEV and counts correlated taus once; the gap compares with "
                         "their mean Allan variance, which a few realisations with large "
