@@ -10,7 +10,9 @@ ch. 6, "the parametric bootstrap"). It holds the noise of the record, of the oth
 effects and of the estimator itself; it does not hold the choice of WHICH effects were
 kept (an effect kept because its estimate came out large is biased high by that
 selection, and the error does not show it). With K realisations the standard error is
-itself uncertain by about 1 / sqrt(2 (K - 1)) (24 % at K = 10).
+itself uncertain by about 1 / sqrt(2 (K - 1)) (24 % at K = 10). The refits' mean less
+the value is the estimator's bootstrap bias on the fitted model (Efron & Tibshirani
+1993, sec. 10.2), reported beside the error.
 
 Each effect's estimator, as in :func:`imubench.gap.candidates.fit_candidates`:
 
@@ -36,8 +38,8 @@ Each effect's estimator, as in :func:`imubench.gap.candidates.fit_candidates`:
   parts.
 
 An estimator that finds nothing on a realisation (no resonance peak, fewer than three
-impulses) leaves that realisation out; with fewer than MIN_REFITS left the error is NaN
-(reported as null).
+impulses) leaves that realisation out (counted in :attr:`Bootstrap.n`); with fewer than
+MIN_REFITS left the error and the bias are NaN (reported as null).
 """
 
 from __future__ import annotations
