@@ -695,8 +695,12 @@ def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
     c["global"] = {"fired": True, "chi2_smooth": 170.7, "threshold_smooth": 16.5,
                    "chi2": 180.0, "threshold": 44.1, "dof": 16}
     c["global_after"] = {"fired": False, "chi2_smooth": 4.0, "threshold_smooth": 16.5}
+    lines = explain_channel(c, 10)
     assert ("region gap 0.729 -> 0.05; the whole Allan curve's shape chi-squared 170.7 -> "
-            "4.0 (threshold 16.5); the temperature") in "\n".join(explain_channel(c, 10))
+            "4.0 (threshold 16.5); the temperature") in "\n".join(lines)
+    # the detections say what fired before any effect, and nothing after
+    found = next(x for x in lines if x.startswith("Significant on the fit part"))
+    assert "->" not in found and "the whole Allan curve's shape (chi-squared 170.7" in found
     c["kept"] = []
     assert "After the kept effects" not in "\n".join(explain_channel(c, 10))
 

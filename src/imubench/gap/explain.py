@@ -147,10 +147,6 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
              "tail_z": "impulsive tails", "temp_z": "correlation with temperature",
              "temp_level_z": "a temperature response of the block means",
              "trend_z": "a time trend"}
-    g, ga = c.get("global") or {}, c.get("global_after") or {}
-    if g.get("fired") and ga.get("chi2_smooth") is not None:
-        out.append(f"the whole Allan curve's shape chi-squared {g['chi2_smooth']:.1f} -> "
-                   f"{ga['chi2_smooth']:.1f} (threshold {ga['threshold_smooth']:.1f})")
     for key, z_norm, one_sided in STAT_TESTS:
         z = _stat(c, key)
         if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
