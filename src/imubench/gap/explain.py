@@ -147,19 +147,28 @@ def _detections(c: dict[str, Any], dof: int) -> list[str]:
              "tail_z": "impulsive tails", "temp_z": "correlation with temperature",
              "temp_level_z": "a temperature response of the block means",
              "trend_z": "a time trend"}
-    for key, z_norm, one_sided in STAT_TESTS:
-        z = _stat(c, key)
-        if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
-            kind = "z" if key in POOLED_STATS else "t"
-            thr = t_threshold(z_norm, stat_dof(key, dof))
-            nd = 1 if f"{abs(z):.1f}" != f"{thr:.1f}" else 2  # 3.60 over 3.56, not 3.6 / 3.6
-            out.append(f"{names[key]} ({kind} {z:.{nd}f} against the threshold "
-                       f"{thr:.{nd}f})")
+    for key, kind, z, thr, nd in _fired_stats(c, dof):
+        out.append(f"{names[key]} ({kind} {z:.{nd}f} against the threshold {thr:.{nd}f})")
     g = c.get("global") or {}
     if g.get("fired"):
         out.append(f"the whole Allan curve's shape (chi-squared {g['chi2_smooth']:.1f} "
                    f"against {g['threshold_smooth']:.1f}; {g['chi2']:.1f} against "
                    f"{g['threshold']:.1f} over all {g['dof']} taus)")
+    return out
+
+
+def _fired_stats(c: dict[str, Any], dof: int
+                 ) -> list[tuple[str, str, float, float, int]]:
+    """Each :data:`STAT_TESTS` statistic of the entry beyond its threshold (Student t with
+    ``dof``): (key, 'z' or 't', value, threshold, decimals to print them with: 1, or 2
+    where the value rounds to its threshold, 3.60 over 3.56 rather than 3.6 / 3.6)."""
+    out = []
+    for key, z_norm, one_sided in STAT_TESTS:
+        z = _stat(c, key)
+        if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
+            thr = t_threshold(z_norm, stat_dof(key, dof))
+            nd = 1 if f"{abs(z):.1f}" != f"{thr:.1f}" else 2
+            out.append((key, "z" if key in POOLED_STATS else "t", z, thr, nd))
     return out
 
 
@@ -197,15 +206,10 @@ def _after_kept(c: dict[str, Any], dof: int) -> str:
     if g.get("fired") and ga.get("chi2_smooth") is not None:
         out.append(f"the whole Allan curve's shape chi-squared {g['chi2_smooth']:.1f} -> "
                    f"{ga['chi2_smooth']:.1f} (threshold {ga['threshold_smooth']:.1f})")
-    for key, z_norm, one_sided in STAT_TESTS:
-        z = _stat(c, key)
-        if stat_fired(z, z_norm, one_sided, stat_dof(key, dof)):
-            kind = "z" if key in POOLED_STATS else "t"
-            thr = t_threshold(z_norm, stat_dof(key, dof))
-            nd = 1 if f"{abs(z):.1f}" != f"{thr:.1f}" else 2  # as the detections print it
-            a = after.get(key)
-            out.append(f"{names[key]} {kind} {z:.{nd}f} -> "
-                       + ("-" if a is None else f"{a:.{nd}f}"))
+    for key, kind, z, _, nd in _fired_stats(c, dof):
+        a = after.get(key)
+        out.append(f"{names[key]} {kind} {z:.{nd}f} -> "
+                   + ("-" if a is None else f"{a:.{nd}f}"))
     whole = c.get("whole_record") or {}
     for fired, key, name in (("step_fired", "bias_step_z", "the whole-record bias step z"),
                              ("drift_fired", "drift_t", "the whole-record drift t"),
