@@ -340,11 +340,8 @@ class ChannelDiagnosis:
 def _kept_dict(c: Candidate) -> dict[str, Any]:
     assert c.fit is not None
     d: dict[str, Any] = {"effect": c.effect, "params": c.params, "n_params": c.n_params,
-                         "params_se": {k: (v if math.isfinite(v) else None)
-                                       for k, v in c.params_se.items()},
-                         "params_bias": {k: (v if math.isfinite(v) else None)
-                                         for k, v in c.params_bias.items()},
-                         "params_n": c.params_n,
+                         "params_se": dict(c.params_se),  # NaN: null in the JSON
+                         "params_bias": dict(c.params_bias), "params_n": dict(c.params_n),
                          "gap_after": c.fit.gap,
                          "gap_excess_after": c.fit.gap_excess,
                          "evidence_closed": c.evidence_closed, **c.at_output(),
@@ -802,17 +799,25 @@ class _Realiser:
         self.fit, self.hold, self.temp = fit, hold, temp
         self._steps: dict[tuple[tuple[str, tuple[tuple[str, float], ...]], ...], _Step] = {}
 
+    def stages(self, kept: list[Candidate]
+               ) -> tuple[Variant, list[ChannelModel], list[np.ndarray | float]]:
+        """The model with ``kept`` added in order, the channel model each effect was added
+        to, and each effect's deterministic part (0.0 for none)."""
+        variant = Variant(self.model)
+        cms: list[ChannelModel] = []
+        dets: list[np.ndarray | float] = []
+        for c in kept:
+            cms.append(variant.model[self.channel])
+            det = deterministic(c.effect, c.params, cms[-1], self.series)
+            dets.append(0.0 if det is None else det)
+            variant = variant.add(self.channel, c)
+        return variant, cms, dets
+
     def variant(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray | float]:
         """The model with ``kept`` added in order, and the sum of their deterministic
         parts."""
-        variant = Variant(self.model)
-        det_sum: np.ndarray | float = 0.0
-        for c in kept:
-            det = deterministic(c.effect, c.params, variant.model[self.channel], self.series)
-            if det is not None:
-                det_sum = det_sum + det
-            variant = variant.add(self.channel, c)
-        return variant, det_sum
+        variant, _, dets = self.stages(kept)
+        return variant, sum(dets, start=0.0)
 
     def step(self, kept: list[Candidate]) -> _Step:
         """The step against the model with ``kept`` (realised afresh, same seeds)."""
@@ -845,14 +850,7 @@ class _Realiser:
         that needs them."""
         final = self.step(kept)
         drawn: list[np.ndarray] = []
-        cms: list[ChannelModel] = []  # the model each effect was added to
-        dets: list[np.ndarray | float] = []
-        variant = Variant(self.model)
-        for c in kept:
-            cms.append(variant.model[self.channel])
-            det = deterministic(c.effect, c.params, cms[-1], self.series)
-            dets.append(0.0 if det is None else det)
-            variant = variant.add(self.channel, c)
+        _, cms, dets = self.stages(kept)
 
         def raw_less_others(j: int) -> Callable[[], np.ndarray]:
             def raw() -> np.ndarray:
