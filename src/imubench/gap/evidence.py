@@ -58,12 +58,19 @@ def fit_temperature(y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
     yb, tb = temperature_blocks(y, temp_c, rate_hz)
     if len(yb) < 5 or np.ptp(tb) < 1e-6:
         return None
-    dt = tb - temp_ref_c
-    a2 = np.column_stack([np.ones_like(dt), dt, dt**2])
-    c2, *_ = np.linalg.lstsq(a2, yb, rcond=None)
-    a1 = a2[:, :2]
-    c1, *_ = np.linalg.lstsq(a1, yb, rcond=None)
+    c2 = temperature_levels(yb, tb, temp_ref_c, quadratic=True)
+    c1 = temperature_levels(yb, tb, temp_ref_c, quadratic=False)
     return TemperatureFit(float(c2[1]), float(c2[2]), float(c1[1]), tb, yb)
+
+
+def temperature_levels(yb: np.ndarray, tb: np.ndarray, temp_ref_c: float, quadratic: bool
+                       ) -> np.ndarray:
+    """Least-squares coefficients (constant, dT[, dT^2]) of block means ``yb`` ((m,) or
+    (m, k), one column per series) on ``dT = tb - temp_ref_c``."""
+    dt = tb - temp_ref_c
+    cols = [np.ones_like(dt), dt] + ([dt**2] if quadratic else [])
+    coef, *_ = np.linalg.lstsq(np.column_stack(cols), yb, rcond=None)
+    return np.asarray(coef)
 
 
 @dataclass(frozen=True)

@@ -181,9 +181,8 @@ def _temperature(c: Candidate, fit: PartSetup, final: SimFeatures, temp_ref_c: f
             return empty
         return {"temp_coeff": list(gls_slopes(np.diff(yb, axis=1), np.diff(tb),
                                               temp.chol)[0])}
-    dt = tb - temp_ref_c
-    cols = [np.ones_like(dt), dt] + ([dt**2] if c.estimator == "levels_quadratic" else [])
-    coef, *_ = np.linalg.lstsq(np.column_stack(cols), yb.T, rcond=None)
+    coef = evidence.temperature_levels(yb.T, tb, temp_ref_c,
+                                       quadratic=c.estimator == "levels_quadratic")
     out = {"temp_coeff": list(coef[1])}
     if c.estimator == "levels_quadratic":
         out["temp_coeff2"] = list(coef[2])
