@@ -47,7 +47,7 @@ from imubench.gap.evidence import (
 )
 from imubench.gap.explain import explain_channel
 from imubench.gap.extras import increment
-from imubench.gap.limits import detection_limits, inject, start_sizes
+from imubench.gap.limits import detection_limits, inject, injection_sign, start_sizes
 from imubench.gap.parts import RecordTemperature
 from imubench.gap.two_level import detrend_span, two_level_llr
 
@@ -511,6 +511,26 @@ def test_detection_limits_of_a_sine_on_white_noise() -> None:
     # the weakest line seen: periodogram peak ~30x the continuum within a factor 4
     assert e["smallest_identified"] / start_sizes(Series(y, None, RATE), 0.5)["sine"] > 0.25
     assert lim["injections_per_size"] == 3
+
+
+def test_detection_limit_is_not_below_a_response_the_record_holds_unseen() -> None:
+    """A temperature response of 1.5e-4 dps/degC in 10 min of white noise, below what the
+    diagnosis keeps (whole-record z ~3): the stated limit must not say that it would have
+    been seen. With injections of one sign each injected record held the record's own
+    response too, and 1.4e-4 more (2.9e-4 in all) was identified 3 of 3 times: a limit
+    of 1.4e-4 below the response the record holds. Alternating signs (+, -, +): the
+    negative injection cancels it, and the limit holds for either sign."""
+    n = int(600 * RATE)
+    t = np.arange(n) / RATE
+    temp = 25.0 + 3.0 * np.sin(2 * np.pi * t / 180.0) + np.sin(2 * np.pi * t / 47.0 + 1.0)
+    c = 1.5e-4
+    y = white(np.random.default_rng(1), n) + c * (temp - 25.0)
+    s = Series(y, temp, RATE, "warm")
+    assert not diagnose_channel(MODEL, "gx", s, GapOptions(seed=1)).kept
+    lim = detection_limits(MODEL, "gx", s, GapOptions(seed=0), ("temperature",))
+    e = lim["effects"]["temperature"]
+    assert e["smallest_identified"] is not None and e["smallest_identified"] > c
+    assert [injection_sign(i) for i in range(3)] == [1.0, -1.0, 1.0]
 
 
 def test_realise_matches_the_simulator_for_model_terms() -> None:
