@@ -1585,7 +1585,7 @@ def test_a_markov_candidate_must_fit_the_allan_curve_better_than_its_look_alikes
                                          for _ in range(10)]))
         cands, ev = fit_candidates(cm, fit, Series(y, None, RATE, "whole"),
                                    fit.compare(cur), cur, ("markov", "flicker", "random_walk"),
-                                   None, math.nan, cur.avar.mean(axis=0))
+                                   None, math.nan)
         return [c.effect for c in cands], ev["markov_fit"]
 
     for seed in (0, 2):

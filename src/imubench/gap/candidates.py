@@ -275,7 +275,8 @@ tau_c 10 s over a model with a large flicker term: ratio 0.76; on a quieter axis
 def markov_share(sigma: float, tau_c_s: float, tau_s: np.ndarray,
                  noise_avar: np.ndarray) -> float:
     """A fitted Gauss-Markov term's AVAR at 3 tau_c over the model's NOISE there
-    (``noise_avar``, :attr:`imubench.gap.diagnose._Step.noise_avar`); it must reach
+    (``noise_avar``, :attr:`imubench.gap.diagnose._Step.noise_feats`: the realisations'
+    mean AVAR without the kept effects' deterministic parts); it must reach
     :data:`MARKOV_DOMINANCE`.
 
     Its descent beyond ~3 tau_c (IEEE 952 C.6) is what tells it from flicker; where the
@@ -437,8 +438,7 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
                    cur: SimFeatures, effects: tuple[str, ...], step_y: np.ndarray | None,
-                   temp_record_z: float, noise_avar: np.ndarray | None
-                   ) -> tuple[list[Candidate], dict[str, Any]]:
+                   temp_record_z: float) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
     ``whole``: the whole record less the kept effects' deterministic parts (the bias
@@ -451,10 +451,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     fire;
     ``temp_record_z``: the whole-record temperature z
     (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
-    the fit part's level test does; ``noise_avar``: the current realisations' mean AVAR
-    at the fit part's taus without the kept effects' deterministic parts (the Markov
-    candidate's share, :func:`markov_share`), needed when ``effects`` holds ``markov`` or
-    ``telegraph`` (None otherwise).
+    the fit part's level test does. ``fit`` and ``cur`` are the record's fit part and
+    the realisations less the kept effects' deterministic parts
+    (:meth:`imubench.gap.parts.PartSetup.less`), so the realisations' mean AVAR is the
+    model's noise (the Markov candidate's share, :func:`markov_share`).
     """
     s = fit.series
     cands: list[Candidate] = []
@@ -464,10 +464,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     dof = cur.k - 1
     markov: tuple[float, float] | None = None  # (sigma, tau_c), shared by the telegraph
     if {"markov", "telegraph"} & set(effects):
-        if noise_avar is None:
-            raise ValueError("fit_candidates: the Markov share needs the noise AVAR")
         sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
-        share = markov_share(sg, tc, fit.tau_s, noise_avar)
+        share = markov_share(sg, tc, fit.tau_s, model_avar)
         descent = avarfit.markov_over_lookalikes(fit.tau_s, fit.real.avar, model_avar, sig,
                                                  sg, tc)
         ev["markov_fit"] = (sg, tc, float(fit.tau_s[-1]) / MARKOV_SPAN, share, descent)

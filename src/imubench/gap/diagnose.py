@@ -81,7 +81,6 @@ from imubench.gap.curves import (
     Z_SLOPE,
     Comparison,
     line_bands,
-    oavar_at,
     stat_fired,
     z_against,
 )
@@ -372,12 +371,32 @@ class _Step:
                  ) -> None:
         n_fit = len(fit.series.y)
         rate = series.rate_hz
+        self.det_sum = det_sum
         self.feats = fit.sim_features(sims[:, :n_fit])
         self.before = fit.compare(self.feats)
         self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
                      if hold is not None else None)
-        self.det_sum = det_sum
-        self._fit_afs = fit.afs
+        self.fit_part = fit.less(det_sum if np.ndim(det_sum) == 0
+                                 else np.asarray(det_sum)[:n_fit])
+        """The fit part less the kept effects' deterministic parts (:meth:`PartSetup.less`),
+        on which the candidates are fitted."""
+        self.noise_feats = (self.feats if self.fit_part is fit
+                            else self.fit_part.sim_features(sims[:, :n_fit]))
+        """The realisations' features over the fit part, each less the kept effects'
+        deterministic parts: the model's noise, against which the candidates are fitted.
+
+        The comparisons of the record with the model (:attr:`before`, :attr:`hold`) keep
+        those parts in both; a noise candidate fitted to the record's Allan variance less
+        the model's with them in sees their Allan variance and its cross term with the
+        noise, which differs from one realisation to the next, where the parts dominate.
+        An outside reviewer's Markov sigma 4.6 mdps, tau_c 30 s, beside a temperature
+        response of 6e-3 dps/degC on +-3 degC: once the response was kept the Markov
+        term's share of the realisations' Allan variance at 3 tau_c was 0.23, most of it
+        the response's (:func:`imubench.gap.candidates.markov_share`). Blind-generator
+        pair Markov 4 mdps, 30 s beside 0.01 dps/degC: after the response, the Markov's
+        descent beyond 3 tau_c was hidden the same way (fitted tau_c 49 s, not shown)
+        and a random walk of 8.2e-4 dps/sqrt(s) was kept; fitted on the record less the
+        response, sigma 4.00 mdps and tau_c 37 s."""
         self.rate_hz = rate
         self.series_parts = (fit.series, None if hold is None else hold.series)
         """The fit and held-out parts' series (the latter None without a held-out part)."""
@@ -395,31 +414,6 @@ class _Step:
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
-
-    def noise_avar(self, sims: np.ndarray) -> np.ndarray:
-        """The realisations' mean AVAR at the fit part's taus without the kept effects'
-        deterministic parts (temperature response, ramp, bias step): each realisation less
-        :attr:`det_sum` (the realisations' mean AVAR itself when there are none).
-
-        Such a part is the same in every realisation and in the record, so its Allan
-        variance hides no descent of a noise term as a noise term of that size would
-        (:func:`imubench.gap.candidates.markov_share`). An outside reviewer's Markov
-        sigma 4.6 mdps, tau_c 30 s, beside a temperature response of 6e-3 dps/degC on
-        +-3 degC: once the response was kept the Markov fit was right (4.07 mdps, 33 s),
-        but its share of the realisations' AVAR at 3 tau_c was 0.23, most of it the
-        response's, so the candidate was never tried and a random walk of 8e-4
-        dps/sqrt(s) was kept in its place. The realisations' AVAR less the response's
-        own is no estimate of the rest where the response dominates: their cross term
-        does not average out over K realisations (it went negative at 3 tau_c on the
-        reviewer's second seed). ``sims``: the realisations this step was built from
-        (a cached step does not hold them): one Allan curve per realisation, asked for only
-        where a Markov candidate is fitted."""
-        if np.ndim(self.det_sum) == 0:
-            return self.feats.avar.mean(axis=0)
-        n_fit = len(self.series_parts[0].y)
-        det = np.asarray(self.det_sum)[:n_fit]
-        return np.mean([oavar_at(x - det, self.rate_hz, self._fit_afs)
-                        for x in sims[:, :n_fit]], axis=0)
 
     def hold_drift(self) -> tuple[float, int]:
         """The held-out part's own drift test (:func:`imubench.gap.evidence.
@@ -651,10 +645,8 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     n_fit = len(fit.series.y)
     cm = variant.model[channel]
     whole = dataclasses.replace(series, y=st.residual)
-    cands, ev = fit_candidates(cm, fit, whole, st.before, st.feats, effects,
-                               st.step_y if st.step_fired else None, st.temp_z,
-                               st.noise_avar(sims) if {"markov", "telegraph"} & set(effects)
-                               else None)
+    cands, ev = fit_candidates(cm, st.fit_part, whole, st.before, st.noise_feats, effects,
+                               st.step_y if st.step_fired else None, st.temp_z)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
@@ -662,7 +654,10 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     # telegraph against Markov on the whole record: the held-out part's Allan and
     # spectral check cannot tell the two apart, so this takes nothing from that check
     two_level = ev.get("two_level")
-    shape_real = llr(series.y, rate, *two_level) if two_level is not None else math.nan
+    # (the record and the realisations less the kept effects' deterministic parts, as
+    # every comparison: a kept ramp of 0.054 dps over the fit part smeared two levels
+    # 0.008 dps apart)
+    shape_real = llr(st.residual, rate, *two_level) if two_level is not None else math.nan
     for c in cands:
         if base_kept and not c.refusal:
             joint = r.refit_base([*kept, c])
@@ -679,7 +674,7 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
         c.temp_record_z = st.temp.z(st.residual, cs, st.det_sum)
         if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
-                [llr(s, rate, *two_level) for s in cs]))
+                [llr(s, rate, *two_level) for s in cs - st.det_sum]))
         c.score = _cand_chi2(c) + penalty * c.n_params
         c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
         c.evidence_closed = st.evidence_closed(c)
@@ -851,18 +846,31 @@ class _Realiser:
         final = self.step(kept)
         drawn: list[np.ndarray] = []
         _, cms, dets = self.stages(kept)
+        n_fit = len(self.fit.series.y)
+
+        def sims() -> np.ndarray:
+            if not drawn:
+                drawn.append(self.realise(kept)[1])
+            return drawn[0]
 
         def raw_less_others(j: int) -> Callable[[], np.ndarray]:
             def raw() -> np.ndarray:
-                if not drawn:
-                    drawn.append(self.realise(kept)[1])
                 others = sum((d for i, d in enumerate(dets) if i != j), start=0.0)
-                return drawn[0] - others
+                return sims() - others
             return raw
 
         for j, c in enumerate(kept):
             ref = self.step(kept[:j])
-            boot = standard_errors(c, Refit(self.fit, final.feats, ref.feats,
+            # as the effect was fitted (_Step.noise_feats): less the deterministic parts
+            # of the effects kept before it; those of the effects kept after it left in
+            if all(np.ndim(d) == 0 for d in dets[j:]):
+                feats = final.noise_feats
+            else:
+                before = sum(dets[:j], start=0.0)
+                part = self.fit.less(before if np.ndim(before) == 0
+                                     else np.asarray(before)[:n_fit])
+                feats = part.sim_features(sims()[:, :n_fit])
+            boot = standard_errors(c, Refit(self.fit, feats, ref.noise_feats,
                                             ref.before.sigma, cms[j], raw_less_others(j)))
             c.params_se, c.params_bias, c.params_n = boot.se, boot.bias, boot.n
 
@@ -888,9 +896,9 @@ class _Realiser:
         rest = [c for c in kept if c is not base]
         st = self.step(rest)
         whole = dataclasses.replace(self.series, y=st.residual)
-        cands, _ = fit_candidates(self.variant(rest)[0].model[self.channel], self.fit, whole,
-                                  st.before, st.feats, ("sine", "base_model"), None,
-                                  st.temp_z, None)
+        cands, _ = fit_candidates(self.variant(rest)[0].model[self.channel], st.fit_part,
+                                  whole, st.before, st.noise_feats, ("sine", "base_model"),
+                                  None, st.temp_z)
         new = next(c for c in cands if c.effect == "base_model")
         new.accepted = True
         return [new if c is base else c for c in kept]

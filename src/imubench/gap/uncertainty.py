@@ -66,11 +66,13 @@ class Refit:
     """What the bootstrap of one kept effect needs.
 
     ``final``: the fit part's features of the realisations of the model with every kept
-    effect; ``reference``: those of the model the effect was added to (the effects kept
-    before it), with ``sigma`` (ln ADEV, per tau) and ``cm`` (its channel model) as the
-    fit of that step saw them; ``raw``: the final model's realisations over the whole
-    record (k, n), each less the deterministic parts of the OTHER kept effects, made on
-    demand (only the sine, outliers and bias-step estimators need samples)."""
+    effect, each less the deterministic parts of the effects kept before this one (as
+    the record was when it was fitted); ``reference``: those of the model the effect was
+    added to (the effects kept before it, less their deterministic parts), with ``sigma``
+    (ln ADEV, per tau) and ``cm`` (its channel model) as the fit of that step saw them;
+    ``raw``: the final model's realisations over the whole record (k, n), each less the
+    deterministic parts of the OTHER kept effects, made on demand (only the sine,
+    outliers and bias-step estimators need samples)."""
 
     fit: PartSetup
     final: SimFeatures
