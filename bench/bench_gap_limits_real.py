@@ -43,7 +43,10 @@ with a zero-phase filter, so taus below ~0.5 s are the filter's):
    (``imubench.noisefit.fit_channel``, the engine of ``imubench fit``, not the gap's
    Allan-residual fit) finds the term present with its 95 % interval above the model's
    value (added 2026-11-27, after a run with the quantization-law rule showed a
-   ``random_walk`` on a null). Every other named effect on a null is a false alarm.
+   ``random_walk`` on a null); ``bias_step`` -> the other sensor of the device (gyro
+   <-> accelerometer) moves at the located time on two of its three axes beyond the 99th
+   percentile of its own moves at other times (:func:`step_in_other_sensor`, added
+   2026-12-05). Every other named effect on a null is a false alarm.
 5. Shown beside top-1 (not the issue's figure): the first kept unmodelled effect after
    skipping the effect the same segment's null named and the independent check found
    (an effect the real background already has, e.g. heavy tails named ``outliers``).
@@ -192,8 +195,50 @@ def fit_larger(key: str, model_value: float, y: np.ndarray, fs: float, ch: str
                 f"[{lo:.3g}, {hi:.3g}] against the model's {model_value:.3g}")
 
 
+STEP_WINDOW_S = 600.0
+"""Window on either side of a located bias step for :func:`step_in_other_sensor`."""
+
+
+def step_in_other_sensor(t_step: float, ch: str, seg: int, recording: str
+                         ) -> tuple[bool, str]:
+    """A bias step named on a null, checked on the OTHER sensor of the same device
+    (gyro <-> accelerometer), whose data the diagnosis of this channel never saw: the
+    difference of the means of STEP_WINDOW_S on either side of the located time is
+    larger than the 99th percentile of the same difference at every other time of the
+    segment (positions a quarter window apart, those within a window of the step left
+    out), on at least two of its three axes. At random times of the CATS segments one
+    axis confirmed 7 of 80 (real data have events of their own), two axes 3 of 80. A
+    physical event (the device bumped or tilted) moves both sensors at once; a chance
+    wander of one channel does not. Added 2026-12-05 after three CATS nulls (gy, ay, az
+    of segment 1) were named `bias_step` at the same time, 28700-29000 s."""
+    other = "a" if ch[0] == "g" else "g"
+    out = []
+    beyond = 0
+    for axis in "xyz":
+        y_all, fs = load(other + axis, recording)
+        n = len(y_all) // SEGMENTS
+        y = y_all[seg * n:(seg + 1) * n]
+        w = round(STEP_WINDOW_S * fs)
+        k = round(t_step * fs)
+        if not w <= k <= len(y) - w:
+            out.append(f"{other}{axis}: step within a window of the edge")
+            continue
+        c = np.concatenate([[0.0], np.cumsum(y)])
+        at = np.arange(w, len(y) - w + 1)
+        d = (c[at + w] - 2.0 * c[at] + c[at - w]) / w  # mean after less mean before
+        d0 = float(d[k - w])
+        rest = np.abs(d[(np.abs(at - k) >= w) & ((at - w) % max(1, w // 4) == 0)])
+        q99 = float(np.quantile(rest, 0.99))
+        beyond += abs(d0) > q99
+        out.append(f"{other}{axis} {d0:+.3g} against 99th percentile {q99:.3g}")
+    return beyond >= 2, "other sensor at the step: " + "; ".join(out)
+
+
 def independent_check(verdict: str, params: dict[str, float], y: np.ndarray, fs: float,
-                      model_value: float = 0.0, ch: str = "") -> tuple[bool, str]:
+                      model_value: float = 0.0, ch: str = "", seg: int = 0,
+                      recording: str = "s5") -> tuple[bool, str]:
+    if verdict == "bias_step" and recording in ("s5", "cats"):
+        return step_in_other_sensor(params["step_time_s"], ch, seg, recording)
     if verdict == "outliers":
         return heavy_tails(y, fs)
     if verdict in FIT_TERMS:
@@ -332,7 +377,7 @@ def run_segment(ch: str, ci: int, seg: int, model, y: np.ndarray, fs: float,
         key = FIT_TERMS.get(d.verdict, "")
         c.in_data, c.check = independent_check(
             d.verdict, d.winner.params, y, fs,
-            float(getattr(model[ch], key)) if key else 0.0, ch)
+            float(getattr(model[ch], key)) if key else 0.0, ch, seg, recording)
         c.check = f"independent check: {'IN DATA' if c.in_data else 'not found'} ({c.check})"
     elif d.verdict not in NULL_OK:
         c.check = "no effect named" if d.verdict == "unexplained" else ""
