@@ -254,19 +254,9 @@ class PartSetup:
         """This part with ``det`` (a deterministic part over its samples: the kept
         effects' temperature response, ramp and bias step; 0.0 for none) taken out of the
         record, and out of each realisation :meth:`sim_features` is given: the
-        realisations of a model with those effects carry the same ``det``, so what is
-        compared is the noise of each.
-
-        Compared with the deterministic part left in, an Allan variance holds
-        ``AVAR(noise) + AVAR(det)`` and their cross term, which differs from one
-        realisation to the next; where ``det`` dominates, the realisations' spread is
-        that cross term's, and a noise process that does not fit the record passes
-        unseen. An outside-style blind pair, a Gauss-Markov process (4 mdps, tau_c 30 s)
-        beside a temperature response of 0.01 dps/degC (+-3 degC): with the response
-        kept, a random walk of 8.2e-4 dps/sqrt(s) closed the held-out gap, though its
-        Allan deviation at 315 s is 8.2 mdps against the record's 2.1 mdps less the
-        response (Markov and white noise: 1.7 mdps); the Markov process, whose descent
-        beyond 3 tau_c was hidden the same way, was never fitted."""
+        realisations of a model with those effects carry the same ``det``, so what each
+        holds then is noise. The forward selection fits its candidates on such a view
+        (:attr:`imubench.gap.diagnose._Step.noise_feats` says why)."""
         if np.ndim(det) == 0 and float(det) == 0.0:
             return self
         view = copy.copy(self)
