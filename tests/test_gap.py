@@ -312,6 +312,8 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
         assert "gap_null_after" in c
         for r_ in c["regions"]:
             assert {"tau_min_s", "tau_max_s", "direction"} <= set(r_)
+        for b in c["bands"]:
+            assert {"f_min_hz", "f_max_hz", "direction", "z_max", "z_max_after"} <= set(b)
         for e in c["effects"]:
             assert {"effect", "params", "gap_after"} <= set(e)
         assert c["verdict"] in (*CASES, "none", "unexplained")

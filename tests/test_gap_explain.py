@@ -698,6 +698,16 @@ def test_each_fired_statistic_is_followed_up_after_the_kept_effects() -> None:
     lines = explain_channel(c, 10)
     assert ("region gap 0.729 -> 0.05; the whole Allan curve's shape chi-squared 170.7 -> "
             "4.0 (threshold 16.5); the temperature") in "\n".join(lines)
+    # a band run that fired is followed up too (a reviewer: the bands were never said
+    # again once an effect was kept); a NaN after-value (no band left there) is not
+    c["bands"] = [{"f_min_hz": 0.00635, "f_max_hz": 0.0285, "direction": "real_above",
+                   "z_max": 7.05, "z_max_after": 1.24},
+                  {"f_min_hz": 20.0, "f_max_hz": 24.5, "direction": "real_below",
+                   "z_max": 5.0, "z_max_after": float("nan")}]
+    lines = explain_channel(c, 10)
+    assert ("region gap 0.729 -> 0.05; the spectrum real above over 0.00635-0.0285 Hz, "
+            "largest |z| 7.0 -> 1.2; the whole Allan curve's shape") in "\n".join(lines)
+    assert "over 20-24.5 Hz, largest" not in "\n".join(lines)
     # the detections say what fired before any effect, and nothing after
     found = next(x for x in lines if x.startswith("Significant on the fit part"))
     assert "->" not in found and "the whole Allan curve's shape (chi-squared 170.7" in found

@@ -533,6 +533,19 @@ def test_detection_limit_is_not_below_a_response_the_record_holds_unseen() -> No
     assert [injection_sign(i) for i in range(3)] == [1.0, -1.0, 1.0]
 
 
+def test_each_fired_band_run_is_read_again_after_the_kept_effects() -> None:
+    """JSON ``bands[].z_max_after``: the largest |z| of a band run that fired, over the
+    same bands, against the model with the kept effects (a random walk here)."""
+    n = int(1800 * RATE)
+    rng = np.random.default_rng(3)
+    y = white(rng, n) + np.cumsum(1e-3 * math.sqrt(1.0 / RATE) * rng.standard_normal(n))
+    d = diagnose_channel(MODEL, "gx", Series(y, None, RATE, "walk"),
+                         GapOptions(seed=2, realisations=5))
+    assert [c.effect for c in d.kept] == ["random_walk"]
+    bands = d.to_dict()["bands"]
+    assert bands and all(b["z_max"] > 5.0 > 2.0 > b["z_max_after"] for b in bands), bands
+
+
 def test_realise_matches_the_simulator_for_model_terms() -> None:
     """A kept simulator term is realised by the simulator; sanity of the variant path."""
     from imubench.gap.diagnose import Variant

@@ -275,6 +275,16 @@ class Comparison:
         sel &= np.isfinite(self.d)
         return float(np.sqrt(np.mean(self.d[sel] ** 2))) if sel.any() else float("nan")
 
+    def band_mask(self, f_lo_hz: float, f_hi_hz: float) -> np.ndarray:
+        """The spectral bands whose centres lie in [f_lo_hz, f_hi_hz]."""
+        return (self.band_f_hz >= f_lo_hz) & (self.band_f_hz <= f_hi_hz)
+
+    def band_z_over(self, f_lo_hz: float, f_hi_hz: float) -> float:
+        """Largest |z| of the spectral bands in [f_lo_hz, f_hi_hz] (:meth:`band_mask`),
+        as a band run's ``z_max``; NaN where there is none."""
+        sel = self.band_mask(f_lo_hz, f_hi_hz) & np.isfinite(self.band_z)
+        return float(np.max(np.abs(self.band_z[sel]))) if sel.any() else float("nan")
+
     def region_gap(self, regions: list[Region]) -> float:
         """RMS of ln(ADEV_real / ADEV_sim) over the union of the regions' taus."""
         sel = np.zeros(self.tau_s.size, dtype=bool)
@@ -298,8 +308,7 @@ class Comparison:
             taus |= (self.tau_s >= r.tau_min_s * 0.999) & (self.tau_s <= r.tau_max_s * 1.001)
         bands = np.zeros(self.band_f_hz.size, dtype=bool)
         for b in before.bands:
-            bands |= (self.band_f_hz >= float(b["f_min_hz"])) & (
-                self.band_f_hz <= float(b["f_max_hz"]))
+            bands |= self.band_mask(float(b["f_min_hz"]), float(b["f_max_hz"]))
         dof = before.realisations - 1
         z = [*self.z[taus], *self.band_z[bands]]
         for name, z_norm, one_sided in STAT_TESTS:

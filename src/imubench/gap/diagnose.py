@@ -261,7 +261,7 @@ class ChannelDiagnosis:
             "gap_excess_floor": self.before.gap_excess_floor,
             "gap_excess_floor_after": ff.gap_excess_floor,
             "holdout": None,
-            "bands": self.before.bands,
+            "bands": [dict(b) for b in self.before.bands],
             "line": {"f_hz": self.before.line_f_hz, "z": self.before.line_z},
             "impulses_z": self.before.tail_z,
             "temperature_slope_z": self.before.temp_z,
@@ -282,6 +282,8 @@ class ChannelDiagnosis:
             self._slope_at_mean(entry)
         for rd, r in zip(out["regions"], self.before.regions, strict=True):
             rd["gap_after"] = ff.gap_over(r.tau_min_s, r.tau_max_s)
+        for bd in out["bands"]:
+            bd["z_max_after"] = ff.band_z_over(float(bd["f_min_hz"]), float(bd["f_max_hz"]))
         if self.holdout_before is not None:
             hb = self.holdout_before
             ha = self.final_holdout or hb

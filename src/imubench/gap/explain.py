@@ -189,7 +189,8 @@ def _whole_record(c: dict[str, Any]) -> list[str]:
 
 def _after_kept(c: dict[str, Any], dof: int) -> str:
     """'After the kept effects: name before -> after, ...' for each Allan region (its
-    gap), single statistic and whole-record test that fired at the first step (empty
+    gap), spectral band run (its largest |z|), single statistic and whole-record test that
+    fired at the first step (empty
     without a kept effect or the JSON's ``statistics_after``): how far the kept effects
     explain each detection."""
     after, whole_after = c.get("statistics_after"), c.get("whole_record_after")
@@ -202,6 +203,10 @@ def _after_kept(c: dict[str, Any], dof: int) -> str:
     out = [f"the Allan curve {r['direction'].replace('_', ' ')} "
            f"{_span(r['tau_min_s'], r['tau_max_s'], 's')}, region gap {_f(r['gap'])} -> "
            f"{_f(r['gap_after'])}" for r in c["regions"] if r.get("gap_after") is not None]
+    out += [f"the spectrum {b['direction'].replace('_', ' ')} "
+            f"{_span(b['f_min_hz'], b['f_max_hz'], 'Hz')}, largest |z| {b['z_max']:.1f} -> "
+            f"{b['z_max_after']:.1f}" for b in c.get("bands") or []
+            if b.get("z_max_after") is not None and math.isfinite(b["z_max_after"])]
     g, ga = c.get("global") or {}, c.get("global_after") or {}
     if g.get("fired") and ga.get("chi2_smooth") is not None:
         out.append(f"the whole Allan curve's shape chi-squared {g['chi2_smooth']:.1f} -> "
