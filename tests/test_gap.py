@@ -314,6 +314,8 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
             assert {"tau_min_s", "tau_max_s", "direction"} <= set(r_)
         for b in c["bands"]:
             assert {"f_min_hz", "f_max_hz", "direction", "z_max", "z_max_after"} <= set(b)
+        for k in c["kept"]:
+            assert k["holdout_region_gap_after"] is not None
         for e in c["effects"]:
             assert {"effect", "params", "gap_after"} <= set(e)
         assert c["verdict"] in (*CASES, "none", "unexplained")
@@ -325,6 +327,8 @@ def test_cli_end_to_end(csv_rec: tuple[Path, Path], tmp_path: Path) -> None:
     assert gy["effects"][0]["params"]["temp_coeff"] == pytest.approx(0.008, rel=0.2)
     assert gy["holdout"]["gap_after"] < 0.5 * gy["holdout"]["gap_before"]
     assert gy["holdout"]["gap_excess_after"] < 0.3 * gy["holdout"]["gap_excess_before"]
+    assert gy["kept"][-1]["holdout_region_gap_after"] == pytest.approx(
+        gy["holdout"]["region_gap_after"])
     for f in ("index.html", "gx_adev.png", "gx_adev.svg", "gy_evidence.png",
               "gy_evidence.svg"):
         assert (rep / f).stat().st_size > 0, f

@@ -284,6 +284,9 @@ class ChannelDiagnosis:
             rd["gap_after"] = ff.gap_over(r.tau_min_s, r.tau_max_s)
         for bd in out["bands"]:
             bd["z_max_after"] = ff.band_z_over(float(bd["f_min_hz"]), float(bd["f_max_hz"]))
+        for kd, c in zip(out["kept"], self.kept, strict=True):
+            if c.holdout is not None:
+                kd["holdout_region_gap_after"] = c.holdout.region_gap(self.before.regions)
         if self.holdout_before is not None:
             hb = self.holdout_before
             ha = self.final_holdout or hb
