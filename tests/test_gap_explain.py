@@ -765,3 +765,30 @@ def test_report_lists_the_kept_effects_with_their_standard_errors() -> None:
             "dps/sqrt(s), refits read 8.9e-05 high (corrected 0.000363)</td><td>0.17</td>"
             "<td>0.3</td>") in table
     assert _kept_table([], {}) == ""
+
+
+def test_a_close_alternative_that_was_not_taken_is_said() -> None:
+    """An outside reviewer: a random walk kept alone where the temperature tests had fired
+    (z 10.3), with nothing said of the temperature + Markov pair the other selection kept
+    and the held-out part favoured. The JSON's ``alternative`` is said, with why it lost."""
+    rw = dict(RW_EFFECT, params={"random_walk": 8.03e-4}, holdout_gap_after=0.15)
+    alt = {"kept": [{"effect": "temperature", "params": {"temp_coeff": 0.00355}},
+                    {"effect": "markov", "params": {"markov_sigma": 0.00398,
+                                                    "markov_tau": 33.1}}],
+           "score": 73.4, "score_kept": 70.7, "n_params": 3, "n_params_kept": 1,
+           "holdout_excess": 0.0509, "holdout_excess_kept": 0.12, "holdout_scatter": 0.0994}
+    c = _entry("random_walk", effects=[rw], kept=[rw], alternative=alt)
+    text = "\n".join(explain_channel(c, 10))
+    assert ("Not kept, though it also explains the record: temperature (temp_coeff = "
+            "0.00355) + markov (markov_sigma = 0.00398, markov_tau = 33.1), the selection "
+            "that examines first") in text, text
+    assert ("It scores 73.4 against 70.7 for the kept effects on the fit part (3 parameters "
+            "against 1; lower is better), held-out gap's excess over its scatter 0.0509 "
+            "against 0.12 (scatter 0.0994); the held-out part favours it; not taken "
+            "because it does not score lower on the fit part.") in text
+    alt.update(score=60.0, holdout_excess=0.3)
+    text = "\n".join(explain_channel(c, 10))
+    assert "favours it" not in text
+    assert "not taken because its held-out gap's excess is above the kept effects'" in text
+    c["alternative"] = None
+    assert "Not kept, though" not in "\n".join(explain_channel(c, 10))

@@ -209,6 +209,9 @@ class ChannelDiagnosis:
     (:func:`_exchange`) or the backward step (:func:`_prune`) dropped, each with its
     ``note``."""
     replicates: list[tuple[str, Comparison, Comparison | None]] = field(default_factory=list)
+    alternative: dict[str, Any] | None = None
+    """Another set of effects that explains the record nearly as well and was not kept
+    (:attr:`_Path.alternative`; JSON ``alternative``, None when there is none)."""
     temp_mean_c: float = float("nan")
     """The record's mean temperature (degC; NaN without one)."""
     temp_ref_c: float = float("nan")
@@ -277,6 +280,7 @@ class ChannelDiagnosis:
             "not_fitted": dict(self.evidence.get("not_fitted", {})),
             "global": self.before.global_dict(),
             "background": self.background,
+            "alternative": self.alternative,
         }
         for entry in (out["effects"] + out["kept"] + out["dropped"] + out["not_kept"]):
             self._slope_at_mean(entry)
@@ -1129,6 +1133,9 @@ class _Path:
     """The first step's candidates, ranked."""
     ev0: dict[str, Any]
     """The first step's evidence."""
+    alternative: dict[str, Any] | None = None
+    """The selection that examined the fired deterministic effects first, where it kept
+    other effects and was not taken (:func:`_better_start`; JSON ``alternative``)."""
 
 
 def _fired_effects(st: _Step) -> tuple[str, ...]:
@@ -1250,6 +1257,13 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     (s_main, h_main), (s_alt, h_alt) = score(main), score(alt)
     scatter = first.hold.gap_null if first.hold is not None else 0.0
     if not (s_alt < s_main and h_alt - h_main <= scatter):
+        main.alternative = {
+            "kept": [{"effect": c.effect, "params": c.params} for c in alt.kept],
+            "score": s_alt, "score_kept": s_main,
+            "n_params": sum(c.n_params for c in alt.kept),
+            "n_params_kept": sum(c.n_params for c in main.kept),
+            "holdout_excess": h_alt, "holdout_excess_kept": h_main,
+            "holdout_scatter": scatter}
         return main, []
     names = " + ".join(c.effect for c in alt.kept)
     gone = [c for c in main.kept if c.effect not in {a.effect for a in alt.kept}]
@@ -1396,7 +1410,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                                          else math.nan),
                             temp_ref_c=float(cm0.temp_ref),
                             residual_significant=residual, background=bg_summary,
-                            pruned=pruned, not_kept=not_kept if residual else [])
+                            pruned=pruned, not_kept=not_kept if residual else [],
+                            alternative=path.alternative)
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag

@@ -555,7 +555,34 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
         else:
             why = ""
         out.append(f"A significant departure remains after the kept effects{why}.")
+    alt = _alternative_line(c, units)
+    if alt:
+        out.append(alt)
     return out
+
+
+def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
+    """'Not kept, though it explains the record too: ...' for the JSON's ``alternative``
+    (the selection that examined the fired deterministic effects first and kept other
+    effects), with why it was not taken; empty without one."""
+    a = c.get("alternative")
+    if not a:
+        return ""
+    names = " + ".join(f"{k['effect']} ({params_text(k['params'], units)})" for k in a["kept"])
+    worse_score = a["score"] >= a["score_kept"]
+    why = ("it does not score lower on the fit part" if worse_score
+           else "its held-out gap's excess is above the kept effects' by more than the "
+                "scatter")
+    favour = ("; the held-out part favours it" if a["holdout_excess"] < a["holdout_excess_kept"]
+              and worse_score else "")
+    return (f"Not kept, though it also explains the record: {names}, the selection that "
+            f"examines first the effects whose own whole-record tests fired. It scores "
+            f"{a['score']:.1f} against {a['score_kept']:.1f} for the kept effects on the fit "
+            f"part ({a['n_params']} parameters against {a['n_params_kept']}; lower is "
+            f"better), held-out gap's excess over its scatter {_f(a['holdout_excess'])} "
+            f"against {_f(a['holdout_excess_kept'])} (scatter {_f(a['holdout_scatter'])})"
+            f"{favour}; not taken because {why}. The data tell the two apart only by "
+            "these figures.")
 
 
 FIRED_WORDS = {"regions": "the Allan curve", "bands": "the spectrum",
