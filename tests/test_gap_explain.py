@@ -792,3 +792,16 @@ def test_a_close_alternative_that_was_not_taken_is_said() -> None:
     assert "not taken because its held-out gap's excess is above the kept effects'" in text
     c["alternative"] = None
     assert "Not kept, though" not in "\n".join(explain_channel(c, 10))
+
+
+def test_the_verdicts_own_closure_says_it_is_its_own_beside_other_kept_effects() -> None:
+    """An outside reviewer read 'modelling it closes 81 %' as the closure of all kept
+    effects (100 %, in the parenthesis after 'Also kept')."""
+    temp = dict(TEMP_EFFECT, holdout_gap_excess_after=0.074, holdout_gap_after=0.12)
+    rw = dict(RW_EFFECT, holdout_gap_excess_after=0.0, holdout_gap_after=0.09)
+    c = _entry("temperature", effects=[temp, rw], kept=[temp, rw])
+    line = explain_channel(c, 10)[0]
+    assert "; modelling it on its own closes 81% of the systematic" in line, line
+    assert "(all kept effects together close 95% of" in line, line
+    c["kept"] = [temp]
+    assert "; modelling it closes 81%" in explain_channel(c, 10)[0]

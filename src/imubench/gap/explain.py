@@ -420,6 +420,8 @@ def headline(c: dict[str, Any], realisations: int,
                               1)
     if verdict == "bias_step" and alone.startswith("; modelling it closes "):
         alone += f" ({STEP_NOT_INDEPENDENT})"
+    if others and alone.startswith("; modelling it closes "):  # read as all of them (a reviewer)
+        alone = alone.replace("; modelling it closes ", "; modelling it on its own closes ", 1)
     text = text[0].upper() + text[1:] + alone + "."
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units, k)
