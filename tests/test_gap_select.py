@@ -873,7 +873,8 @@ def test_a_sine_is_not_called_a_resonance() -> None:
                          GapOptions(seed=2, realisations=4, effects=("resonance", "sine")))
     assert d.verdict == "sine"
     res = [c for c in d.candidates if c.effect == "resonance"]
-    assert res and all("a spectral line (the sine's)" in c.refusal for c in res)
+    assert res and all("a spectral line's width (the sine candidate's shape)" in c.refusal
+                       for c in res)
 
 
 def test_a_model_channel_without_noise_is_a_clear_error() -> None:

@@ -526,7 +526,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                         cands[-1].refusal = (
                             f"narrower than {PEAK_MIN_BINS} bins of the spectrum "
                             f"({rf.resonance_width_hz:.3g} Hz against {PEAK_MIN_BINS} x "
-                            f"{df:.3g} Hz): a spectral line (the sine's), not a resonance")
+                            f"{df:.3g} Hz): a spectral line's width (the sine "
+                            "candidate's shape), not a resonance")
         elif eff == "temperature":
             gate, gate_level = _temperature_gates(dof)
             if s.has_temperature and (abs(before.temp_z) > gate
