@@ -779,9 +779,9 @@ def test_a_close_alternative_that_was_not_taken_is_said() -> None:
            "holdout_excess": 0.0509, "holdout_excess_kept": 0.12, "holdout_scatter": 0.0994}
     c = _entry("random_walk", effects=[rw], kept=[rw], alternative=alt)
     text = "\n".join(explain_channel(c, 10))
-    assert ("Not kept, though it also explains the record: temperature (temp_coeff = "
-            "0.00355) + markov (markov_sigma = 0.00398, markov_tau = 33.1), the selection "
-            "that examines first") in text, text
+    assert ("Examined and not kept: temperature (temp_coeff = 0.00355) + markov "
+            "(markov_sigma = 0.00398, markov_tau = 33.1), kept by the selection that "
+            "examines first") in text, text
     assert ("It scores 73.4 against 70.7 for the kept effects on the fit part (3 parameters "
             "against 1; lower is better), held-out gap's excess over its scatter 0.0509 "
             "against 0.12 (scatter 0.0994); the held-out part favours it; not taken "
@@ -791,7 +791,7 @@ def test_a_close_alternative_that_was_not_taken_is_said() -> None:
     assert "favours it" not in text
     assert "not taken because its held-out gap's excess is above the kept effects'" in text
     c["alternative"] = None
-    assert "Not kept, though" not in "\n".join(explain_channel(c, 10))
+    assert "Examined and not kept" not in "\n".join(explain_channel(c, 10))
 
 
 def test_the_verdicts_own_closure_says_it_is_its_own_beside_other_kept_effects() -> None:

@@ -564,7 +564,7 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
 
 
 def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
-    """'Not kept, though it explains the record too: ...' for the JSON's ``alternative``
+    """'Examined and not kept: ...' for the JSON's ``alternative``
     (the selection that examined the fired deterministic effects first and kept other
     effects), with why it was not taken; empty without one."""
     a = c.get("alternative")
@@ -577,14 +577,13 @@ def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None)
                 "scatter")
     favour = ("; the held-out part favours it" if a["holdout_excess"] < a["holdout_excess_kept"]
               and worse_score else "")
-    return (f"Not kept, though it also explains the record: {names}, the selection that "
-            f"examines first the effects whose own whole-record tests fired. It scores "
-            f"{a['score']:.1f} against {a['score_kept']:.1f} for the kept effects on the fit "
-            f"part ({a['n_params']} parameters against {a['n_params_kept']}; lower is "
-            f"better), held-out gap's excess over its scatter {_f(a['holdout_excess'])} "
-            f"against {_f(a['holdout_excess_kept'])} (scatter {_f(a['holdout_scatter'])})"
-            f"{favour}; not taken because {why}. The data tell the two apart only by "
-            "these figures.")
+    return (f"Examined and not kept: {names}, kept by the selection that examines first "
+            f"the effects whose own whole-record tests fired. It scores {a['score']:.1f} "
+            f"against {a['score_kept']:.1f} for the kept effects on the fit part "
+            f"({a['n_params']} parameters against {a['n_params_kept']}; lower is better), "
+            f"held-out gap's excess over its scatter {_f(a['holdout_excess'])} against "
+            f"{_f(a['holdout_excess_kept'])} (scatter {_f(a['holdout_scatter'])}){favour}; "
+            f"not taken because {why}.")
 
 
 FIRED_WORDS = {"regions": "the Allan curve", "bands": "the spectrum",
