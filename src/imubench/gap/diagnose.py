@@ -672,11 +672,10 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     # 0.008 dps apart)
     shape_real = llr(st.residual, rate, *two_level) if two_level is not None else math.nan
     for c in cands:
-        members = [*kept, c]
         if base_kept and not c.refusal:
-            members = r.refit_base(members)
-            c.base_refit = next(x for x in members if x.effect == "base_model")
-            cs = r.realise(members)[1]
+            joint = r.refit_base([*kept, c])
+            c.base_refit = next(x for x in joint if x.effect == "base_model")
+            cs = r.realise(joint)[1]
         else:
             cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds,
                                 sims, local_sum)
@@ -685,8 +684,7 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
         det = deterministic(c.effect, c.params, cm, series)
         c.drift_t = (evidence.drift_statistic(st.residual - det, rate)[0]
                      if det is not None else st.drift_t)
-        cm_c = r.variant(members)[0].model[channel]
-        c.temp_record_z = r.temperature_for(cm_c).z(st.residual, cs, st.det_sum)
+        c.temp_record_z = st.temp.z(st.residual, cs, st.det_sum)
         if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
                 [llr(s, rate, *two_level) for s in cs - st.det_sum]))
@@ -808,23 +806,6 @@ class _Realiser:
         self.model, self.channel, self.series, self.seeds = model, channel, series, seeds
         self.fit, self.hold, self.temp = fit, hold, temp
         self._steps: dict[tuple[tuple[str, tuple[tuple[str, float], ...]], ...], _Step] = {}
-        self._temps: dict[ChannelModel, RecordTemperature] = {model[channel]: temp}
-
-    def temperature_for(self, cm: ChannelModel) -> RecordTemperature:
-        """The whole-record temperature test under the covariance of ``cm``'s noise (the
-        model being scored: the base model's with the kept and candidate noise terms).
-
-        The test's z is against the realisations of that model, so it is calibrated under
-        any covariance, but a GLS slope weighted for the base model's white and flicker
-        noise is far from efficient under a random walk or a Gauss-Markov process, and
-        the realisations' spread then hides a response. An outside reviewer's Markov
-        (4 mdps, 30 s) beside 3e-3 dps/degC: the temperature z 10.3 fell to 1.4 against
-        the realisations of a random walk of 8.0e-4 dps/sqrt(s), which then scored better
-        than temperature + Markov (the response and the process right within 20 %) and
-        was kept alone, 2 seeds of 3."""
-        if cm not in self._temps:
-            self._temps[cm] = RecordTemperature(cm, self.series)
-        return self._temps[cm]
 
     def stages(self, kept: list[Candidate]
                ) -> tuple[Variant, list[ChannelModel], list[np.ndarray | float]]:
@@ -858,9 +839,8 @@ class _Realiser:
         run's seeds); built from them when it is not cached yet."""
         key = self._key(kept)
         if key not in self._steps:
-            variant, det = self.variant(kept)
-            self._steps[key] = _Step(self.fit, self.hold, sims, self.series,
-                                     self.temperature_for(variant.model[self.channel]), det)
+            self._steps[key] = _Step(self.fit, self.hold, sims, self.series, self.temp,
+                                     self.variant(kept)[1])
         return self._steps[key]
 
     def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, _Step]:
