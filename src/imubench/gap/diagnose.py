@@ -668,8 +668,8 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     # spectral check cannot tell the two apart, so this takes nothing from that check
     two_level = ev.get("two_level")
     # (the record and the realisations less the kept effects' deterministic parts, as
-    # every comparison: a kept ramp of 0.054 dps over the fit part smeared two levels
-    # 0.008 dps apart)
+    # the candidates are fitted, _Step.noise_feats: a kept ramp of 0.054 dps over the fit
+    # part smeared two levels 0.008 dps apart)
     shape_real = llr(st.residual, rate, *two_level) if two_level is not None else math.nan
     for c in cands:
         if base_kept and not c.refusal:
