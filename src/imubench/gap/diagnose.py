@@ -875,14 +875,9 @@ class _Realiser:
         for j, c in enumerate(kept):
             ref = self.step(kept[:j])
             # as the effect was fitted (_Step.noise_feats): less the deterministic parts
-            # of the effects kept before it; those of the effects kept after it left in
-            if all(np.ndim(d) == 0 for d in dets[j:]):
-                feats = final.noise_feats
-            else:
-                before = sum(dets[:j], start=0.0)
-                part = self.fit.less(before if np.ndim(before) == 0
-                                     else np.asarray(before)[:n_fit])
-                feats = part.sim_features(sims()[:, :n_fit])
+            # of the effects kept before it (ref.fit_part's); those kept after it left in
+            feats = (final.noise_feats if all(np.ndim(d) == 0 for d in dets[j:])
+                     else ref.fit_part.sim_features(sims()[:, :n_fit]))
             boot = standard_errors(c, Refit(self.fit, feats, ref.noise_feats,
                                             ref.before.sigma, cms[j], raw_less_others(j)))
             c.params_se, c.params_bias, c.params_n = boot.se, boot.bias, boot.n

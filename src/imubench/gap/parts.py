@@ -269,8 +269,10 @@ class PartSetup:
 
     def sim_features(self, sims: np.ndarray) -> SimFeatures:
         """The features of each realisation (rows of ``sims``) less :attr:`det`."""
-        return stack([features(s - self.det, self.series.rate_hz, self.afs, self.edges,
-                               self.nperseg, self.series.temp_c) for s in sims])
+        if np.ndim(self.det) > 0:
+            sims = sims - self.det
+        return stack([features(s, self.series.rate_hz, self.afs, self.edges, self.nperseg,
+                               self.series.temp_c) for s in sims])
 
     def compare(self, sims: SimFeatures) -> Comparison:
         return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr,
