@@ -1370,6 +1370,28 @@ def test_a_ramp_whose_held_out_part_drifts_otherwise_is_refused() -> None:
         "temperature_note"]
 
 
+def test_a_ramp_is_refused_where_the_held_out_part_drifts_the_other_way() -> None:
+    """The held-out drift rule on its own: the second half of the sweep above, its
+    parabola rising, drifts up at t > 7, which refuses a falling ramp fitted on the first
+    half and not a rising one; a flat white half refuses neither."""
+    from imubench.gap.diagnose import _drifts_the_other_way
+    from imubench.gap.evidence import drift_statistic
+
+    n = int(1800 * RATE)
+    t = np.arange(n) / RATE
+    temp = 32.5 + 17.5 * t / t[-1]
+    rng = np.random.default_rng(3)
+    rising = white_flicker(rng, n, RATE, 0.004, 0.0008) + 1e-3 * (temp - 25.0) ** 2
+    t_hold, dof = drift_statistic(rising, RATE)
+    assert t_hold > 7.0
+    note = _drifts_the_other_way(-1.3e-4, t_hold, dof)
+    assert note.startswith("the held-out part drifts the other way (drift t"), note
+    assert _drifts_the_other_way(1.3e-4, t_hold, dof) == ""
+    flat = white_flicker(rng, n, RATE, 0.004, 0.0)
+    assert _drifts_the_other_way(-1.3e-4, *drift_statistic(flat, RATE)) == ""
+    assert _drifts_the_other_way(-1.3e-4, math.nan, 1) == ""
+
+
 def test_a_held_out_part_without_temperature_change_is_said_to_be_no_test() -> None:
     """A warm-up that ends in the fit part leaves the held-out part at one temperature:
     the temperature response's refusal says so (an outside reviewer's 20 -> 30 degC,

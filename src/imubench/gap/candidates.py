@@ -165,6 +165,10 @@ class Candidate:
     """Which estimator fitted a temperature response: ``gls`` (the block-mean increments'
     GLS slope), ``levels`` or ``levels_quadratic`` (least squares of the block-mean
     levels); empty for the other effects, which have one estimator each."""
+    backfitted: bool = False
+    """Fitted on the record less EVERY other kept effect's deterministic part (the
+    backfitting of :func:`imubench.gap.diagnose._refit_deterministic`), not only those of
+    the effects kept before it; its standard error's refits are made the same way."""
     params_se: dict[str, float] = field(default_factory=dict)
     """Standard error of each fitted parameter (:func:`imubench.gap.uncertainty.
     standard_errors`); filled for the kept effects once the selection is over."""
@@ -541,8 +545,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     {"temp_coeff": cm.temp_coeff, "temp_coeff2": cm.temp_coeff2}, s.temp_c,
                     cm.temp_ref)
                 tf = evidence.fit_temperature(lacking, s.temp_c, s.rate_hz, cm.temp_ref)
-                gls = (float(fit.temp.slopes(lacking[None, :])[0]) if fit.temp is not None
-                       else math.nan)
+                # under the covariance of the noise of the model it is added to (the
+                # base model's with the kept noise terms): generalised least squares is
+                # the best linear unbiased estimator under the noise's own covariance
+                # (Aitken 1935), not under the base model's white and flicker alone
+                temp = RecordTemperature(cm, s)
+                gls = float(temp.slopes(lacking[None, :])[0])
                 if math.isfinite(gls):
                     # the model-GLS slope beside a trend (the level test's), which a ramp
                     # or a slow wander does not bias as it does the levels' least squares
@@ -562,7 +570,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     cands[-1].refusal = (
                         _curvature_refusal(tf.block_temp_c, cm.temp_ref,
                                            cands[-1].params["temp_coeff"])
-                        or _flat_curvature(fit.temp, lacking, cm.temp_ref))
+                        or _flat_curvature(temp, lacking, cm.temp_ref))
         elif eff == "outliers" and before.tail_z > Z_TAIL_CANDIDATE:
             of = evidence.fit_outliers(s.y, s.rate_hz, float(cur.impulses.mean()))
             if of is not None:

@@ -54,7 +54,7 @@ from lsm6ds_sim.model import ChannelModel
 from imubench.gap import avarfit, evidence
 from imubench.gap.candidates import Candidate, filter_power_gain
 from imubench.gap.curves import SimFeatures, gls_slopes, line_segment
-from imubench.gap.parts import PartSetup
+from imubench.gap.parts import PartSetup, RecordTemperature
 from imubench.noisefit.spectral_line import SCAN_LOW_FRACTION
 
 MIN_REFITS = 5
@@ -131,7 +131,7 @@ def _refits(c: Candidate, r: Refit) -> dict[str, list[float]]:
     if eff == "ramp":
         return {"ramp": list(r.final.trend_slope)}
     if eff == "temperature":
-        return _temperature(c, fit, r.final, r.cm.temp_ref)
+        return _temperature(c, fit, r.final, r.cm)
     if eff == "resonance":
         ref_psd = r.reference.psd.mean(axis=0)
         g2 = c.output_gain2
@@ -165,25 +165,26 @@ def _refits(c: Candidate, r: Refit) -> dict[str, list[float]]:
     raise ValueError(f"standard_errors: no estimator for the effect {eff!r}")
 
 
-def _temperature(c: Candidate, fit: PartSetup, final: SimFeatures, temp_ref_c: float
+def _temperature(c: Candidate, fit: PartSetup, final: SimFeatures, cm: ChannelModel
                  ) -> dict[str, list[float]]:
     """The temperature coefficients of each realisation's block means (the blocks of
     :func:`imubench.gap.curves.temperature_blocks`), by the estimator that fitted ``c``:
-    ``gls`` (:meth:`imubench.gap.parts.RecordTemperature.slopes`: increments, the base
-    model's covariance), ``levels`` or ``levels_quadratic`` (least squares of the levels
-    on dT, and dT^2, beside a constant, :func:`imubench.gap.evidence.fit_temperature`)."""
+    ``gls`` (:meth:`imubench.gap.parts.RecordTemperature.slopes`: increments, the
+    covariance of the noise of ``cm``, the model the effect was added to), ``levels`` or
+    ``levels_quadratic`` (least squares of the levels on dT, and dT^2, beside a
+    constant, :func:`imubench.gap.evidence.fit_temperature`)."""
     yb, tb = final.temp_yb, fit.real.temp_tb
     fitted = ["temp_coeff"] + ["temp_coeff2"] * (c.estimator == "levels_quadratic")
     empty: dict[str, list[float]] = {k: [] for k in fitted}
     if yb is None or tb is None or yb.shape[1] != len(tb):
         return empty
     if c.estimator == "gls":
-        temp = fit.temp
-        if temp is None or temp.chol is None or temp.tb is None or len(temp.tb) != len(tb):
+        temp = RecordTemperature(cm, fit.series)
+        if temp.chol is None or temp.tb is None or len(temp.tb) != len(tb):
             return empty
         return {"temp_coeff": list(gls_slopes(np.diff(yb, axis=1), np.diff(tb),
                                               temp.chol)[0])}
-    coef = evidence.temperature_levels(yb.T, tb, temp_ref_c,
+    coef = evidence.temperature_levels(yb.T, tb, cm.temp_ref,
                                        quadratic=c.estimator == "levels_quadratic")
     out = {"temp_coeff": list(coef[1])}
     if c.estimator == "levels_quadratic":
