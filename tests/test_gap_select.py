@@ -1620,7 +1620,8 @@ def test_a_markov_candidate_must_fit_the_allan_curve_better_than_its_look_alikes
         cur = fit.sim_features(np.array([white_flicker(rng, nf, RATE, white_d, b0)
                                          for _ in range(10)]))
         cands, ev = fit_candidates(cm, fit, Series(y, None, RATE, "whole"),
-                                   fit.compare(cur), cur, ("markov", "flicker", "random_walk"),
+                                   fit.compare(cur), cur, fit.compare(cur).sigma,
+                                   ("markov", "flicker", "random_walk"),
                                    None, math.nan)
         return [c.effect for c in cands], ev["markov_fit"]
 
@@ -1635,3 +1636,40 @@ def test_a_markov_candidate_must_fit_the_allan_curve_better_than_its_look_alikes
     names, (_, tau_c, tau_c_max, _, descent) = first_step(
         white_flicker(rng, n, RATE, white_d, b0) + markov(rng, 0.004, 30.0), rng)
     assert "markov" in names and descent > 10.0 and tau_c <= tau_c_max
+
+
+def test_candidates_are_weighted_by_the_band_of_the_record_less_the_kept_responses() -> None:
+    """After a temperature response is kept, the candidates' Allan-curve fits are weighted
+    by the one-sigma band of the fit part less the response against the realisations less
+    it (:attr:`imubench.gap.diagnose._Step.noise_sigma`), the record's own confidence
+    interval recomputed on the view (:meth:`imubench.gap.parts.PartSetup.less`). With the
+    response in, every realisation holds it alike, and the band at the long taus is
+    narrower than the noise's."""
+    from imubench.gap.candidates import deterministic
+    from imubench.gap.diagnose import _Step
+    from imubench.gap.parts import PartSetup, seeds_of, simulate_channel
+
+    n = int(1800 * RATE)
+    t = np.arange(n) / RATE
+    temp = 25.0 + 3.0 * np.sin(2 * math.pi * t / 1500.0)
+    model = NoiseModel.single_term("gx", white=0.004, flicker=0.0008)
+    cm = model["gx"]
+    y = white_flicker(np.random.default_rng(5), n, RATE, 0.004, 0.0008) + 0.01 * (temp - 25)
+    series = Series(y, temp, RATE, "temp")
+    nf = n // 2
+    fit, hold = PartSetup(series.part(0, nf), cm), PartSetup(series.part(nf, n), cm)
+    kept = model.with_channel("gx", temp_coeff=0.01)
+    det = deterministic("temperature", {"temp_coeff": 0.01, "temp_coeff2": 0.0}, cm, series)
+    assert det is not None
+    sims = simulate_channel(kept, "gx", series, seeds_of(3, 10))
+    st = _Step(fit, hold, sims, series, RecordTemperature(cm, series), det)
+    less = PartSetup(Series(y[:nf] - det[:nf], temp[:nf], RATE, "less"), cm)
+    assert np.allclose(st.fit_part.ci_s, less.ci_s, equal_nan=True)
+    assert np.allclose(st.noise_sigma, less.compare(st.noise_feats).sigma, equal_nan=True)
+    # the response, alike in every realisation, narrows the band at the long taus (here
+    # 0.11, 0.16, 0.25 against 0.14, 0.18, 0.33 at 39-158 s)
+    assert np.all(st.before.sigma[-3:] < st.noise_sigma[-3:])
+    # nothing kept: the band is the comparison's own
+    st0 = _Step(fit, hold, simulate_channel(model, "gx", series, seeds_of(3, 10)), series,
+                RecordTemperature(cm, series), 0.0)
+    assert st0.noise_sigma is st0.before.sigma

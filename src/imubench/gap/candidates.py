@@ -441,8 +441,9 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
-                   cur: SimFeatures, effects: tuple[str, ...], step_y: np.ndarray | None,
-                   temp_record_z: float) -> tuple[list[Candidate], dict[str, Any]]:
+                   cur: SimFeatures, sigma_ln_adev: np.ndarray, effects: tuple[str, ...],
+                   step_y: np.ndarray | None, temp_record_z: float
+                   ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
     ``whole``: the whole record less the kept effects' deterministic parts (the bias
@@ -458,13 +459,15 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     the fit part's level test does. ``fit`` and ``cur`` are the record's fit part and
     the realisations less the kept effects' deterministic parts
     (:meth:`imubench.gap.parts.PartSetup.less`), so the realisations' mean AVAR is the
-    model's noise (the Markov candidate's share, :func:`markov_share`).
+    model's noise (the Markov candidate's share, :func:`markov_share`);
+    ``sigma_ln_adev``: the one-sigma band (ln ADEV per tau) of ``fit`` against ``cur``,
+    which weighs the Allan-curve fits (:attr:`imubench.gap.diagnose._Step.noise_sigma`).
     """
     s = fit.series
     cands: list[Candidate] = []
     ev: dict[str, Any] = {}
     model_avar = cur.avar.mean(axis=0)
-    sig = before.sigma
+    sig = sigma_ln_adev
     dof = cur.k - 1
     markov: tuple[float, float] | None = None  # (sigma, tau_c), shared by the telegraph
     if {"markov", "telegraph"} & set(effects):

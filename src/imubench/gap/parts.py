@@ -218,6 +218,15 @@ class RecordTemperature:
         return gls_slopes(np.diff(yb, axis=1), np.diff(self.tb), self.chol, extra)[0]
 
 
+def _allan_spread(series: Series, afs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The taus (s) of the averaging factors ``afs`` of the series and its OADEV's
+    one-sigma spread in ln ADEV there, from the confidence interval."""
+    full = oadev(series.y, series.rate_hz, "freq", afs=afs)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ci_s = 0.5 * np.log(np.asarray(full.ci_high) / np.asarray(full.ci_low))
+    return np.asarray(full.tau_s), ci_s
+
+
 class PartSetup:
     """Taus, bands and the real features of one part (fit, holdout or a replicate)."""
 
@@ -231,10 +240,7 @@ class PartSetup:
         f, _ = welch_psd(series.y[:self.nperseg], series.rate_hz, self.nperseg)
         self.f_hz = f
         self.edges = band_edges(f)
-        full = oadev(series.y, series.rate_hz, "freq", afs=self.afs)
-        self.tau_s = np.asarray(full.tau_s)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            self.ci_s = 0.5 * np.log(np.asarray(full.ci_high) / np.asarray(full.ci_low))
+        self.tau_s, self.ci_s = _allan_spread(series, self.afs)
         self.real = features(series.y, series.rate_hz, self.afs, self.edges, self.nperseg,
                              series.temp_c)
         self.corr = (None if cm is None
@@ -263,6 +269,7 @@ class PartSetup:
         view.det = det
         s = self.series
         view.series = Series(s.y - det, s.temp_c, s.rate_hz, s.name)
+        view.ci_s = _allan_spread(view.series, self.afs)[1]
         view.real = features(view.series.y, s.rate_hz, self.afs, self.edges, self.nperseg,
                              s.temp_c)
         return view
