@@ -410,19 +410,6 @@ class _Step:
         a fitted response (5 % of 6e-3 dps/degC) showed as a held-out gap that a random
         walk's wide realisations covered, and the random walk was kept over temperature +
         Markov (:func:`_better_start`)."""
-        self.noise_sigma = (self.before.sigma if self.fit_part is fit
-                            else self.fit_part.compare(self.noise_feats).sigma)
-        """The one-sigma band (ln ADEV per tau) of the fit part less the kept effects'
-        deterministic parts against :attr:`noise_feats`: the weights of the candidates'
-        Allan-curve fits, made in that frame. The band of :attr:`before` (parts in) is
-        narrow at the long taus where a kept response dominates every realisation alike,
-        and there a record's ln AVAR of few degrees of freedom lies below ln E[AVAR]
-        (E ln(chi2_nu / nu) = -0.58 at nu = 2), which such weights then follow. An
-        outside reviewer's random walk 3e-4 dps/sqrt(s) kept after a temperature response
-        of 3e-3 dps/degC, three records: 2.03, 1.65, 2.19e-4 with those weights, 2.25,
-        1.76, 2.27e-4 with these. (The rest of the shortfall is the records': their fit
-        halves less the true response have ADEVs of 0.69, 0.23 and 0.74 of the truth's
-        at 300 s.)"""
         self.rate_hz = rate
         self.series_parts = (fit.series, None if hold is None else hold.series)
         """The fit and held-out parts' series (the latter None without a held-out part)."""
@@ -440,6 +427,23 @@ class _Step:
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
+
+    @functools.cached_property
+    def noise_sigma(self) -> np.ndarray:
+        """The one-sigma band (ln ADEV per tau) of the fit part less the kept effects'
+        deterministic parts against :attr:`noise_feats`: the weights of the candidates'
+        Allan-curve fits, made in that frame. The band of :attr:`before` (parts in) is
+        narrow at the long taus where a kept response dominates every realisation alike,
+        and there a record's ln AVAR of few degrees of freedom lies below ln E[AVAR]
+        (E ln(chi2_nu / nu) = -0.58 at nu = 2), which such weights then follow. An
+        outside reviewer's random walk 3e-4 dps/sqrt(s) kept after a temperature response
+        of 3e-3 dps/degC, three records: 2.03, 1.65, 2.19e-4 with those weights, 2.25,
+        1.76, 2.27e-4 with these. (The rest of the shortfall is the records': their fit
+        halves less the true response have ADEVs of 0.69, 0.23 and 0.74 of the truth's
+        at 300 s.)"""
+        if self.noise_feats is self.feats:  # nothing kept with a deterministic part
+            return self.before.sigma
+        return self.fit_part.compare(self.noise_feats).sigma
 
     def hold_drift(self) -> tuple[float, int]:
         """The held-out part's own drift test (:func:`imubench.gap.evidence.
