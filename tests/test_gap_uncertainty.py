@@ -155,3 +155,47 @@ def test_the_two_starts_are_compared_once_each_is_refitted() -> None:
     assert abs(kept["temperature"].params["temp_coeff"] / 0.004 - 1.0) < 0.1
     assert abs(kept["ramp"].params["ramp"] / 2e-5 - 1.0) < 0.15
     assert [c.effect for c in d.pruned] == ["random_walk"]
+
+
+def _reviewer_b_record(seed: int, temp_coeff: float, ramp: float) -> Series:
+    """A second outside reviewer's record (its generator and seed): 1 h at 104 Hz of white
+    0.004 dps/sqrt(Hz) and flicker 8e-4 dps by FFT shaping, a temperature response to two
+    slow sinusoids and a drift, and a ramp (dps/s), quantised to 8.75 mdps."""
+    fs, n = 104.0, 374400
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    a1, a2 = rng.uniform(2, 4), rng.uniform(1, 3)
+    p1, p2 = rng.uniform(10, 20) * 60, rng.uniform(25, 40) * 60
+    f1, f2 = rng.uniform(0, 2 * np.pi, 2)
+    off, drift = rng.uniform(-2, 2), rng.uniform(-1.5, 1.5) / 3600.0
+    temp = (25 + off + a1 * np.sin(2 * np.pi * t / p1 + f1) + a2 * np.sin(2 * np.pi * t / p2 + f2)
+            + drift * t)
+    m = 2 * n
+    f = np.fft.rfftfreq(m, 1.0 / fs)
+    s1 = np.zeros_like(f)
+    s1[1:] = 8e-4**2 / (np.pi * f[1:])
+    amp = np.sqrt(m * fs * s1 / 2.0)
+    x = WHITE * math.sqrt(fs) * rng.standard_normal(n)
+    spec = amp * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / math.sqrt(2.0)
+    spec[0] = 0.0
+    spec[-1] = amp[-1] * rng.standard_normal()
+    x += np.fft.irfft(spec, m)[:n] + temp_coeff * (temp - 25.0) + ramp * t
+    # as its CSV file has them: the temperature to 6 decimals
+    return Series(np.round(x / 0.00875) * 0.00875, np.round(np.round(temp * 256) / 256, 6), fs,
+                  f"reviewer B {seed}")
+
+
+def test_a_kept_noise_process_is_refitted_beside_the_effects_kept_after_it() -> None:
+    """A random walk kept before a ramp took the ramp's long-tau excess (4.3e-4, then
+    2.3e-4 dps/sqrt(s) beside the temperature response); refitted beside the response
+    and the ramp it is 4.8e-5 and not needed, but the sequential replacement kept its
+    stale value and the backward step kept it for what that value did on the held-out
+    part (a random walk of 2.3e-4 reported on a record without one). The kept process is
+    now refitted in place, and the backward step drops it."""
+    model = NoiseModel.single_term("gx", white=WHITE, flicker=8e-4, output_white=2.48e-4,
+                                   temp_ref=25.0)
+    d = diagnose_channel(model, "gx", _reviewer_b_record(101, 0.004, 2e-5), GapOptions(seed=21))
+    kept = {c.effect: c for c in d.kept}
+    assert set(kept) == {"temperature", "ramp"}
+    assert abs(kept["temperature"].params["temp_coeff"] / 0.004 - 1.0) < 0.1
+    assert abs(kept["ramp"].params["ramp"] / 2e-5 - 1.0) < 0.15

@@ -1059,11 +1059,16 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
             ranked, best, _ = _evaluate(r, others, st, sims,
                                         tuple(e for e in effects if e not in done))
             new, _ = _choose(ranked, best, r.hold, st, check(variant))
-            if new is None or new.effect == old.effect:
-                continue
             occupant = next((c for c in ranked if c.effect == old.effect), None)
-            old_score = (occupant.score if occupant is not None else
-                         r.step(kept).chi2() + math.log(st.before.n_terms) * old.n_params)
+            as_kept = r.step(kept).chi2() + math.log(st.before.n_terms) * old.n_params
+            if new is None or new.effect == old.effect:
+                if (occupant is not None and not occupant.refusal
+                        and occupant.params != old.params and occupant.score < as_kept):
+                    kept = _refitted_in_place(r, kept, old, occupant)
+                    last, changed = occupant, True
+                    break
+                continue
+            old_score = occupant.score if occupant is not None else as_kept
             if new.score >= old_score:
                 continue
             new.accepted, old.accepted = True, False
@@ -1078,6 +1083,19 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
         if not changed:
             break
     return kept, replaced
+
+
+def _refitted_in_place(r: _Realiser, kept: list[Candidate], old: Candidate,
+                       new: Candidate) -> list[Candidate]:
+    """``kept`` with ``old`` replaced in its place by ``new``, the same effect fitted
+    again beside the other kept effects (its base model's refit with it), re-scored as a
+    sequence. ``new`` is kept whether or not it would pass as an addition (its ``note``
+    is cleared): whether the effect is still needed is the backward step's question
+    (:func:`_prune`)."""
+    new.accepted, old.accepted, new.note = True, False, ""
+    kept = [new if c is old else c for c in _with_base_of(kept, new)]
+    r.rescore_from(kept)
+    return kept
 
 
 REFITTED = ("temperature", "ramp", "bias_step")
@@ -1237,8 +1255,8 @@ def _polish(r: _Realiser, effects: tuple[str, ...],
     if len(path.kept) < 2:
         return []
     forward_kept = [id(c) for c in path.kept]
-    kept, gone = _exchange(r, path.kept, effects, check)
-    kept = _refit_deterministic(r, kept, check)
+    kept = _refit_deterministic(r, path.kept, check)
+    kept, gone = _exchange(r, kept, effects, check)
     kept, dropped = _prune(r, kept)
     gone += dropped
     path.kept = kept
