@@ -50,7 +50,7 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
             "of the fit part's total); score 40.2;") in text
     assert "other criterion" not in text
     assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
-    assert "runner-up random_walk scores 71.0" in text
+    assert "runner-up random_walk, 71.0" in text
     assert "systematic part is 0.49 -> 0.07" in text
     assert "over the fit part's regions 0.9 -> 0.1" in text
     # below-threshold statistics are not listed as evidence
@@ -276,7 +276,7 @@ def test_verdict_names_the_criterion_it_passed_and_a_refused_runner_up() -> None
     text = "\n".join(explain_channel(c, 10, gap_units(["ax"])["params"]["ax"]))  # type: ignore[index]
     assert "Verdict base_model (no output filter, white = 5.3e-05 g/sqrt(Hz))" in text
     assert "passed on the other criterion" in text
-    assert ("runner-up quantization scores 2297.4" in text
+    assert ("the first step's best score was quantization, 2297.4" in text
             and "but was refused: the short-tau excess does not follow" in text)
     assert "Allan curve real above at 0.1 s" in text
 
@@ -572,8 +572,8 @@ def test_the_text_says_why_a_better_scoring_first_step_effect_is_not_the_verdict
     kept = [{**TEMP_EFFECT, "holdout_gap_after": 0.1}, {**RW_EFFECT, "holdout_gap_after": 0.1}]
     text = "\n".join(explain_channel(_entry("temperature", effects=[rw_first, TEMP_EFFECT],
                                              kept=kept), 10, units))
-    assert ("the runner-up random_walk scores 30.0 (lower is better; BIC penalty ln(n) per "
-            "parameter, 1 against 1), better at the first step, and is kept as well "
+    assert ("the first step's best score was random_walk, 30.0 (lower is better; BIC "
+            "penalty ln(n) per parameter, 1 against 1), and is kept as well "
             "(step 2, fitted again there)") in text
     flicker = {"effect": "flicker", "params": {"flicker": 0.002}, "reason":
                "replaced by markov: fitted again beside the other kept effects, markov "

@@ -1559,6 +1559,12 @@ def test_a_markov_process_beside_a_temperature_response_is_tried_once_the_respon
     assert kept["temperature"]["temp_coeff"] == pytest.approx(6e-3, rel=0.15)
     assert kept["markov"]["markov_tau"] == pytest.approx(30.0, rel=0.35)
     assert kept["markov"]["markov_sigma"] == pytest.approx(0.0045, rel=0.25)
+    # the first step's gate for the Markov process, shut then, is not reported against
+    # the Markov kept later (an outside reviewer read it as a contradiction); the first
+    # step's ranking says which effects were kept in the end
+    out = d.to_dict()
+    assert "markov" not in out["not_fitted"]
+    assert [e["effect"] for e in out["effects"] if e["kept"]] == ["temperature"]
 
 
 def test_a_step_hidden_in_white_noise_on_single_blocks_is_seen_across_several() -> None:

@@ -240,6 +240,7 @@ class ChannelDiagnosis:
 
     def to_dict(self) -> dict[str, Any]:
         ff = self.final_fit or self.before
+        kept_effects = {c.effect for c in self.kept}
         out: dict[str, Any] = {
             "gap_before": self.before.gap,
             "significant": (self.before.significant or self.step_fired or self.drift_fired
@@ -277,11 +278,14 @@ class ChannelDiagnosis:
             "whole_record_after": self._whole_record_after(),
             "global_after": ff.global_dict(),
             "temperature_note": self.temp_note or None,
-            "not_fitted": dict(self.evidence.get("not_fitted", {})),
+            "not_fitted": {e: why for e, why in self.evidence.get("not_fitted", {}).items()
+                           if e not in kept_effects},
             "global": self.before.global_dict(),
             "background": self.background,
             "alternative": self.alternative,
         }
+        for entry in out["effects"]:
+            entry["kept"] = entry["effect"] in kept_effects
         for entry in (out["effects"] + out["kept"] + out["dropped"] + out["not_kept"]):
             self._slope_at_mean(entry)
         for rd, r in zip(out["regions"], self.before.regions, strict=True):

@@ -601,13 +601,13 @@ def _better_runner_up(effect: str, c: dict[str, Any]) -> str:
     kept = c.get("kept") or []
     at = next((i for i, k in enumerate(kept) if k["effect"] == effect), None)
     if at is not None:
-        return (f", better at the first step, and is kept as well (step {at + 1}, fitted "
+        return (f", and is kept as well (step {at + 1}, fitted "
                 "again there): the selection that examines first the effects whose own "
                 "whole-record tests fired kept the same effects in this order, with a "
                 "lower score on the fit part")
     gone = next((x for x in [*c.get("dropped", []), *c.get("not_kept", [])]
                  if x["effect"] == effect), None)
-    return (f", better at the first step, but is not kept: {gone['reason']}"
+    return (f", but is not kept: {gone['reason']}"
             if gone is not None and gone.get("reason") else "")
 
 
@@ -772,7 +772,10 @@ def explain_channel(c: dict[str, Any], realisations: int,
             txt += f"; score {w['score']:.1f}"
         r = next((e for e in effects if e["effect"] != verdict), None)
         if r is not None and "n_params" in w:
-            txt += (f"; the runner-up {r['effect']} scores {r['score']:.1f} (lower is better; "
+            # the first step's best score is not called a runner-up (an outside reviewer)
+            lead = ("the runner-up" if "score" not in w or r["score"] >= w["score"]
+                    else "the first step's best score was")
+            txt += (f"; {lead} {r['effect']}, {r['score']:.1f} (lower is better; "
                     f"BIC penalty ln(n) per parameter, {w['n_params']} against "
                     f"{r['n_params']})")
             why = str(r.get("rejected_because") or "")
