@@ -1047,7 +1047,11 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
     biased shape (issue 15 blind pairs: a telegraph beside a ramp, whose Allan rise
     stretched the fitted dwell from ~20 s to 37 s, so that the two-level test refused
     the telegraph and `markov` was named; once the ramp is in the model the telegraph is
-    fitted again).
+    fitted again). When the best acceptable candidate is the same effect, or none is
+    acceptable, the kept process takes the parameters it is fitted to in that context
+    if they score better than its earlier fit (:func:`_refitted_in_place`): kept stale,
+    a random walk fitted before a ramp stayed at 2.3e-4 dps/sqrt(s) where, beside the
+    ramp, it is 4.8e-5 and not needed (an outside reviewer's temperature + ramp).
     Repeated while a replacement is made, at most :data:`EXCHANGE_PASSES` times.
 
     Returns the kept effects (the replacement last, the sequence re-scored) and the
@@ -1251,9 +1255,10 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
 def _polish(r: _Realiser, effects: tuple[str, ...],
             check: Callable[[Variant], Callable[[Candidate], str] | None],
             reps: list[tuple[PartSetup, Series]], path: _Path) -> list[Candidate]:
-    """The forward selection's kept effects improved in place: sequential replacement of
-    the noise processes (:func:`_exchange`), backfitting of the deterministic parts
-    (:func:`_refit_deterministic`), then backward elimination (:func:`_prune`). Returns the
+    """The forward selection's kept effects improved in place: backfitting of the
+    deterministic parts (:func:`_refit_deterministic`), sequential replacement of the
+    noise processes beside them (:func:`_exchange`), then backward elimination
+    (:func:`_prune`). Returns the
     effects replaced or dropped, each with its ``note``; ``path``'s residual and replicate
     comparisons are brought up to date when its kept effects changed."""
     if len(path.kept) < 2:
