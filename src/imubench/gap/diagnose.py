@@ -1258,9 +1258,9 @@ def _polish(r: _Realiser, effects: tuple[str, ...],
     """The forward selection's kept effects improved in place: backfitting of the
     deterministic parts (:func:`_refit_deterministic`), sequential replacement of the
     noise processes beside them (:func:`_exchange`), then backward elimination
-    (:func:`_prune`). Returns the
-    effects replaced or dropped, each with its ``note``; ``path``'s residual and replicate
-    comparisons are brought up to date when its kept effects changed."""
+    (:func:`_prune`). Returns the effects replaced or dropped, each with its ``note``;
+    ``path``'s residual and replicate comparisons are brought up to date when its kept
+    effects changed."""
     if len(path.kept) < 2:
         return []
     forward_kept = [id(c) for c in path.kept]
