@@ -1679,3 +1679,17 @@ def test_candidates_are_weighted_by_the_band_of_the_record_less_the_kept_respons
     st0 = _Step(fit, hold, simulate_channel(model, "gx", series, seeds_of(3, 10)), series,
                 RecordTemperature(cm, series), 0.0)
     assert st0.noise_sigma is st0.before.sigma
+
+
+def test_the_same_effects_kept_in_another_order_are_not_an_alternative() -> None:
+    """The second start kept temperature + flicker where the first kept flicker +
+    temperature, and the report offered it as an alternative "not taken because it does
+    not score lower" (46.2 against 46.1; an outside reviewer): the same effects in another
+    order are the same selection."""
+    def path(*effects: str) -> Any:
+        return diagnose._Path([Candidate(e, {}, 1) for e in effects], [], False, [], [], {})
+
+    main, alt = path("flicker", "temperature"), path("temperature", "flicker")
+    first = cast(Any, SimpleNamespace(hold=None))
+    kept, gone = diagnose._better_start(cast(Any, None), first, main, alt)
+    assert kept is main and gone == [] and main.alternative is None

@@ -199,3 +199,51 @@ def test_a_kept_noise_process_is_refitted_beside_the_effects_kept_after_it() -> 
     assert set(kept) == {"temperature", "ramp"}
     assert abs(kept["temperature"].params["temp_coeff"] / 0.004 - 1.0) < 0.1
     assert abs(kept["ramp"].params["ramp"] / 2e-5 - 1.0) < 0.15
+
+
+def _reviewer_c_record(seed: int) -> Series:
+    """A third outside reviewer's record (its generator and seed): 1 h at 104 Hz of white
+    0.004 dps/sqrt(Hz) and flicker 8e-4 dps (FFT-shaped over eight times the length, a
+    random stretch of it), a temperature response of 0.004 dps/degC to four sinusoids
+    (5.5-38 min) and a drift of 1.5 degC/h, and a ramp of 2e-5 dps/s, quantised to 8.75
+    mdps."""
+    fs, n, ext = 104.0, 374400, 8
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    ph = rng.uniform(0, 2 * np.pi, 4)
+    drift = rng.choice([-1, 1]) * 1.5 * (t / 3600 - 0.5)
+    temp = np.round(256 * (26.0 + 3.0 * np.sin(2 * np.pi * t / (38 * 60) + ph[0])
+                           + 1.5 * np.sin(2 * np.pi * t / (13 * 60) + ph[1])
+                           + 0.7 * np.sin(2 * np.pi * t / (5.5 * 60) + ph[2])
+                           + 0.4 * np.sin(2 * np.pi * t / (23 * 60) + ph[3]) + drift)) / 256
+    x = WHITE * math.sqrt(fs) * rng.standard_normal(n)
+    m = n * ext
+    f = np.fft.rfftfreq(m, 1.0 / fs)
+    s1 = np.zeros_like(f)
+    s1[1:] = 8e-4**2 / (np.pi * f[1:])
+    spec = np.sqrt(s1 * fs * m / 4) * (rng.standard_normal(f.size)
+                                       + 1j * rng.standard_normal(f.size))
+    spec[0] = 0
+    spec[-1] = spec[-1].real * math.sqrt(2)
+    start = rng.integers(0, m - n)
+    x += np.fft.irfft(spec, m)[start:start + n] + 0.004 * (temp - 25.0) + 2e-5 * t
+    return Series(np.round(x / 0.00875) * 0.00875, np.round(temp, 6), fs, f"reviewer C {seed}")
+
+
+def test_the_deterministic_parts_are_backfitted_again_after_the_exchange_puts_one_in(
+        ) -> None:
+    """The exchange replaced a random walk kept first by the ramp, after the backfitting:
+    the temperature response kept beside the walk stayed as fitted then, 0.00476 dps/degC
+    for 0.004, with the whole-record temperature test still firing at z -8.0 after it,
+    and the ramp was listed both as kept and as "tried next and not kept" (an outside
+    reviewer's record). The kept deterministic parts are backfitted again after an
+    exchange that changed them."""
+    model = NoiseModel.single_term("gx", white=WHITE, flicker=8e-4, output_white=2.48e-4,
+                                   temp_ref=25.0)
+    d = diagnose_channel(model, "gx", _reviewer_c_record(100), GapOptions(seed=21))
+    kept = {c.effect: c for c in d.kept}
+    assert set(kept) == {"temperature", "ramp"}
+    assert abs(kept["temperature"].params["temp_coeff"] / 0.004 - 1.0) < 0.1
+    assert abs(kept["ramp"].params["ramp"] / 2e-5 - 1.0) < 0.15
+    assert not d.residual_significant
+    assert not {c.effect for c in d.not_kept} & set(kept)
