@@ -1270,7 +1270,7 @@ def _polish(r: _Realiser, effects: tuple[str, ...],
     kept = _refit_deterministic(r, path.kept, check)
     before = [id(c) for c in kept]
     kept, gone = _exchange(r, kept, effects, check)
-    if [id(c) for c in kept] != before:  # a deterministic effect put in by the exchange
+    if [id(c) for c in kept] != before:  # e.g. a ramp put in for a random walk
         kept = _refit_deterministic(r, kept, check)
     kept, dropped = _prune(r, kept)
     gone += dropped
