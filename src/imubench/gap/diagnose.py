@@ -1278,7 +1278,8 @@ def _polish(r: _Realiser, effects: tuple[str, ...],
     if gone or [id(c) for c in kept] != forward_kept:
         # an effect refused where the forward selection stopped and kept here (a ramp
         # that replaced a random walk) is not reported as not kept as well
-        path.not_kept = [c for c in path.not_kept if c.effect not in {x.effect for x in kept}]
+        kept_effects = {c.effect for c in kept}
+        path.not_kept = [c for c in path.not_kept if c.effect not in kept_effects]
         path.residual = r.step(kept).significant
         path.rep_now = _on_replicates(r.variant(kept)[0], r.channel, reps, r.seeds)
     return gone
