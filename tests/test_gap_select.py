@@ -1668,7 +1668,7 @@ def test_candidates_are_weighted_by_the_band_of_the_record_less_the_kept_respons
     det = deterministic("temperature", {"temp_coeff": 0.01, "temp_coeff2": 0.0}, cm, series)
     assert det is not None
     sims = simulate_channel(kept, "gx", series, seeds_of(3, 10))
-    st = _Step(fit, hold, sims, series, RecordTemperature(cm, series), det)
+    st = _Step(fit, hold, sims, series, RecordTemperature(cm, series), det, cm)
     less = PartSetup(Series(y[:nf] - det[:nf], temp[:nf], RATE, "less"), cm)
     assert np.allclose(st.fit_part.ci_s, less.ci_s, equal_nan=True)
     assert np.allclose(st.noise_sigma, less.compare(st.noise_feats).sigma, equal_nan=True)
@@ -1677,7 +1677,7 @@ def test_candidates_are_weighted_by_the_band_of_the_record_less_the_kept_respons
     assert np.all(st.before.sigma[-3:] < st.noise_sigma[-3:])
     # nothing kept: the band is the comparison's own
     st0 = _Step(fit, hold, simulate_channel(model, "gx", series, seeds_of(3, 10)), series,
-                RecordTemperature(cm, series), 0.0)
+                RecordTemperature(cm, series), 0.0, cm)
     assert st0.noise_sigma is st0.before.sigma
 
 

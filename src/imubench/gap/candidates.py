@@ -155,6 +155,10 @@ class Candidate:
     """The base model's refit fitted again with this candidate beside it (set when the
     refit was kept before it, :func:`imubench.gap.diagnose._evaluate`); it replaces the
     kept one when this candidate is kept."""
+    noise: ChannelModel | None = None
+    """The channel model of the kept effects with this one, whose noise covariance its
+    temperature tests are made under (:meth:`imubench.gap.diagnose.Variant.noise`; set
+    when it is realised)."""
     accepted: bool = False
     note: str = ""
     """Why the candidate was not accepted (empty when accepted or not examined)."""

@@ -174,6 +174,21 @@ class Variant:
         sims = simulate_channel(self.model, channel, series, seeds)
         return sims + self.local_sum(len(series.y), series.rate_hz, seeds)
 
+    def noise(self, channel: str) -> ChannelModel:
+        """The channel model whose noise covariance the temperature tests of this variant
+        are made under (:meth:`imubench.gap.parts.RecordTemperature.for_model`): the
+        simulator's terms, and a kept telegraph as the Gauss-Markov process of the same
+        autocovariance (sigma = step / 2, tau_c = dwell / 2: ``(s/2)^2 exp(-2 tau /
+        dwell)`` for levels +-s/2 switching at rate 1 / dwell) when no Markov term is
+        there. The other local effects (a step, a sine, a resonance, outliers) add no
+        covariance to block means of seconds."""
+        cm = self.model[channel]
+        tele = next((p for e, p in self.local if e == "telegraph"), None)
+        if tele is None or cm.markov_sigma > 0:
+            return cm
+        return cm.replace(markov_sigma=tele["telegraph_step"] / 2.0,
+                          markov_tau=tele["telegraph_dwell_s"] / 2.0)
+
 
 @dataclass
 class ChannelDiagnosis:
@@ -380,14 +395,14 @@ class _Step:
     """
 
     def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
-                 series: Series, temp: RecordTemperature, det_sum: np.ndarray | float
-                 ) -> None:
+                 series: Series, temp: RecordTemperature, det_sum: np.ndarray | float,
+                 noise: ChannelModel) -> None:
         n_fit = len(fit.series.y)
         rate = series.rate_hz
         self.det_sum = det_sum
         self.feats = fit.sim_features(sims[:, :n_fit])
-        self.before = fit.compare(self.feats)
-        self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]))
+        self.before = fit.compare(self.feats, noise)
+        self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]), noise)
                      if hold is not None else None)
         self.fit_part = fit.less(det_sum if np.ndim(det_sum) == 0
                                  else np.asarray(det_sum)[:n_fit])
@@ -421,8 +436,10 @@ class _Step:
         """The record less the kept effects' deterministic parts."""
         self.drift_t, self.drift_dof = evidence.drift_statistic(self.residual, rate)
         self.drift_fired = stat_fired(self.drift_t, Z_DRIFT, False, self.drift_dof)
-        self.temp = temp
-        self.temp_z = temp.z(self.residual, sims, det_sum)
+        self.temp = temp.for_model(noise)
+        """The whole-record temperature test under the covariance of the model's noise
+        (``noise``: the base model's with the kept noise processes)."""
+        self.temp_z = self.temp.z(self.residual, sims, det_sum)
         self.temp_fired = stat_fired(self.temp_z, Z_SLOPE, False, POOLED_DOF)
         self.step_y = self._for_step(self.residual[None, :])[0]
         """The record as the whole-record step test sees it (:meth:`_for_step`)."""
@@ -708,16 +725,18 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
         if base_kept and not c.refusal:
             joint = r.refit_base([*kept, c])
             c.base_refit = next(x for x in joint if x.effect == "base_model")
-            cs = r.realise(joint)[1]
+            with_c, cs, _ = r.realise(joint)
         else:
+            with_c = variant.add(channel, c)
             cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds,
                                 sims, local_sum)
-        c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]))
+        c.noise = with_c.noise(channel)
+        c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]), c.noise)
         c.step_z = z_against(st.step_real, st.step_stats(cs))
         det = deterministic(c.effect, c.params, cm, series)
         c.drift_t = (evidence.drift_statistic(st.residual - det, rate)[0]
                      if det is not None else st.drift_t)
-        c.temp_record_z = st.temp.z(st.residual, cs, st.det_sum)
+        c.temp_record_z = st.temp.for_model(c.noise).z(st.residual, cs, st.det_sum)
         if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
                 [llr(s, rate, *two_level) for s in cs - st.det_sum]))
@@ -777,7 +796,7 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
             continue
         if hold is not None and st.hold is not None:
             n_fit = cs.shape[1] - len(hold.series.y)
-            c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]))
+            c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]), c.noise)
             c.holdout_dparts = _holdout_drop(st.hold, c, hold)
         c.note = _acceptable(c, st)
         if not c.note and replicate_check is not None:
@@ -790,8 +809,8 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
 def _on_replicates(variant: Variant, channel: str, reps: list[tuple[PartSetup, Series]],
                    seeds: list[int]) -> list[Comparison]:
     """Each replicate recording against realisations of ``variant`` over it."""
-    return [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)))
-            for rs, rep in reps]
+    return [rs.compare(rs.sim_features(variant.realise(channel, rep, seeds)),
+                       variant.noise(channel)) for rs, rep in reps]
 
 
 def _replicate_refusal(c: Candidate, variant: Variant, channel: str,
@@ -872,8 +891,9 @@ class _Realiser:
         run's seeds); built from them when it is not cached yet."""
         key = self._key(kept)
         if key not in self._steps:
+            variant, det = self.variant(kept)
             self._steps[key] = _Step(self.fit, self.hold, sims, self.series, self.temp,
-                                     self.variant(kept)[1])
+                                     det, variant.noise(self.channel))
         return self._steps[key]
 
     def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, _Step]:

@@ -74,6 +74,14 @@ BLOCK_TERMS = ("white", "flicker", "random_walk", "quantization", "outliers")
 (the Gauss-Markov term and the white noise after the filter enter too, on their own)."""
 
 
+def block_increment_key(cm: ChannelModel) -> tuple[float, ...]:
+    """The fields of ``cm`` that :func:`block_increment_acv` reads: two channel models with
+    the same key have the same block-increment covariance."""
+    return (cm.white, cm.flicker, cm.random_walk, cm.quantization, cm.outlier_rate,
+            cm.outlier_amplitude, cm.markov_sigma, cm.markov_tau, cm.bandwidth_hz,
+            float(cm.filter_order), cm.output_white)
+
+
 def block_increment_acv(cm: ChannelModel, m: int, n_lags: int, rate_hz: float) -> np.ndarray:
     """Autocovariance (unit^2) at lags 0..n_lags-1 (in blocks) of the first differences
     ``D_j = ybar_{j+1} - ybar_j`` of the means of consecutive non-overlapping blocks of
