@@ -93,9 +93,9 @@ def test_bias_step_is_located_and_sized() -> None:
     rng = np.random.default_rng(3)
     n = int(1200 * RATE)
     y = white(rng, n) + np.cumsum(1e-4 / math.sqrt(RATE) * rng.standard_normal(n))
-    y0, _ = step_statistic(y, RATE)
+    y0, _ = step_statistic(y)
     y = y + np.where(np.arange(n) / RATE >= 437.0, 0.02, 0.0)
-    y1, _ = step_statistic(y, RATE)
+    y1, _ = step_statistic(y)
     assert y0 < 5.0 < y1
     st = fit_bias_step(y, RATE)
     assert st.step_time_s == pytest.approx(437.0, abs=2.0)
@@ -1183,12 +1183,12 @@ XX
     hidden = seen = 0
     for _ in range(5):
         y = noise() + response + step
-        raw = step_statistic(y, fs)[0]
-        less = step_statistic(rec.less_response(y[None, :])[0], fs)[0]
+        raw = step_statistic(y)[0]
+        less = step_statistic(rec.less_response(y[None, :])[0])[0]
         hidden += raw < STEP_SIGMAS
         seen += less > STEP_SIGMAS
         null = rec.less_response((noise() + response)[None, :])[0]
-        assert step_statistic(null, fs)[0] < 4.5
+        assert step_statistic(null)[0] < 4.5
     assert hidden == 5 and seen == 5
     y = noise() + response
     taken = y - rec.less_response(y[None, :])[0]
@@ -1587,7 +1587,7 @@ def test_a_step_hidden_in_white_noise_on_single_blocks_is_seen_across_several() 
         d = m[lag:] - m[:-lag]
         mad = 1.4826 * np.median(np.abs(d - np.median(d)))
         single = max(single, float(np.max(np.abs(d - np.median(d)) / mad)))
-    stat, _ = step_statistic(y, RATE)
+    stat, _ = step_statistic(y)
     assert single < STEP_SIGMAS < stat
     st = fit_bias_step(y, RATE)
     assert st.step_time_s == pytest.approx(1367.0, abs=14.0)

@@ -443,7 +443,7 @@ class _Step:
         self.temp_fired = stat_fired(self.temp_z, Z_SLOPE, False, POOLED_DOF)
         self.step_y = self._for_step(self.residual[None, :])[0]
         """The record as the whole-record step test sees it (:meth:`_for_step`)."""
-        self.step_real = evidence.step_statistic(self.step_y, rate)[0]
+        self.step_real = evidence.step_statistic(self.step_y)[0]
         sim_steps = self.step_stats(sims)
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
@@ -497,7 +497,7 @@ class _Step:
     def step_stats(self, sims: np.ndarray) -> np.ndarray:
         """The step statistic of each realisation, seen as the record is (:meth:`_for_step`)."""
         ys = self._for_step(sims - self.det_sum)
-        return np.array([evidence.step_statistic(y, self.rate_hz)[0] for y in ys])
+        return np.array([evidence.step_statistic(y)[0] for y in ys])
 
     @property
     def record_fired(self) -> bool:

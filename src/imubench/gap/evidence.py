@@ -161,7 +161,7 @@ STEP_SCALES = (1, 2, 4, 8)
 side of each block boundary (and of each block, skipped)."""
 
 
-def step_statistic(y: np.ndarray, rate_hz: float) -> tuple[float, int]:
+def step_statistic(y: np.ndarray) -> tuple[float, int]:
     """(largest normalised jump of block means, block index of the jump).
 
     For each width w of STEP_SCALES, the mean of w block means after a boundary less the
