@@ -611,6 +611,47 @@ def test_iso_times_with_a_utc_offset_are_read(tmp_path: Path, zone: str) -> None
     assert rec.t_s[0] == pytest.approx(1714564800.0)  # 2024-05-01T12:00:00Z
 
 
+def test_dotted_day_first_dates_are_read_as_utc_seconds(tmp_path: Path) -> None:
+    """``01.05.2024 23:59:59.990`` (DIN 5008, European loggers' and Excel's exports) was
+    refused as "no number"; dotted dates are day first wherever they are written. Across
+    midnight the day changes and the stamps run on (a month-first misreading would jump a
+    month there)."""
+    import datetime
+
+    t0 = datetime.datetime(2024, 5, 1, 23, 59, 59)
+    rows = [(t0 + datetime.timedelta(seconds=k / 100)).strftime("%d.%m.%Y %H:%M:%S.%f")[:-3]
+            + f",{k % 5}" for k in range(300)]
+    path = tmp_path / "dotted.csv"
+    path.write_text("Zeit,gyro_x [dps]\n" + "\n".join(rows) + "\n")
+    rec = load_recording(path)
+    assert len(rec) == 300 and rec.damage is None and rec.rate_hz == pytest.approx(100.0)
+    assert rec.t_s[0] == pytest.approx(1714607999.0)  # 2024-05-01T23:59:59Z
+
+
+def test_slashed_dates_and_matlab_date_numbers_are_refused_with_the_fix(tmp_path: Path
+                                                                      ) -> None:
+    """A slashed date is month first in the US and day first elsewhere: refused, with the
+    value and the forms imubench reads. A MATLAB date number (days) has no unit that
+    gives an IMU's rate: the refusal says what it looks like and how to write seconds."""
+    slashed = tmp_path / "slashed.csv"
+    slashed.write_text("time,gyro_x [dps]\n" + "\n".join(
+        f"05/01/2024 12:00:{k // 100:02d}.{k % 100:02d}0,{k % 5}" for k in range(300)) + "\n")
+    with pytest.raises(RecordingError) as e:
+        load_recording(slashed)
+    msg = str(e.value)
+    assert "slashed.csv:2:" in msg and "'05/01/2024 12:00:00.000'" in msg
+    assert "ISO 8601" in msg and "01.05.2024" in msg and "--columns t=-" in msg
+    datenum = tmp_path / "datenum.csv"
+    datenum.write_text("time,gyro_x [dps]\n" + "\n".join(
+        f"{739008.5 + k / 100 / 86400:.15g},{k % 5}" for k in range(300)) + "\n")
+    with pytest.raises(RecordingError) as e:
+        load_recording(datenum)
+    msg = str(e.value)
+    assert "MATLAB date numbers" in msg and "719529" in msg
+    # 15 significant digits stamp to 86 us: the median step reads 99.8 Hz
+    assert 99.0 < float(msg.split("(days; ")[1].split(" Hz")[0]) < 101.0
+
+
 @pytest.mark.parametrize("style", ["semicolon", "quoted"])
 def test_thousands_separators_are_read(tmp_path: Path, style: str) -> None:
     """``-1.234,567`` in a ``;`` export and ``"-1,234.567"`` in a comma-separated one:

@@ -183,6 +183,13 @@ ISO_TIME = re.compile(r"^(\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?)"
                       r"(Z|[+-]\d{2}:?\d{2})?$")
 """A date and time as loggers and pandas write them (ISO 8601: UTC when no zone, ``Z``,
 or an offset ``+02:00`` / ``+0200``, as pandas writes a time-zone-aware index)."""
+DOTTED_TIME = re.compile(r"^(\d{1,2})\.(\d{1,2})\.(\d{4})[T ](\d{1,2}):(\d{2}):(\d{2}(?:\.\d+)?)$")
+"""A date with dots, day first, and a time (``01.05.2024 12:00:00.010``: the form of
+DIN 5008 and of European loggers' and Excel's exports), read as UTC like :data:`ISO_TIME`.
+Dotted dates are day first wherever they are written; slashed ones (``05/01/2024``) are
+month first in the US and day first elsewhere, so they are refused (:func:`_time_hint`)."""
+DATE_LIKE = re.compile(r"\d[./-]\d{1,2}[./-]\d|\d:\d{2}")
+"""A cell that holds a date or a clock time in some form (for the message)."""
 
 
 SPARSE_SHARE = 0.5
@@ -207,6 +214,10 @@ def _number(text: str) -> float:
     except ValueError:
         if FORTRAN_NUMBER.match(text):
             value = float(text.replace("D", "E").replace("d", "e"))
+        elif m := DOTTED_TIME.match(text):
+            day, month, year, hour, minute, second = m.groups()
+            iso = f"{year}-{int(month):02d}-{int(day):02d}T{int(hour):02d}:{minute}:{second}"
+            return float(np.datetime64(iso, "ns").astype(np.int64)) * 1e-9
         elif m := ISO_TIME.match(text):
             utc = float(np.datetime64(m.group(1), "ns").astype(np.int64)) * 1e-9
             zone = m.group(2) or "Z"
@@ -402,6 +413,35 @@ def _unreadable_hint(path: Path, raw: _Raw) -> str:
     return ""
 
 
+def _cell(path: Path, raw: _Raw, lineno: int, k: int) -> str:
+    """The text of field ``k`` of line ``lineno`` (empty when it cannot be read again)."""
+    try:
+        with open_text(path, raw.encoding) as fh:
+            for i, line in enumerate(fh, 1):
+                if i == lineno:
+                    fields = _split(line.strip(), raw.delim)
+                    return fields[k].strip() if k < len(fields) else ""
+    except (OSError, EOFError, gzip.BadGzipFile, zlib.error):
+        pass
+    return ""
+
+
+def _time_hint(path: Path, raw: _Raw, lineno: int, failed: list[int], t_col: int | None
+               ) -> str:
+    """For the message that refuses a file whose time column is no number: the value, and
+    the forms of a date and time imubench reads (a slashed date, ``05/01/2024``, is month
+    first in the US and day first elsewhere: no reader can tell which)."""
+    if t_col is None or t_col not in failed:
+        return ""
+    text = _cell(path, raw, lineno, t_col)
+    if not DATE_LIKE.search(text):
+        return f" (time: {text!r})" if text else ""
+    return (f" (time: {text!r}); imubench reads dates and times as ISO 8601 "
+            "(2024-05-01 12:00:00.010) or day first with dots (01.05.2024 12:00:00.010): "
+            "convert the column, or read the rows in order at a rate you give with "
+            "--rate HZ --columns t=-")
+
+
 def _is_unit(text: str) -> bool:
     """Whether a cell of a units row names a unit imubench reads (gyro, accelerometer,
     time or temperature)."""
@@ -494,7 +534,8 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                            for j in raw.row_fail[i] if j in used})
         raise RecordingError(
             f"{where}:{first}: {len(failed)} of {len(table)} data lines hold a value that "
-            f"is no number in a column read ({', '.join(bad_cols)}); not a recording")
+            f"is no number in a column read ({', '.join(bad_cols)}); not a recording"
+            + _time_hint(path, raw, first, raw.row_fail[failed[0]], where_col.get("t")))
     if failed:
         good = np.ones(len(table), dtype=bool)
         good[failed] = False

@@ -58,6 +58,11 @@ it) are absolute, and their magnitude gives the unit (s, ms, us, ns)."""
 MJD_RANGE = (40_000.0, 100_000.0)
 """Modified Julian Dates (days) of 1968-2132: a time tag column in this range is MJD."""
 SECONDS_PER_DAY = 86_400.0
+DATENUM_RANGE = (693_962.0, 767_011.0)
+"""MATLAB serial date numbers (days since year 0) of 1900-2099: refused with the fix (a
+datenum written with 15 significant digits is stamped to 86 us only)."""
+DATENUM_OF_UNIX_EPOCH = 719_529.0
+"""MATLAB's ``datenum(1970, 1, 1)``."""
 MJD_OF_UNIX_EPOCH = 40_587.0
 """The Modified Julian Date of 1970-01-01 00:00 UTC."""
 
@@ -155,9 +160,15 @@ def time_unit_from_spacing(t: np.ndarray, where: str) -> tuple[str, float]:
                         " Hz; give --time-unit s|ms|us|ns or --rate HZ")
                 return unit, scale
     if len(fits) != 1:
+        datenum = ""
+        if len(finite) and DATENUM_RANGE[0] <= float(np.median(finite)) <= DATENUM_RANGE[1]:
+            datenum = (f"; the values (~{float(np.median(finite)):.9g}) look like MATLAB "
+                       f"date numbers (days; {1.0 / (step * SECONDS_PER_DAY):.4g} Hz): "
+                       "write seconds instead ((datenum - "
+                       f"{DATENUM_OF_UNIX_EPOCH:.0f}) * 86400 are Unix seconds)")
         raise RecordingError(
             f"{where}: cannot tell the unit of the time column (median step {step:.6g}); "
-            "give --time-unit s|ms|us|ns or --rate HZ"
+            "give --time-unit s|ms|us|ns or --rate HZ" + datenum
         )
     if fits[0][0] == "ms" and 1.0 / step >= SLOW_LOGGER_HZ:
         raise RecordingError(
