@@ -633,20 +633,19 @@ def test_slashed_dates_and_matlab_date_numbers_are_refused_with_the_fix(tmp_path
     """A slashed date is month first in the US and day first elsewhere: refused, with the
     value and the forms imubench reads. A MATLAB date number (days) has no unit that
     gives an IMU's rate: the refusal says what it looks like and how to write seconds."""
-    slashed = tmp_path / "slashed.csv"
-    slashed.write_text("time,gyro_x [dps]\n" + "\n".join(
-        f"05/01/2024 12:00:{k // 100:02d}.{k % 100:02d}0,{k % 5}" for k in range(300)) + "\n")
-    with pytest.raises(RecordingError) as e:
-        load_recording(slashed)
-    msg = str(e.value)
+    def refusal(name: str, times: list[str]) -> str:
+        path = tmp_path / name
+        path.write_text("time,gyro_x [dps]\n"
+                        + "\n".join(f"{t},{k % 5}" for k, t in enumerate(times)) + "\n")
+        with pytest.raises(RecordingError) as e:
+            load_recording(path)
+        return str(e.value)
+
+    msg = refusal("slashed.csv", [f"05/01/2024 12:00:{k // 100:02d}.{k % 100:02d}0"
+                                  for k in range(300)])
     assert "slashed.csv:2:" in msg and "'05/01/2024 12:00:00.000'" in msg
     assert "ISO 8601" in msg and "01.05.2024" in msg and "--columns t=-" in msg
-    datenum = tmp_path / "datenum.csv"
-    datenum.write_text("time,gyro_x [dps]\n" + "\n".join(
-        f"{739008.5 + k / 100 / 86400:.15g},{k % 5}" for k in range(300)) + "\n")
-    with pytest.raises(RecordingError) as e:
-        load_recording(datenum)
-    msg = str(e.value)
+    msg = refusal("datenum.csv", [f"{739008.5 + k / 100 / 86400:.15g}" for k in range(300)])
     assert "MATLAB date numbers" in msg and "719529" in msg
     # 15 significant digits stamp to 86 us: the median step reads 99.8 Hz
     assert 99.0 < float(msg.split("(days; ")[1].split(" Hz")[0]) < 101.0
