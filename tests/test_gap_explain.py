@@ -51,6 +51,11 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     assert "other criterion" not in text
     assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
     assert "runner-up random_walk, 71.0" in text
+    assert "kept as well" not in text
+    # a runner-up kept at a later step says so (an outside reviewer)
+    later = "\n".join(explain_channel({**c, "kept": [TEMP_EFFECT, RW_EFFECT]}, 10, units))
+    assert ("the runner-up random_walk, 71.0 (lower is better; BIC penalty ln(n) per "
+            "parameter, 1 against 1), kept as well at step 2 (below).") in later
     assert "systematic part is 0.49 -> 0.07" in text
     assert "over the fit part's regions 0.9 -> 0.1" in text
     # below-threshold statistics are not listed as evidence

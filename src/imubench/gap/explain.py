@@ -785,6 +785,14 @@ def explain_channel(c: dict[str, Any], realisations: int,
                 txt += f" but was refused: {why}"
             elif "score" in w and r["score"] < w["score"]:
                 txt += _better_runner_up(r["effect"], c)
+            if not why.startswith(REPLACED) and ("score" not in w
+                                                 or r["score"] >= w["score"]):
+                # a runner-up kept at a later step (an outside reviewer read "the
+                # runner-up temperature" with the response kept at step 2)
+                at = next((i for i, k in enumerate(c.get("kept") or [])
+                           if k["effect"] == r["effect"]), None)
+                if at is not None and at > 0:
+                    txt += f", kept as well at step {at + 1} (below)"
         lines.append(txt + ".")
     lines.extend(_kept_lines(c, units))
     if followed := _after_kept(c, dof):
