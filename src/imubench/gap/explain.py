@@ -593,13 +593,19 @@ FIRED_WORDS = {"regions": "the Allan curve", "bands": "the spectrum",
 """The held-out tests of :attr:`imubench.gap.curves.Comparison.fired`, in words."""
 
 
+def _kept_step(c: dict[str, Any], effect: str) -> int | None:
+    """The index of ``effect`` among the channel entry ``c``'s kept effects (None: not
+    kept)."""
+    return next((i for i, k in enumerate(c.get("kept") or []) if k["effect"] == effect),
+                None)
+
+
 def _better_runner_up(effect: str, c: dict[str, Any]) -> str:
     """Why the first step's better-scoring ``effect`` is not the verdict: kept later (the
     selection that examines first the effects whose own whole-record tests fired kept the
     effects in another order, :func:`imubench.gap.diagnose._better_start`), or dropped or
     not kept, with that reason."""
-    kept = c.get("kept") or []
-    at = next((i for i, k in enumerate(kept) if k["effect"] == effect), None)
+    at = _kept_step(c, effect)
     if at is not None:
         return (f", and is kept as well (step {at + 1}, fitted "
                 "again there): the selection that examines first the effects whose own "
@@ -789,8 +795,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
                                                  or r["score"] >= w["score"]):
                 # a runner-up kept at a later step (an outside reviewer read "the
                 # runner-up temperature" with the response kept at step 2)
-                at = next((i for i, k in enumerate(c.get("kept") or [])
-                           if k["effect"] == r["effect"]), None)
+                at = _kept_step(c, r["effect"])
                 if at is not None and at > 0:
                     txt += f", kept as well at step {at + 1} (below)"
         lines.append(txt + ".")

@@ -279,9 +279,9 @@ class PartSetup:
         # a block the real part lacks makes its increments' count differ from the
         # covariance's, and the level test NaN (curves.gls_against)
         self.temp = None if cm is None else RecordTemperature(cm, series)
-        """The part's temperature blocks and the base model's covariance of their
-        increments (None without a model)."""
-        self.temp_chol = None if self.temp is None else self.temp.chol
+        """The part's temperature blocks and the covariance of their increments under the
+        model it was set up with (None without a model; :meth:`compare` makes the test
+        under another model's, :meth:`RecordTemperature.for_model`)."""
         self.det: np.ndarray | float = 0.0
         """The deterministic part taken out of the record and of every realisation
         compared with it (:meth:`less`; 0.0 for the part as recorded)."""
@@ -315,8 +315,8 @@ class PartSetup:
         """The part against the realisations' features ``sims``; the temperature level
         test under the covariance of ``noise``'s noise (the model realised in ``sims``;
         None: the model this part was set up with, :meth:`RecordTemperature.for_model`)."""
-        chol = (self.temp.for_model(noise).chol if noise is not None and self.temp is not None
-                else self.temp_chol)
-        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr, chol)
+        temp = self.temp if noise is None or self.temp is None else self.temp.for_model(noise)
+        return compare(self.real, self.ci_s, sims, self.tau_s, self.edges, self.corr,
+                       None if temp is None else temp.chol)
 
 

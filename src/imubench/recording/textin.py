@@ -202,6 +202,11 @@ unused accelerometer column on every other line dropped those lines from the gyr
 then read at half its rate)."""
 
 
+def _utc_seconds(iso: str) -> float:
+    """Unix seconds of an ISO 8601 date and time without a zone, read as UTC."""
+    return float(np.datetime64(iso, "ns").astype(np.int64)) * 1e-9
+
+
 def _number(text: str) -> float:
     """The field's value: NaN for a missing one (:data:`MISSING_CELLS`: a hole); an ISO
     8601 date and time (``2024-05-01 12:00:00.010``, UTC) as Unix seconds; ValueError for
@@ -216,10 +221,10 @@ def _number(text: str) -> float:
             value = float(text.replace("D", "E").replace("d", "e"))
         elif m := DOTTED_TIME.match(text):
             day, month, year, hour, minute, second = m.groups()
-            iso = f"{year}-{int(month):02d}-{int(day):02d}T{int(hour):02d}:{minute}:{second}"
-            return float(np.datetime64(iso, "ns").astype(np.int64)) * 1e-9
+            return _utc_seconds(
+                f"{year}-{int(month):02d}-{int(day):02d}T{int(hour):02d}:{minute}:{second}")
         elif m := ISO_TIME.match(text):
-            utc = float(np.datetime64(m.group(1), "ns").astype(np.int64)) * 1e-9
+            utc = _utc_seconds(m.group(1))
             zone = m.group(2) or "Z"
             if zone != "Z":  # local time = UTC + offset
                 sign = -1.0 if zone[0] == "-" else 1.0
