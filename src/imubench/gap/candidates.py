@@ -169,6 +169,11 @@ class Candidate:
     """Which estimator fitted a temperature response: ``gls`` (the block-mean increments'
     GLS slope), ``levels`` or ``levels_quadratic`` (least squares of the block-mean
     levels); empty for the other effects, which have one estimator each."""
+    whole_record: bool = False
+    """A temperature response fitted on the whole record (less the kept effects'
+    deterministic parts) and tested there, not on the fit part and the held-out part:
+    set when the two parts' temperature spans are too unequal for the split to fit it
+    on one and check it on the other (:func:`imubench.gap.diagnose.temperature_spans`)."""
     backfitted: bool = False
     """Fitted on the record less EVERY other kept effect's deterministic part (the
     backfitting of :func:`imubench.gap.diagnose._refit_deterministic`), not only those of
@@ -199,11 +204,21 @@ class Candidate:
         }
         if self.note or self.refusal:  # a refusal holds whether or not it was examined
             d["rejected_because"] = self.note or self.refusal
+        d.update(self.fitted_on())
         if math.isfinite(self.shape_z):
             d["shape_z"] = self.shape_z
         d.update(self.at_output())
         d.update(self.holdout_dict())
         return d
+
+    def fitted_on(self) -> dict[str, str]:
+        """JSON ``fitted_on`` of a temperature response or bias step: ``whole_record``
+        (a bias step always; a temperature response when :attr:`whole_record`) or
+        ``fit_part``; empty for the other effects, always fitted on the fit part."""
+        if self.effect not in ("temperature", "bias_step"):
+            return {}
+        return {"fitted_on": "whole_record" if self.whole_record or self.effect == "bias_step"
+                else "fit_part"}
 
     def as_recorded(self) -> dict[str, float]:
         """:attr:`params` with a sine's amplitude and a resonance's height as the record
@@ -373,18 +388,20 @@ def _quantization_refusal(tau_s: np.ndarray, real_avar: np.ndarray, model_avar: 
             f"filter or the white level would")
 
 
-def _curvature_refusal(temp_c: np.ndarray, temp_ref: float, coeff: float) -> str:
+def _curvature_refusal(temp_c: np.ndarray, temp_ref: float, coeff: float,
+                       where: str = "the fit part's") -> str:
     """Why the quadratic temperature response cannot be offered (empty when it can): its
     coefficients are stated at ``temp_ref`` (the model file's convention), and when the
     recorded temperatures lie farther from it than their own span, they are an
     extrapolation of a curvature the record does not fix (a reviewer's CATS tag hour at
     5.2-5.7 degC against temp_ref 25 degC: -39.3 dps/degC and -1.03 dps/degC^2, which
-    cancel over the record). The linear response stays a candidate."""
+    cancel over the record). The linear response stays a candidate. ``where``: whose
+    temperatures ``temp_c`` are, for the text."""
     lo, hi = float(np.nanmin(temp_c)), float(np.nanmax(temp_c))
     span = hi - lo
     if lo - span <= temp_ref <= hi + span:
         return ""
-    return (f"the fit part's temperatures ({lo:.2f}-{hi:.2f} degC) are too narrow and too "
+    return (f"{where} temperatures ({lo:.2f}-{hi:.2f} degC) are too narrow and too "
             f"far from temp_ref {temp_ref:g} degC to fix a curvature: its coefficients "
             f"there would be an extrapolation (temp_coeff {coeff:.3g}); the linear "
             "response is the candidate")
@@ -446,7 +463,8 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
                    cur: SimFeatures, sigma_ln_adev: np.ndarray, effects: tuple[str, ...],
-                   step_y: np.ndarray | None, temp_record_z: float
+                   step_y: np.ndarray | None, temp_record_z: float,
+                   temp_whole: RecordTemperature | None = None
                    ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
@@ -460,7 +478,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     fire;
     ``temp_record_z``: the whole-record temperature z
     (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
-    the fit part's level test does. ``fit`` and ``cur`` are the record's fit part and
+    the fit part's level test does; ``temp_whole``: that test under the covariance of
+    ``cm``'s noise when the temperature response is to be fitted on ``whole`` rather than
+    on the fit part (:attr:`Candidate.whole_record`; None: on the fit part). ``fit`` and
+    ``cur`` are the record's fit part and
     the realisations less the kept effects' deterministic parts
     (:meth:`imubench.gap.parts.PartSetup.less`), so the realisations' mean AVAR is the
     model's noise (the Markov candidate's share, :func:`markov_share`);
@@ -544,19 +565,24 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             if s.has_temperature and (abs(before.temp_z) > gate
                                       or abs(before.temp_level_z) > gate_level
                                       or abs(temp_record_z) > gate_level):
-                assert s.temp_c is not None
-                # the coefficients the model lacks: the regression of the fit part less
-                # the kept effects' deterministic parts (a kept bias step biased it) and
-                # less the model's own temperature response (its realisations carry it)
-                lacking = whole.y[:len(s.y)] - temperature_response(
-                    {"temp_coeff": cm.temp_coeff, "temp_coeff2": cm.temp_coeff2}, s.temp_c,
+                on_whole = temp_whole is not None
+                y_t, temp_c = ((whole.y, whole.temp_c) if on_whole
+                               else (whole.y[:len(s.y)], s.temp_c))
+                assert temp_c is not None
+                # the coefficients the model lacks: the regression of the fit part (or
+                # the whole record) less the kept effects' deterministic parts (a kept
+                # bias step biased it) and less the model's own temperature response
+                # (its realisations carry it)
+                lacking = y_t - temperature_response(
+                    {"temp_coeff": cm.temp_coeff, "temp_coeff2": cm.temp_coeff2}, temp_c,
                     cm.temp_ref)
-                tf = evidence.fit_temperature(lacking, s.temp_c, s.rate_hz, cm.temp_ref)
+                tf = evidence.fit_temperature(lacking, temp_c, s.rate_hz, cm.temp_ref)
                 # under the covariance of the noise of the model it is added to (the
                 # base model's with the kept noise terms): generalised least squares is
                 # the best linear unbiased estimator under the noise's own covariance
                 # (Aitken 1935), not under the base model's white and flicker alone
-                temp = RecordTemperature(cm, s)
+                temp = temp_whole if temp_whole is not None else RecordTemperature(cm, s)
+                first = len(cands)
                 gls = float(temp.slopes(lacking[None, :])[0])
                 if math.isfinite(gls):
                     # the model-GLS slope beside a trend (the level test's), which a ramp
@@ -576,8 +602,11 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                                            estimator="levels_quadratic"))
                     cands[-1].refusal = (
                         _curvature_refusal(tf.block_temp_c, cm.temp_ref,
-                                           cands[-1].params["temp_coeff"])
+                                           cands[-1].params["temp_coeff"],
+                                           "the record's" if on_whole else "the fit part's")
                         or _flat_curvature(temp, lacking, cm.temp_ref))
+                for c in cands[first:]:
+                    c.whole_record = on_whole
         elif eff == "outliers" and before.tail_z > Z_TAIL_CANDIDATE:
             of = evidence.fit_outliers(s.y, s.rate_hz, float(cur.impulses.mean()))
             if of is not None:

@@ -317,6 +317,23 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
 
 STEP_NOT_INDEPENDENT = ("a bias step is located on the whole record, the held-out part "
                         "included, so for it this is not an independent check")
+RECORD_NOT_INDEPENDENT = ("the temperature response is fitted on the whole record, the "
+                          "held-out part included, so for it this is not an independent "
+                          "check")
+
+
+def on_record(k: dict[str, Any] | None) -> bool:
+    """Whether the effect entry ``k`` was fitted on the whole record rather than the fit
+    part (a bias step; a temperature response where the parts' temperature spans are too
+    unequal, JSON ``fitted_on``)."""
+    return (k or {}).get("effect") == "bias_step" or (k or {}).get("fitted_on") == "whole_record"
+
+
+def _not_independent(k: dict[str, Any] | None) -> str:
+    """Why the held-out figures are no independent check of the whole-record effect
+    ``k``."""
+    return STEP_NOT_INDEPENDENT if (k or {}).get("effect") == "bias_step" \
+        else RECORD_NOT_INDEPENDENT
 
 
 UNMOVED = 0.05
@@ -338,7 +355,7 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         ea, ga = h.get("gap_excess_after"), h.get("gap_after")
     if eb is not None and eb > 0.05 and ea is not None:
         frac, what = 1.0 - ea / eb, "the systematic Allan-curve gap"
-    elif eb is not None and ea is not None and (after or {}).get("effect") != "bias_step":
+    elif eb is not None and ea is not None and not on_record(after):
         # nothing systematic to close there: a share of the raw gap would be of scatter
         text = (f"; the held-out Allan curve is within its scatter before and after "
                 f"(systematic gap {_f(eb)} -> {_f(ea)}")
@@ -352,9 +369,10 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         return ""
     if frac >= UNMOVED:
         return f"; modelling it closes {_pct(frac)} of {what} on the held-out part"
-    if (after or {}).get("effect") == "bias_step":
-        return ("; the step is located on the whole record, so the held-out part is not "
-                "its test")
+    if on_record(after):
+        what = ("the step is located" if (after or {}).get("effect") == "bias_step"
+                else "the response is fitted")
+        return f"; {what} on the whole record, so the held-out part is not its test"
     ga = ga if ga is not None else h.get("gap_after")
     moves = ("widens" if ga is not None and ga > (1.0 + UNMOVED) * h["gap_before"]
              else "does not close")
@@ -418,8 +436,8 @@ def headline(c: dict[str, Any], realisations: int,
     if others and alone.startswith("; on the held-out part"):  # the others close the rest
         alone = alone.replace("; on the held-out part", "; on its own, on the held-out part",
                               1)
-    if verdict == "bias_step" and alone.startswith("; modelling it closes "):
-        alone += f" ({STEP_NOT_INDEPENDENT})"
+    if on_record(main) and alone.startswith("; modelling it closes "):
+        alone += f" ({_not_independent(main)})"
     if others and alone.startswith("; modelling it closes "):  # read as all of them (a reviewer)
         alone = alone.replace("; modelling it closes ", "; modelling it on its own closes ", 1)
     text = text[0].upper() + text[1:] + alone + "."
@@ -430,8 +448,8 @@ def headline(c: dict[str, Any], realisations: int,
         if together.startswith("; modelling it closes "):
             text += (" (all kept effects together close "
                      + together.removeprefix("; modelling it closes ")
-                     + (f"; {STEP_NOT_INDEPENDENT}"
-                        if any(k["effect"] == "bias_step" for k in kept) else "") + ").")
+                     + "".join(f"; {_not_independent(k)}" for k in kept if on_record(k))
+                     + ").")
 
         elif together:
             text += " (with all kept effects" + together.lstrip(";").replace(";", ",") + ")."
@@ -444,7 +462,8 @@ PART_NAMES = {"allan": "Allan curve", "bands": "spectrum bands", "statistics":
               "line, tail, temperature, trend and level statistics"}
 
 
-def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
+def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any],
+                 spans: dict[str, float] | None = None) -> list[str]:
     """What the held-out check measured for each kept effect, and why the held-out gap
     shown may not move when the check passes (each effect's gap after it against the gap
     after the effects before it).
@@ -469,6 +488,14 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any]) -> list[str]:
         if k["effect"] == "bias_step":
             out.append("Held-out check of bias_step: not applied (the step is located and "
                        "tested on the whole record).")
+            continue
+        if on_record(k):
+            where = (f"the fit part's temperature spans {spans['fit_part']:.2f} degC and the "
+                     f"held-out part's {spans['held_out']:.2f} degC, too unequal to fit a "
+                     "response on one and check it on the other; " if spans else "")
+            out.append(f"Held-out check of {k['effect']}: not applied ({where}it is fitted "
+                       "on the whole record and tested there, by the whole-record "
+                       "temperature test).")
             continue
         need = (f"; needs more than {chi2_dist.isf(HOLDOUT_ALPHA, k['n_params']):.1f} "
                 f"for {k['n_params']} parameter{'s' * (k['n_params'] > 1)}"
@@ -544,7 +571,7 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
         notes.append("values +- one standard error")
     first = lead + (f" ({', '.join(notes)})" if notes else "") + ": "
     out = [first + "; ".join(parts) + "."]
-    out.extend(_check_lines(kept, h))
+    out.extend(_check_lines(kept, h, c.get("temperature_spans_c")))
     if dropped:
         out.append("Kept first, then dropped: " + "; ".join(dropped) + ".")
     if c.get("residual_significant") and c["verdict"] not in ("none",):
@@ -674,8 +701,9 @@ def explain_channel(c: dict[str, Any], realisations: int,
     lines: list[str] = [headline(c, realisations, units)]
     if any(k.get("params_se") for k in c.get("kept", [])):
         k = max(int(realisations), 2)
-        on_whole = (" (a bias step over the whole record)"
-                    if any(x["effect"] == "bias_step" for x in c["kept"]) else "")
+        whole = [x["effect"].replace("_", " ") for x in c["kept"] if on_record(x)]
+        on_whole = (f" (a {' and a '.join(whole)} over the whole record)".replace(
+            "a temperature", "a temperature response") if whole else "")
         lines.append(
             f"Values +- one standard error: each kept effect refitted the same way on {k} "
             f"simulated records of the fitted model, over the fit part{on_whole}. The error "
@@ -811,10 +839,13 @@ def explain_channel(c: dict[str, Any], realisations: int,
             f"{_f(c.get('gap_excess_after'))}.")
     h = c.get("holdout")
     if h and h.get("gap_before") is not None and "region_gap_before" in h:
-        used = ("never used for the fit" if not any(
-            k["effect"] == "bias_step" for k in c.get("kept", []))
-            else "never used for the fit but to locate the kept bias step, which is found "
-            "on the whole record")
+        whole = [k["effect"] for k in c.get("kept", []) if on_record(k)]
+        used = "never used for the fit" + "".join(
+            f" {'and' if i else 'but'} " + (
+                "to locate the kept bias step, which is found on the whole record"
+                if e == "bias_step" else
+                "to fit the kept temperature response, which is fitted on the whole record")
+            for i, e in enumerate(whole))
         txt = (f"Held-out part ({used}): gap {_f(h['gap_before'])} -> "
                f"{_f(h['gap_after'])}, systematic{_floor(h)} {_f(h['gap_excess_before'])} "
                f"-> {_f(h['gap_excess_after'])}")

@@ -27,7 +27,10 @@ Each effect's estimator, as in :func:`imubench.gap.candidates.fit_candidates`:
   6-24 % (13 to 52 standard errors);
 * ``ramp``: the least-squares slope of the block means against time;
 * ``temperature``: the coefficient from the estimator that gave it (the GLS slope of the
-  block-mean increments, or least squares of the block-mean levels, linear or quadratic);
+  block-mean increments, or least squares of the block-mean levels, linear or quadratic),
+  over the fit part, or over the whole realisation less the other kept effects'
+  deterministic parts for a response fitted on the whole record
+  (:attr:`imubench.gap.candidates.Candidate.whole_record`);
 * ``sine``: the zero-padded periodogram's frequency and the least-squares amplitude
   (:func:`imubench.gap.evidence.fit_sine`);
 * ``resonance``: the Lorentzian fit to the spectral excess
@@ -72,7 +75,10 @@ class Refit:
     (ln ADEV, per tau) and ``cm`` (its channel model) as the fit of that step saw them;
     ``raw``: the final model's realisations over the whole record (k, n), each less the
     deterministic parts of the OTHER kept effects, made on demand (only the sine,
-    outliers and bias-step estimators need samples)."""
+    outliers and bias-step estimators, and a temperature response fitted on the whole
+    record, need samples); ``record_temp``: the whole-record temperature test under the
+    covariance of ``cm``'s noise (its blocks, temperature and GLS factor), for a
+    temperature response fitted on the whole record."""
 
     fit: PartSetup
     final: SimFeatures
@@ -80,6 +86,7 @@ class Refit:
     sigma: np.ndarray
     cm: ChannelModel
     raw: Callable[[], np.ndarray]
+    record_temp: RecordTemperature | None = None
 
 
 @dataclass(frozen=True)
@@ -130,6 +137,8 @@ def _refits(c: Candidate, r: Refit) -> dict[str, list[float]]:
         return {}
     if eff == "ramp":
         return {"ramp": list(r.final.trend_slope)}
+    if eff == "temperature" and c.whole_record:
+        return _temperature_on_record(c, r)
     if eff == "temperature":
         return _temperature(c, fit, r.final, r.cm)
     if eff == "resonance":
@@ -189,4 +198,27 @@ def _temperature(c: Candidate, fit: PartSetup, final: SimFeatures, cm: ChannelMo
     out = {"temp_coeff": list(coef[1])}
     if c.estimator == "levels_quadratic":
         out["temp_coeff2"] = list(coef[2])
+    return out
+
+
+def _temperature_on_record(c: Candidate, r: Refit) -> dict[str, list[float]]:
+    """The temperature coefficients of each whole realisation (less the other kept
+    effects' deterministic parts), by the estimator that fitted ``c`` on the whole record:
+    the GLS slope of the block-mean increments under the covariance of ``r.cm``'s noise
+    (:meth:`imubench.gap.parts.RecordTemperature.slopes`), or the least squares of the
+    block-mean levels (:func:`imubench.gap.evidence.fit_temperature`)."""
+    fitted = ["temp_coeff"] + ["temp_coeff2"] * (c.estimator == "levels_quadratic")
+    temp = r.record_temp
+    if temp is None or temp.temp_c is None:
+        return {k: [] for k in fitted}
+    raw = r.raw()
+    if c.estimator == "gls":
+        return {"temp_coeff": list(temp.slopes(raw))}
+    fits = [evidence.fit_temperature(y, temp.temp_c, temp.rate_hz, r.cm.temp_ref)
+            for y in raw]
+    out = {"temp_coeff": [math.nan if f is None else (
+        f.temp_coeff if c.estimator == "levels_quadratic" else f.temp_coeff_linear)
+        for f in fits]}
+    if c.estimator == "levels_quadratic":
+        out["temp_coeff2"] = [math.nan if f is None else f.temp_coeff2 for f in fits]
     return out
