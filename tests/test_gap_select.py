@@ -1413,17 +1413,17 @@ def test_a_split_too_unequal_in_temperature_is_named_with_its_spans() -> None:
 WARM_RATE = 20.0
 
 
-def _warm_up_record(seed: int, coeff: float, start_s: float, walk: float = 0.0
-                    ) -> tuple[Series, np.ndarray]:
+def _warm_up_record(seed: int, coeff: float, start_s: float, walk: float = 0.0,
+                    tau_s: float = 600.0) -> tuple[Series, np.ndarray]:
     """1 h at WARM_RATE of white 0.004 dps/sqrt(Hz) + flicker 0.0008 dps (+ a random walk
     ``walk`` dps/sqrt(s)) and a response ``coeff`` dps/degC to a warm-up from 20 to 30
-    degC with a 600 s time constant that starts at ``start_s`` (0: in the fit part;
+    degC with a time constant ``tau_s`` that starts at ``start_s`` (0: in the fit part;
     1800: at the start of the held-out part), 0.01 degC steps; (the record, its
     temperature)."""
     rng = np.random.default_rng(seed)
     n = int(3600 * WARM_RATE)
     t = np.arange(n) / WARM_RATE
-    temp = 20.0 + 10.0 * np.where(t > start_s, 1.0 - np.exp(-(t - start_s) / 600.0), 0.0)
+    temp = 20.0 + 10.0 * np.where(t > start_s, 1.0 - np.exp(-(t - start_s) / tau_s), 0.0)
     temp = np.round(temp / 0.01) * 0.01
     y = white_flicker(rng, n, WARM_RATE, 0.004, 0.0008) + coeff * (temp - 25.0)
     if walk:
@@ -1449,6 +1449,7 @@ def test_a_response_to_a_warm_up_in_one_part_is_fitted_and_tested_on_the_whole_r
     assert d.verdict == "temperature", out["reason"]
     k = out["kept"][0]
     assert k["fitted_on"] == "whole_record"
+    assert k["holdout_check_applied"] is False
     coeff, se = k["params"]["temp_coeff"], k["params_se"]["temp_coeff"]
     assert abs(coeff - 1e-3) < min(0.2e-3, 3.0 * se), (coeff, se)
     spans = out["temperature_spans_c"]
@@ -1461,15 +1462,19 @@ def test_a_response_to_a_warm_up_in_one_part_is_fitted_and_tested_on_the_whole_r
             "held-out part included, so for it this is not an independent check" in text), text
 
 
-@pytest.mark.parametrize(("start_s", "seed", "walk"),
-                         [(0.0, 1, 0.0), (1800.0, 2, 0.0), (0.0, 103, 3e-4)])
+@pytest.mark.parametrize(("start_s", "seed", "walk", "tau_s"),
+                         [(0.0, 1, 0.0, 600.0), (1800.0, 2, 0.0, 600.0),
+                          (0.0, 103, 3e-4, 600.0), (0.0, 19, 3e-4, 300.0)])
 def test_a_warm_up_without_a_response_is_not_named(start_s: float, seed: int,
-                                                   walk: float) -> None:
+                                                   walk: float, tau_s: float) -> None:
     """No response to the warm-up: no temperature is named, on the model's own noise nor
     beside an unmodelled random walk 3e-4 dps/sqrt(s) whose level follows the warm-up by
     chance (seed 103: whole-record temperature z -4.8 under the base model, named
-    ``random_walk``)."""
-    series, _ = _warm_up_record(seed, 0.0, start_s, walk)
+    ``random_walk``). Seed 19 (300 s time constant, z 6.2 under the base model): the
+    response, fitted on the whole record and kept first, stayed beside the walk (2.9e-3
+    dps/degC) until the backward step dropped it, its whole-record test no longer firing
+    under the walk's covariance."""
+    series, _ = _warm_up_record(seed, 0.0, start_s, walk, tau_s)
     d = diagnose_channel(WARM_MODEL, "gx", series, GapOptions(seed=3))
     assert "temperature" not in {c.effect for c in d.kept}, d.to_dict()["reason"]
     assert d.verdict == ("random_walk" if walk else "none")

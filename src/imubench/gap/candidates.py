@@ -251,13 +251,18 @@ class Candidate:
         return float(sum(self.holdout_dparts.values())) if self.holdout_dparts else math.nan
 
     def holdout_dict(self) -> dict[str, Any]:
-        """The held-out part's figures after this effect (empty without a held-out part)."""
+        """The held-out part's figures after this effect (empty without a held-out part);
+        ``holdout_check_applied`` false for an effect fitted and tested on the whole record
+        (a bias step, :attr:`whole_record`), whose chi-squared drop is shown but decides
+        nothing."""
         if self.holdout is None:
             return {}
         return {"holdout_gap_after": self.holdout.gap,
                 "holdout_gap_excess_after": self.holdout.gap_excess,
                 "holdout_chi2_drop": self.holdout_dchi2,
-                "holdout_chi2_drop_parts": self.holdout_dparts}
+                "holdout_chi2_drop_parts": self.holdout_dparts,
+                "holdout_check_applied": not (self.whole_record
+                                              or self.effect == "bias_step")}
 
 
 def additive(cm: ChannelModel, effect: str) -> bool:

@@ -1039,6 +1039,15 @@ def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[C
     set beat the full set as kept). The least needed effect goes first; repeat while one
     is redundant.
 
+    A temperature response fitted and tested on the whole record
+    (:attr:`imubench.gap.candidates.Candidate.whole_record`) has no held-out check: its
+    test is the whole-record temperature test, and it goes first when that test, made
+    without it under the covariance of the effects kept after it, no longer fires. Kept
+    first against a model without a random walk, a response fitted to a walk that
+    followed a warm-up by chance stayed beside the walk (an outside reviewer's warm-up
+    20 -> 30 degC, 300 s time constant, walk 3e-4 dps/sqrt(s), no response: 2.45e-3 +-
+    0.73e-3 dps/degC kept; whole-record z 5.5 under the base model, 2.2 under the walk's).
+
     Returns the kept effects (in their order, re-scored as a sequence when one was
     dropped) and the dropped ones, each with its ``note``."""
     dropped: list[Candidate] = []
@@ -1052,6 +1061,13 @@ def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[C
             reduced[id(c)] = r.refit_base([x for x in kept if x is not c])
             st = r.step(reduced[id(c)])
             rise = c.unique_chi2 = st.chi2() - full.chi2()
+            if c.whole_record and not st.temp_fired:
+                worst = (-math.inf, c, (
+                    f"{PRUNE_REASON}: fitted and tested on the whole record, without a "
+                    "held-out check, and without it the whole-record temperature test "
+                    f"no longer fires beside them (z {st.temp_z:.1f}, under their "
+                    "covariance)"))
+                break
             need = float(chi2_dist.isf(FIT_ALPHA, c.n_params))
             if rise > need:
                 continue

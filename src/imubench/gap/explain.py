@@ -839,13 +839,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
             f"{_f(c.get('gap_excess_after'))}.")
     h = c.get("holdout")
     if h and h.get("gap_before") is not None and "region_gap_before" in h:
-        whole = [k["effect"] for k in c.get("kept", []) if on_record(k)]
-        used = "never used for the fit" + "".join(
-            f" {'and' if i else 'but'} " + (
-                "to locate the kept bias step, which is found on the whole record"
-                if e == "bias_step" else
-                "to fit the kept temperature response, which is fitted on the whole record")
-            for i, e in enumerate(whole))
+        whole = [("to locate the kept bias step" if k["effect"] == "bias_step"
+                  else "to fit the kept temperature response")
+                 for k in c.get("kept", []) if on_record(k)]
+        used = ("never used for the fit" if not whole else
+                f"used only {' and '.join(whole)}, on the whole record")
         txt = (f"Held-out part ({used}): gap {_f(h['gap_before'])} -> "
                f"{_f(h['gap_after'])}, systematic{_floor(h)} {_f(h['gap_excess_before'])} "
                f"-> {_f(h['gap_excess_after'])}")
