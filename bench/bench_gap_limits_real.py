@@ -161,9 +161,7 @@ def load(ch: str, recording: str = "s5") -> tuple[np.ndarray, float]:
         return np.degrees(z["gyro_x"]), float(z["fs_hz"])
     if recording == "cats":
         z = np.load(RECORDINGS["cats"])
-        rows = (CATS / "events.csv").read_text().splitlines()
-        first = next(r.split(",") for r in rows[1:] if r.startswith("static"))
-        i0, i1 = int(first[1]), int(first[2])
+        i0, i1 = cats_static()
         if ch[0] == "g":
             return np.degrees(z["gyro_mrad_s"][i0:i1, i] / 1000.0), float(z["fs_hz"])
         return z["accel_m_s2"][i0:i1, i] / G, float(z["fs_hz"])
@@ -171,6 +169,13 @@ def load(ch: str, recording: str = "s5") -> tuple[np.ndarray, float]:
     if ch[0] == "g":
         return np.degrees(z["gyro_measured_rad_s"][:, i]), float(z["fs_hz"])
     return z["accel_m_s2"][:, i] / G, float(z["fs_hz"])
+
+
+def cats_static() -> tuple[int, int]:
+    """First and end row of the CATS tag's first static segment (events.csv)."""
+    rows = (CATS / "events.csv").read_text().splitlines()
+    first = next(r.split(",") for r in rows[1:] if r.startswith("static"))
+    return int(first[1]), int(first[2])
 
 
 def heavy_tails(y: np.ndarray, fs: float) -> tuple[bool, str]:
@@ -242,10 +247,8 @@ def step_in_other_sensor(t_step: float, ch: str, seg: int, recording: str
 def real_temperature(seg: int) -> np.ndarray:
     """The CATS tag's own temperature (degC) over test segment ``seg``, which the bench
     withholds from the diagnosis (it gives the synthetic one)."""
-    z = np.load(RECORDINGS["cats"])
-    rows = (CATS / "events.csv").read_text().splitlines()
-    first = next(r.split(",") for r in rows[1:] if r.startswith("static"))
-    temp = z["temperature_c"][int(first[1]):int(first[2])]
+    i0, i1 = cats_static()
+    temp = np.load(RECORDINGS["cats"])["temperature_c"][i0:i1]
     n = len(temp) // SEGMENTS
     return temp[seg * n:(seg + 1) * n]
 

@@ -1414,12 +1414,11 @@ WARM_RATE = 20.0
 
 
 def _warm_up_record(seed: int, coeff: float, start_s: float, walk: float = 0.0,
-                    tau_s: float = 600.0) -> tuple[Series, np.ndarray]:
+                    tau_s: float = 600.0) -> Series:
     """1 h at WARM_RATE of white 0.004 dps/sqrt(Hz) + flicker 0.0008 dps (+ a random walk
     ``walk`` dps/sqrt(s)) and a response ``coeff`` dps/degC to a warm-up from 20 to 30
     degC with a time constant ``tau_s`` that starts at ``start_s`` (0: in the fit part;
-    1800: at the start of the held-out part), 0.01 degC steps; (the record, its
-    temperature)."""
+    1800: at the start of the held-out part), 0.01 degC steps."""
     rng = np.random.default_rng(seed)
     n = int(3600 * WARM_RATE)
     t = np.arange(n) / WARM_RATE
@@ -1428,7 +1427,7 @@ def _warm_up_record(seed: int, coeff: float, start_s: float, walk: float = 0.0,
     y = white_flicker(rng, n, WARM_RATE, 0.004, 0.0008) + coeff * (temp - 25.0)
     if walk:
         y += np.cumsum(rng.standard_normal(n)) * walk / math.sqrt(WARM_RATE)
-    return Series(y, temp, WARM_RATE, "warm-up"), temp
+    return Series(y, temp, WARM_RATE, "warm-up")
 
 
 WARM_MODEL = NoiseModel.single_term("gx", white=0.004, flicker=0.0008)
@@ -1443,7 +1442,7 @@ def test_a_response_to_a_warm_up_in_one_part_is_fitted_and_tested_on_the_whole_r
     dps/degC (whole-record temperature z 14-16). Fitted on the whole record and tested by
     the whole-record temperature test, it is named, with its value within 20 % and three
     standard errors, and the text says why the held-out part is not its test."""
-    series, _ = _warm_up_record(1, 1e-3, start_s)
+    series = _warm_up_record(1, 1e-3, start_s)
     d = diagnose_channel(WARM_MODEL, "gx", series, GapOptions(seed=3))
     out = d.to_dict()
     assert d.verdict == "temperature", out["reason"]
@@ -1474,7 +1473,7 @@ def test_a_warm_up_without_a_response_is_not_named(start_s: float, seed: int,
     response, fitted on the whole record and kept first, stayed beside the walk (2.9e-3
     dps/degC) until the backward step dropped it, its whole-record test no longer firing
     under the walk's covariance."""
-    series, _ = _warm_up_record(seed, 0.0, start_s, walk, tau_s)
+    series = _warm_up_record(seed, 0.0, start_s, walk, tau_s)
     d = diagnose_channel(WARM_MODEL, "gx", series, GapOptions(seed=3))
     assert "temperature" not in {c.effect for c in d.kept}, d.to_dict()["reason"]
     assert d.verdict == ("random_walk" if walk else "none")

@@ -72,7 +72,7 @@ def _evidence(ax: Any, d: ChannelDiagnosis) -> str:
         ax.set_xlabel("temperature (degC)")
         ax.set_ylabel(f"{d.channel} block mean ({unit})")
         ax.legend(fontsize=7)
-        return "temperature scatter (fit part)"
+        return f"temperature scatter ({'whole record' if w.whole_record else 'fit part'})"
     if eff == "ramp" and "ramp" in ev and d.winner is not None:
         t, means = ev["ramp"]
         ok = np.isfinite(means)
