@@ -421,6 +421,12 @@ def test_a_kept_effect_says_when_the_held_out_part_still_departs_after_it() -> N
     assert ("still departs from the model with the kept effects (by the whole Allan "
             "curve's shape, a correlation with temperature) where the fit part"
             ) in "\n".join(explain_channel(c, 10))
+    # a region of one tau reads as that tau (an outside reviewer: "(1020-1020 s real above)")
+    hold["regions_after"], hold["fired_after"] = [{"tau_min_s": 1020.0, "tau_max_s": 1020.0,
+                                                   "direction": "real_above", "gap": 0.5,
+                                                   "z_max": 5.0}], []
+    assert "with the kept effects (1020 s real above) where" in "\n".join(
+        explain_channel(c, 10))
     hold["significant_after"] = False
     assert "still departs" not in "\n".join(explain_channel(c, 10))
 
@@ -785,8 +791,9 @@ def test_a_close_alternative_that_was_not_taken_is_said() -> None:
     c = _entry("random_walk", effects=[rw], kept=[rw], alternative=alt)
     text = "\n".join(explain_channel(c, 10))
     assert ("Examined and not kept: temperature (temp_coeff = 0.00355) + markov "
-            "(markov_sigma = 0.00398, markov_tau = 33.1), kept by the selection that "
-            "examines first") in text, text
+            "(markov_sigma = 0.00398, markov_tau = 33.1), the effects that the other "
+            "selection (the one that examines first the effects whose own whole-record "
+            "tests fired) kept.") in text, text
     assert ("It scores 76.9 against 68.5 for the kept effects on the fit part (3 parameters "
             "against 1; lower is better), held-out gap's excess over its scatter 0.0509 "
             "against 0.12 (scatter 0.0994); the held-out part favours it; not taken "
@@ -810,3 +817,18 @@ def test_the_verdicts_own_closure_says_it_is_its_own_beside_other_kept_effects()
     assert "(all kept effects together close 95% of" in line, line
     c["kept"] = [temp]
     assert "; modelling it closes 81%" in explain_channel(c, 10)[0]
+
+
+def test_an_accelerometers_drift_is_no_rate() -> None:
+    """With an accelerometer's units (g), a temperature response and a ramp say what
+    drifts ("the acceleration"), not "the rate" (an outside reviewer read "The rate drifts
+    with temperature, 0.00157 +- 0.00016 g/degC")."""
+    from imubench.noisefit.units import param_units
+
+    temp = {"temp_coeff": 0.00157, "temp_coeff2": 0.0}
+    assert describe("temperature", temp, param_units("ay")).startswith(
+        "the acceleration drifts with temperature, 0.00157 g/degC")
+    assert describe("ramp", {"ramp": 2e-6}, param_units("az")).startswith(
+        "the acceleration drifts linearly in time")
+    assert describe("temperature", temp, param_units("gy")).startswith(
+        "the rate drifts with temperature, 0.00157 dps/degC")

@@ -688,6 +688,9 @@ def _acceptable(c: Candidate, st: _Step) -> str:
     if c.whole_record:
         spans = temperature_spans(*st.series_parts)
         where = f" ({_spans_text(spans)})" if spans is not None else ""
+        if not math.isfinite(st.temp_z):
+            return (f"fitted and tested on the whole record{where}, where the temperature "
+                    f"test cannot be made ({st.temp.note or 'no temperature blocks'})")
         if not st.temp_fired:
             return (f"fitted and tested on the whole record{where}, where the temperature "
                     f"test did not fire (z {st.temp_z:.1f})")

@@ -62,6 +62,13 @@ def _span(lo: float, hi: float, unit: str) -> str:
     return f"at {a} {unit}" if a == b else f"over {a}-{b} {unit}"
 
 
+def _range(lo: float | None, hi: float | None, unit: str) -> str:
+    """'lo-hi unit', or 'lo unit' for a single tau (an outside reviewer read "(1020-1020 s
+    real above)")."""
+    a, b = _f(lo), _f(hi)
+    return f"{a} {unit}" if a == b else f"{a}-{b} {unit}"
+
+
 def _with_error(v: float, err: float) -> str:
     """'v +- err' in one notation: the error to 2 significant digits and the value to the
     same decimal place (a sine's 7.299983 Hz with 7.9e-06 Hz reads 7.2999831 +-
@@ -274,6 +281,9 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
         return _valued({key: value}, key, units)
 
     e = entry or {}
+    # what the channel reads: an accelerometer's (unit g) is no rate (an outside reviewer
+    # read "The rate drifts with temperature, 0.00157 g/degC")
+    what = "the acceleration" if (units or {}).get("ramp", "").startswith("g/") else "the rate"
     if effect == "sine" and e.get("sine_amplitude_at_output") is not None:
         return (f"a sinusoidal disturbance of amplitude "
                 f"{like(e['sine_amplitude_at_output'], 'sine_amplitude')} at "
@@ -281,7 +291,7 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
                 "the model's output filter, the model file's value)")
     if effect == "temperature" and p.get("temp_coeff2") and \
             e.get("temp_slope_at_mean") is not None:
-        return (f"the rate drifts with temperature, "
+        return (f"{what} drifts with temperature, "
                 f"{like(e['temp_slope_at_mean'], 'temp_coeff')} at the record's mean "
                 f"{_f(e.get('temp_mean_c'), 3)} degC, curving by {g('temp_coeff2')} "
                 f"(model-file coefficients at temp_ref: temp_coeff {g('temp_coeff')})")
@@ -290,13 +300,13 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     filt = (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
             if bw is not None and bw > 0 else "no output filter")
     return {
-        "temperature": f"the rate drifts with temperature, {g('temp_coeff')}",
+        "temperature": f"{what} drifts with temperature, {g('temp_coeff')}",
         "sine": f"a sinusoidal disturbance of amplitude {g('sine_amplitude')} at "
                 f"{num('sine_freq', 'Hz')}",
         "random_walk": f"the bias wanders as a random walk (K = {g('random_walk')})",
         "flicker": f"the bias instability (flicker) is larger than modelled (B = "
                    f"{g('flicker')})",
-        "ramp": f"the rate drifts linearly in time, {g('ramp')}",
+        "ramp": f"{what} drifts linearly in time, {g('ramp')}",
         "quantization": f"quantization noise is larger than modelled (Q = "
                         f"{g('quantization')})",
         "markov": f"a correlated bias (Gauss-Markov) of sigma {g('markov_sigma')} with "
@@ -407,7 +417,7 @@ def headline(c: dict[str, Any], realisations: int,
             every = (" (the whole-curve test fired, so every tau is counted)"
                      if (c.get("global") or {}).get("fired") else "")
             return ("No unmodelled effect: the recording departs from the model at "
-                    f"{_f(bg.get('tau_min_s'))}-{_f(bg.get('tau_max_s'))} s{every} by no "
+                    f"{_range(bg.get('tau_min_s'), bg.get('tau_max_s'), 's')}{every} by no "
                     f"more than {src} differ (replicate variation).")
         h = c.get("holdout") or {}
         if h.get("significant"):
@@ -604,8 +614,9 @@ def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None)
                 "scatter")
     favour = ("; the held-out part favours it" if a["holdout_excess"] < a["holdout_excess_kept"]
               and worse_score else "")
-    return (f"Examined and not kept: {names}, kept by the selection that examines first "
-            f"the effects whose own whole-record tests fired. It scores {a['score']:.1f} "
+    return (f"Examined and not kept: {names}, the effects that the other selection (the "
+            f"one that examines first the effects whose own whole-record tests fired) "
+            f"kept. It scores {a['score']:.1f} "
             f"against {a['score_kept']:.1f} for the kept effects on the fit part "
             f"({a['n_params']} parameters against {a['n_params_kept']}; lower is better), "
             f"held-out gap's excess over its scatter {_f(a['holdout_excess'])} against "
@@ -679,7 +690,7 @@ def _held_out_causes(h: dict[str, Any]) -> str:
 def _held_out_departure(h: dict[str, Any], after: bool) -> str:
     """'The held-out part departs from the model (its regions) where the fit part does not
     (systematic gap, scatter)', before any effect or (``after``) after all kept ones."""
-    regs = "; ".join(f"{_f(r['tau_min_s'])}-{_f(r['tau_max_s'])} s "
+    regs = "; ".join(f"{_range(r['tau_min_s'], r['tau_max_s'], 's')} "
                      f"{r['direction'].replace('_', ' ')}"
                      for r in h.get("regions_after" if after else "regions", []))
     lead = ("The held-out part still departs from the model with the kept effects" if after
