@@ -1885,3 +1885,31 @@ def test_the_whole_record_temperature_test_beside_a_kept_walk_is_made_under_its_
     under_base = _Step(fit, hold, sims, series, rt, 0.0, cm0)
     assert under_walk.temp_fired and under_walk.temp_z > 3.6
     assert not under_base.temp_fired and under_base.temp_z < 3.0
+
+
+def test_a_ramp_on_a_steady_temperature_drift_says_what_response_it_would_be() -> None:
+    """A response of 3e-3 dps/degC to a temperature that drifts steadily (20 -> 25 degC
+    over the hour, a 0.2 degC wiggle): the drift is named ``ramp`` (the temperature's
+    increments barely vary), and nothing said that the temperature drifted the same way
+    (an outside reviewer's CATS piece: a ramp of -4.88e-6 dps/s where the temperature fell
+    at 0.75 degC/h, a response of 0.026 dps/degC). The ramp now comes with the response
+    that gives its drift; on a temperature that cycles, nothing is said."""
+    n = int(3600 * WARM_RATE)
+    t = np.arange(n) / WARM_RATE
+    temp = np.round((20.0 + 5.0 * t / 3600.0 + 0.2 * np.sin(2 * math.pi * t / 900)) / 0.01) * 0.01
+    y = white_flicker(np.random.default_rng(4), n, WARM_RATE, 0.004, 0.0008) + 3e-3 * (
+        temp - 25.0)
+    out = diagnose_channel(WARM_MODEL, "gx", Series(y, temp, WARM_RATE, "drift"),
+                           GapOptions(seed=3)).to_dict()
+    assert out["verdict"] == "ramp", out["reason"]
+    alias = out["ramp_temperature_alias"]
+    assert alias["r_time"] > 0.99
+    assert alias["temp_coeff_equivalent"] == pytest.approx(3e-3, rel=0.15)
+    text = "\n".join(explain_channel(out, 10, {"temp_coeff": "dps/degC", "ramp": "dps/s"}))
+    assert "The temperature drifted in step with time (r +1.00 over the record, 4.9 degC/h)" \
+        in text, text
+    cycling = 20.0 + 3.0 * np.sin(2 * math.pi * t / 1500.0)
+    out = diagnose_channel(WARM_MODEL, "gx", Series(
+        white_flicker(np.random.default_rng(4), n, WARM_RATE, 0.004, 0.0008) + 5e-6 * t,
+        cycling, WARM_RATE, "ramp"), GapOptions(seed=3)).to_dict()
+    assert out["verdict"] == "ramp" and out["ramp_temperature_alias"] is None

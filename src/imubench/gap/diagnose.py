@@ -80,6 +80,7 @@ from imubench.gap.curves import (
     STAT_TESTS,
     Z_SLOPE,
     Comparison,
+    block_means,
     line_bands,
     stat_fired,
     z_against,
@@ -234,6 +235,10 @@ class ChannelDiagnosis:
     temp_spans_c: tuple[float, float] | None = None
     """The fit part's and held-out part's temperature spans (degC) when they are too
     unequal for the split to test a temperature response (:func:`temperature_spans`)."""
+    ramp_temperature: dict[str, float] | None = None
+    """A kept ramp's drift read as a temperature response, when the record's temperature
+    drifted in step with time (:func:`ramp_as_temperature`; JSON
+    ``ramp_temperature_alias``)."""
     not_kept: list[Candidate] = field(default_factory=list)
     """The candidates examined at the step where the forward selection stopped with a
     significant departure left (after at least one kept effect), each with the ``note``
@@ -304,6 +309,7 @@ class ChannelDiagnosis:
             "global": self.before.global_dict(),
             "background": self.background,
             "alternative": self.alternative,
+            "ramp_temperature_alias": self.ramp_temperature,
         }
         for entry in out["effects"]:
             entry["kept"] = entry["effect"] in kept_effects
@@ -1565,12 +1571,44 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                                          if series.has_temperature and series.temp_c is not None
                                          else math.nan),
                             temp_ref_c=float(cm0.temp_ref), temp_spans_c=realiser.temp_spans,
+                            ramp_temperature=ramp_as_temperature(kept, cm0, series),
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [],
                             alternative=path.alternative)
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag
+
+
+RAMP_TEMP_R = 0.9
+"""|r| of the record's block-mean temperature with time above which a kept ramp is said
+to be what a temperature response would give (:func:`ramp_as_temperature`)."""
+
+
+def ramp_as_temperature(kept: list[Candidate], cm: ChannelModel, series: Series
+                        ) -> dict[str, float] | None:
+    """When a ramp is kept and the record's temperature drifted in step with time (|r| of
+    its 64 block means with time at least :data:`RAMP_TEMP_R`): ``r_time``,
+    ``temp_rate_c_per_s`` (least-squares slope of the block temperatures on time) and
+    ``temp_coeff_equivalent``, the response (unit/degC) that gives the ramp's added drift
+    (the kept ramp less the model's). None otherwise. An outside reviewer's CATS piece: a
+    ramp of -4.88e-6 dps/s kept where the temperature fell at 0.75 degC/h, exactly a
+    response of 0.026 dps/degC, and nothing said so."""
+    ramp = next((c for c in kept if c.effect == "ramp"), None)
+    if ramp is None or not series.has_temperature or series.temp_c is None:
+        return None
+    m = max(1, len(series.temp_c) // 64)
+    tb = block_means(series.temp_c, m)
+    t = (np.arange(len(tb)) + 0.5) * m / series.rate_hz
+    ok = np.isfinite(tb)
+    if ok.sum() < 5 or np.ptp(tb[ok]) <= 0:
+        return None
+    r = float(np.corrcoef(t[ok], tb[ok])[0, 1])
+    rate = float(np.polyfit(t[ok], tb[ok], 1)[0])
+    if not (abs(r) >= RAMP_TEMP_R and rate != 0):
+        return None
+    return {"r_time": r, "temp_rate_c_per_s": rate,
+            "temp_coeff_equivalent": (ramp.params["ramp"] - cm.ramp) / rate}
 
 
 def main_param_error(effect: str, fitted: dict[str, float], truth: float) -> float:

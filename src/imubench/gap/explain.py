@@ -741,6 +741,14 @@ def explain_channel(c: dict[str, Any], realisations: int,
                      + _strongest(c, dof) + ".")
     if c.get("temperature_note"):
         lines.append(f"Temperature: {c['temperature_note']}.")
+    alias = c.get("ramp_temperature_alias")
+    if alias:
+        lines.append(
+            f"The temperature drifted in step with time (r {alias['r_time']:+.2f} over the "
+            f"record, {alias['temp_rate_c_per_s'] * 3600.0:.3g} degC/h): the kept ramp's "
+            "drift is what a temperature response of "
+            + _valued({"temp_coeff": alias["temp_coeff_equivalent"]}, "temp_coeff", units)
+            + " would give; a record over a temperature cycle tells the two apart.")
     effects = c["effects"]
     if verdict == "none":
         lines.append("Verdict none: " + (
