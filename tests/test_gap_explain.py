@@ -632,6 +632,14 @@ def test_a_bias_steps_held_out_closure_is_not_called_independent() -> None:
     assert text[0].startswith("The bias steps by -0.031 at t = 1914 s; modelling it closes")
     assert "so for it this is not an independent check" in text[0]
     assert "0% of the fit part's total, the step test being on the whole record" in "\n".join(text)
+    assert "within two standard errors of zero" not in "\n".join(text)
+    # a step whose size its refits do not fix is said to be so (an outside reviewer: a
+    # step of -0.0040 +- 0.0026 dps kept beside a ramp, where the record held none)
+    step = dict(step, params={"step_size": -0.0040, "step_time_s": 2943.0},
+                params_se={"step_size": 0.0026, "step_time_s": 1229.0})
+    text = explain_channel(_entry("bias_step", effects=[step], kept=[step]), 10)
+    assert ("step_time_s = 2943 +- 1229; its size is within two standard errors of zero: "
+            "the record does not fix it): fit-part gap") in "\n".join(text), text
 
 
 def test_a_held_out_departure_at_a_line_is_not_blamed_on_a_slow_process() -> None:

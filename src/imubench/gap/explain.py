@@ -564,8 +564,13 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     for i, k in enumerate(kept, 1):
         how = (f"; by {ESTIMATOR_WORDS[k['estimator']]}" if k.get("estimator") in
                ESTIMATOR_WORDS else "")
-        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units, k)}{how}): fit-part "
-               f"gap {_f(k['gap_after'])}")
+        size, se = k["params"].get("step_size"), (k.get("params_se") or {}).get("step_size")
+        unfixed = ("; its size is within two standard errors of zero: the record does not "
+                   "fix it" if k["effect"] == "bias_step" and size is not None
+                   and se is not None and math.isfinite(se) and abs(size) < 2.0 * se
+                   else "")
+        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units, k)}{how}{unfixed}): "
+               f"fit-part gap {_f(k['gap_after'])}")
         if k.get("holdout_gap_after") is not None:
             txt += f", held-out gap {_f(k['holdout_gap_after'])}"
         parts.append(txt)
