@@ -659,8 +659,8 @@ def temperature_spans(fit: Series, hold: Series | None) -> tuple[float, float] |
     return None
 
 
-def _spans_text(spans: tuple[float, float]) -> str:
-    """The two parts' temperature spans in words."""
+def spans_text(spans: tuple[float, float]) -> str:
+    """The fit part's and the held-out part's temperature spans (degC) in words."""
     return (f"the fit part's temperature spans {spans[0]:.2f} degC and the held-out part's "
             f"{spans[1]:.2f} degC")
 
@@ -693,7 +693,7 @@ def _acceptable(c: Candidate, st: _Step) -> str:
                 f"and lowers chi-squared by {drop:.1f} (needs {need_fit:.1f})")
     if c.whole_record:
         spans = temperature_spans(*st.series_parts)
-        where = f" ({_spans_text(spans)})" if spans is not None else ""
+        where = f" ({spans_text(spans)})" if spans is not None else ""
         if not math.isfinite(st.temp_z):
             return (f"fitted and tested on the whole record{where}, where the temperature "
                     f"test cannot be made ({st.temp.note or 'no temperature blocks'})")

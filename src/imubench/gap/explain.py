@@ -39,6 +39,7 @@ from imubench.gap.diagnose import (
     REPLACED,
     exchanged_by,
     removes,
+    spans_text,
 )
 
 
@@ -500,9 +501,8 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any],
                        "tested on the whole record).")
             continue
         if on_record(k):
-            where = (f"the fit part's temperature spans {spans['fit_part']:.2f} degC and the "
-                     f"held-out part's {spans['held_out']:.2f} degC, too unequal to fit a "
-                     "response on one and check it on the other; " if spans else "")
+            where = (spans_text((spans["fit_part"], spans["held_out"])) + ", too unequal "
+                     "to fit a response on one and check it on the other; " if spans else "")
             out.append(f"Held-out check of {k['effect']}: not applied ({where}it is fitted "
                        "on the whole record and tested there, by the whole-record "
                        "temperature test).")
