@@ -42,6 +42,7 @@ import platform
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -60,6 +61,19 @@ R_CLEAR = 0.9
 R_NONE = 0.5
 """|r| below which it holds none."""
 SEED = 7
+
+
+class Case(NamedTuple):
+    """One diagnosed segment: its class by |r| (``clear``, ``none`` or ``-``), whether a
+    temperature response was kept, its coefficient, the block slopes of this and of the
+    other test segment, and whether a handling event lies inside."""
+
+    cls: str
+    named: bool
+    coeff: float
+    slope: float
+    slope_other: float
+    handled: bool
 
 
 def events(kind: str) -> list[tuple[int, int, str]]:
@@ -100,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
           f"axes={args.axes} orientations={args.orientations} "
           f"model_less_temperature={args.model_less_temperature}", flush=True)
     t_all = time.perf_counter()
-    rows = []
+    rows: list[Case] = []
     for o in (int(x) for x in args.orientations.split(",")):
         i0, i1, note = events("static")[o]
         temp_all = z["temperature_c"][i0:i1]
@@ -133,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
                 coeff = k["params"]["temp_coeff"] if k else math.nan
                 se = (k.get("params_se") or {}).get("temp_coeff") if k else None
                 cls = "clear" if abs(r) >= R_CLEAR else "none" if abs(r) < R_NONE else "-"
-                rows.append((cls, k is not None, coeff, slope, slope_o, handled))
+                rows.append(Case(cls, k is not None, coeff, slope, slope_o, handled))
                 fitted = (f"temperature {coeff:.3g} +- {se if se is not None else math.nan:.2g} "
                           f"({k.get('fitted_on')})" if k else "no temperature")
                 inside = " (handling inside)" if handled else ""
@@ -144,16 +158,16 @@ def main(argv: list[str] | None = None) -> int:
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
     print(f"\n## summary ({time.perf_counter() - t_all:.0f} s)")
     for label, subset in (("all segments", rows),
-                          ("without a handling event", [x for x in rows if not x[5]])):
-        clear = [x for x in subset if x[0] == "clear"]
-        none = [x for x in subset if x[0] == "none"]
-        named = [x for x in clear if x[1]]
-        err = [abs(x[2] / x[3] - 1.0) for x in named]
-        err_o = [abs(x[2] / x[4] - 1.0) for x in named
-                 if math.isfinite(x[4]) and x[4] * x[2] > 0]
+                          ("without a handling event", [x for x in rows if not x.handled])):
+        clear = [x for x in subset if x.cls == "clear"]
+        none = [x for x in subset if x.cls == "none"]
+        named = [x for x in clear if x.named]
+        err = [abs(x.coeff / x.slope - 1.0) for x in named]
+        err_o = [abs(x.coeff / x.slope_other - 1.0) for x in named
+                 if math.isfinite(x.slope_other) and x.slope_other * x.coeff > 0]
         print(f"  {label}: clear responses (|r| >= {R_CLEAR}) named temperature "
               f"{len(named)}/{len(clear)}; no response (|r| < {R_NONE}) named temperature "
-              f"{sum(x[1] for x in none)}/{len(none)}; median |fitted / slope - 1| "
+              f"{sum(x.named for x in none)}/{len(none)}; median |fitted / slope - 1| "
               f"{np.median(err) if err else math.nan:.1%} against this segment's block "
               f"slope, {np.median(err_o) if err_o else math.nan:.1%} against the other "
               f"segment's (n = {len(err_o)} of the same sign)")
