@@ -1395,17 +1395,21 @@ def test_a_ramp_is_refused_where_the_held_out_part_drifts_the_other_way() -> Non
 def test_a_split_too_unequal_in_temperature_is_named_with_its_spans() -> None:
     """A warm-up that ends in the fit part leaves the held-out part at one temperature (an
     outside reviewer's 20 -> 30 degC, 600 s time constant: held-out part 29.5-30.0
-    degC); one that starts in the held-out part leaves the fit part nothing to fit. Both
-    are too unequal for the split (:func:`temperature_spans`); parts that both move are
-    not, nor a record without a temperature or a held-out part."""
+    degC); one that starts in the held-out part leaves the fit part nothing to fit; a
+    temperature that steps between the parts leaves each at one temperature. Each part
+    is measured against the record's span (:func:`temperature_spans`); parts that both
+    move are not too narrow, nor is a record without a temperature or a held-out part."""
     from imubench.gap.diagnose import temperature_spans
 
     y = np.zeros(100)
     warm = Series(y, np.linspace(20.0, 29.5, 100), RATE, "fit")
     flat = Series(y, np.linspace(29.5, 30.0, 100), RATE, "hold")
-    assert temperature_spans(warm, flat) == pytest.approx((9.5, 0.5))
-    assert temperature_spans(flat, warm) == pytest.approx((0.5, 9.5))
+    assert temperature_spans(warm, flat) == pytest.approx((9.5, 0.5, 10.0))
+    assert temperature_spans(flat, warm) == pytest.approx((0.5, 9.5, 10.0))
+    stepped = (Series(y, np.full(100, 20.0), RATE, "f"), Series(y, np.full(100, 30.0), RATE, "h"))
+    assert temperature_spans(*stepped) == pytest.approx((0.0, 0.0, 10.0))
     assert temperature_spans(warm, Series(y, np.linspace(25.0, 30.0, 100), RATE, "h")) is None
+    assert temperature_spans(*(Series(y, np.full(100, 20.0), RATE, p) for p in "fh")) is None
     assert temperature_spans(warm, None) is None
     assert temperature_spans(Series(y, None, RATE, "f"), flat) is None
 
@@ -1452,7 +1456,7 @@ def test_a_response_to_a_warm_up_in_one_part_is_fitted_and_tested_on_the_whole_r
     coeff, se = k["params"]["temp_coeff"], k["params_se"]["temp_coeff"]
     assert abs(coeff - 1e-3) < min(0.2e-3, 3.0 * se), (coeff, se)
     spans = out["temperature_spans_c"]
-    assert min(spans.values()) < 0.25 * max(spans.values()), spans
+    assert min(spans["fit_part"], spans["held_out"]) < 0.25 * spans["record"], spans
     text = "\n".join(explain_channel(out, 10))
     assert "Held-out check of temperature: not applied (the fit part's temperature spans" \
         in text, text
@@ -1913,3 +1917,28 @@ def test_a_ramp_on_a_steady_temperature_drift_says_what_response_it_would_be() -
         white_flicker(np.random.default_rng(4), n, WARM_RATE, 0.004, 0.0008) + 5e-6 * t,
         cycling, WARM_RATE, "ramp"), GapOptions(seed=3)).to_dict()
     assert out["verdict"] == "ramp" and out["ramp_temperature_alias"] is None
+
+
+@pytest.mark.parametrize("coeff", [0.0, 2e-3])
+def test_a_temperature_that_steps_between_the_parts_is_fitted_on_the_whole_record(
+        coeff: float) -> None:
+    """The temperature steps from 20 to 30 degC at the split, each part at one
+    temperature: compared part with part the spans were both 0 and the split was kept,
+    and a response of 2e-3 dps/degC was ``unexplained``. Against the record's span (10
+    degC) each part holds too little, and the response is fitted and tested on the whole
+    record; without a response nothing is named."""
+    n = int(3600 * WARM_RATE)
+    temp = np.where(np.arange(n) < n // 2, 20.0, 30.0)
+    y = white_flicker(np.random.default_rng(2), n, WARM_RATE, 0.004, 0.0008) + coeff * (
+        temp - 25.0)
+    out = diagnose_channel(WARM_MODEL, "gx", Series(y, temp, WARM_RATE, "stepped"),
+                           GapOptions(seed=3)).to_dict()
+    assert out["temperature_spans_c"] == pytest.approx(
+        {"fit_part": 0.0, "held_out": 0.0, "record": 10.0})
+    if not coeff:
+        assert out["verdict"] == "none", out["reason"]
+        return
+    assert out["verdict"] == "temperature", out["reason"]
+    k = out["kept"][0]
+    assert k["fitted_on"] == "whole_record"
+    assert k["params"]["temp_coeff"] == pytest.approx(coeff, rel=0.1)

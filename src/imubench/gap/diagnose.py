@@ -232,9 +232,9 @@ class ChannelDiagnosis:
     """The record's mean temperature (degC; NaN without one)."""
     temp_ref_c: float = float("nan")
     """The model's ``temp_ref`` (degC), where the temperature coefficients are stated."""
-    temp_spans_c: tuple[float, float] | None = None
-    """The fit part's and held-out part's temperature spans (degC) when they are too
-    unequal for the split to test a temperature response (:func:`temperature_spans`)."""
+    temp_spans_c: tuple[float, float, float] | None = None
+    """The fit part's, the held-out part's and the record's temperature spans (degC) when
+    the split cannot both fit and test a temperature response (:func:`temperature_spans`)."""
     ramp_temperature: dict[str, float] | None = None
     """A kept ramp's drift read as a temperature response, when the record's temperature
     drifted in step with time (:func:`ramp_as_temperature`; JSON
@@ -303,7 +303,8 @@ class ChannelDiagnosis:
             "temperature_note": self.temp_note or None,
             "temperature_spans_c": (None if self.temp_spans_c is None else
                                     {"fit_part": self.temp_spans_c[0],
-                                     "held_out": self.temp_spans_c[1]}),
+                                     "held_out": self.temp_spans_c[1],
+                                     "record": self.temp_spans_c[2]}),
             "not_fitted": {e: why for e, why in self.evidence.get("not_fitted", {}).items()
                            if e not in kept_effects},
             "global": self.before.global_dict(),
@@ -627,16 +628,18 @@ def _explains_own_test(c: Candidate, st: _Step) -> bool:
 
 
 HOLDOUT_TEMP_SPAN = 0.25
-"""Share of one part's temperature span below which the split is too unequal in
-temperature to fit a response on the fit part and check it on the held-out part
-(:func:`temperature_spans`)."""
+"""Share of the record's temperature span below which a part holds too little of it to
+fit a response there or check it there (:func:`temperature_spans`)."""
 
 
-def temperature_spans(fit: Series, hold: Series | None) -> tuple[float, float] | None:
-    """The fit part's and the held-out part's temperature spans (degC), when the two are
-    too unequal for the split to fit a temperature response on one and check it on the
-    other: one spans less than :data:`HOLDOUT_TEMP_SPAN` of the other's. None otherwise
-    (and without a held-out part or a temperature).
+def temperature_spans(fit: Series, hold: Series | None
+                      ) -> tuple[float, float, float] | None:
+    """The fit part's, the held-out part's and the whole record's temperature spans
+    (degC), when the split cannot both fit a temperature response on one part and check
+    it on the other: one part spans less than :data:`HOLDOUT_TEMP_SPAN` of the record's.
+    None otherwise (and without a held-out part or a temperature). Measured against the
+    record's span, a temperature that steps between the parts (each part at one
+    temperature) counts too.
 
     Then the temperature response is fitted and tested on the whole record, as a bias
     step is (:attr:`imubench.gap.candidates.Candidate.whole_record`). A warm-up that ends
@@ -652,17 +655,19 @@ def temperature_spans(fit: Series, hold: Series | None) -> tuple[float, float] |
         return None
     if not (np.isfinite(fit.temp_c).any() and np.isfinite(hold.temp_c).any()):
         return None
-    sf, sh = float(np.nanmax(fit.temp_c) - np.nanmin(fit.temp_c)), float(
-        np.nanmax(hold.temp_c) - np.nanmin(hold.temp_c))
-    if max(sf, sh) > 0 and min(sf, sh) < HOLDOUT_TEMP_SPAN * max(sf, sh):
-        return sf, sh
+    lo, hi = (min(float(np.nanmin(fit.temp_c)), float(np.nanmin(hold.temp_c))),
+              max(float(np.nanmax(fit.temp_c)), float(np.nanmax(hold.temp_c))))
+    sf, sh, sw = float(np.nanmax(fit.temp_c) - np.nanmin(fit.temp_c)), float(
+        np.nanmax(hold.temp_c) - np.nanmin(hold.temp_c)), hi - lo
+    if sw > 0 and min(sf, sh) < HOLDOUT_TEMP_SPAN * sw:
+        return sf, sh, sw
     return None
 
 
-def spans_text(spans: tuple[float, float]) -> str:
-    """The fit part's and the held-out part's temperature spans (degC) in words."""
+def spans_text(spans: tuple[float, float, float]) -> str:
+    """The parts' and the record's temperature spans (degC) in words."""
     return (f"the fit part's temperature spans {spans[0]:.2f} degC and the held-out part's "
-            f"{spans[1]:.2f} degC")
+            f"{spans[1]:.2f} degC, of the record's {spans[2]:.2f} degC")
 
 
 def _drifts_the_other_way(ramp: float, t_hold: float, dof: int) -> str:

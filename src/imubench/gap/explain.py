@@ -501,8 +501,9 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any],
                        "tested on the whole record).")
             continue
         if on_record(k):
-            where = (spans_text((spans["fit_part"], spans["held_out"])) + ", too unequal "
-                     "to fit a response on one and check it on the other; " if spans else "")
+            where = (spans_text((spans["fit_part"], spans["held_out"], spans["record"]))
+                     + ": one part holds too little of it to fit a response there or "
+                     "check it there; " if spans else "")
             out.append(f"Held-out check of {k['effect']}: not applied ({where}it is fitted "
                        "on the whole record and tested there, by the whole-record "
                        "temperature test).")
