@@ -211,14 +211,19 @@ class Candidate:
         d.update(self.holdout_dict())
         return d
 
+    @property
+    def on_record(self) -> bool:
+        """Fitted and tested on the whole record, without the held-out check: a bias step
+        always, a temperature response when :attr:`whole_record`."""
+        return self.whole_record or self.effect == "bias_step"
+
     def fitted_on(self) -> dict[str, str]:
         """JSON ``fitted_on`` of a temperature response or bias step: ``whole_record``
-        (a bias step always; a temperature response when :attr:`whole_record`) or
-        ``fit_part``; empty for the other effects, always fitted on the fit part."""
+        (:attr:`on_record`) or ``fit_part``; empty for the other effects, always fitted
+        on the fit part."""
         if self.effect not in ("temperature", "bias_step"):
             return {}
-        return {"fitted_on": "whole_record" if self.whole_record or self.effect == "bias_step"
-                else "fit_part"}
+        return {"fitted_on": "whole_record" if self.on_record else "fit_part"}
 
     def as_recorded(self) -> dict[str, float]:
         """:attr:`params` with a sine's amplitude and a resonance's height as the record
@@ -253,16 +258,14 @@ class Candidate:
     def holdout_dict(self) -> dict[str, Any]:
         """The held-out part's figures after this effect (empty without a held-out part);
         ``holdout_check_applied`` false for an effect fitted and tested on the whole record
-        (a bias step, :attr:`whole_record`), whose chi-squared drop is shown but decides
-        nothing."""
+        (:attr:`on_record`), whose chi-squared drop is shown but decides nothing."""
         if self.holdout is None:
             return {}
         return {"holdout_gap_after": self.holdout.gap,
                 "holdout_gap_excess_after": self.holdout.gap_excess,
                 "holdout_chi2_drop": self.holdout_dchi2,
                 "holdout_chi2_drop_parts": self.holdout_dparts,
-                "holdout_check_applied": not (self.whole_record
-                                              or self.effect == "bias_step")}
+                "holdout_check_applied": not self.on_record}
 
 
 def additive(cm: ChannelModel, effect: str) -> bool:

@@ -655,10 +655,9 @@ def temperature_spans(fit: Series, hold: Series | None
         return None
     if not (np.isfinite(fit.temp_c).any() and np.isfinite(hold.temp_c).any()):
         return None
-    lo, hi = (min(float(np.nanmin(fit.temp_c)), float(np.nanmin(hold.temp_c))),
-              max(float(np.nanmax(fit.temp_c)), float(np.nanmax(hold.temp_c))))
-    sf, sh, sw = float(np.nanmax(fit.temp_c) - np.nanmin(fit.temp_c)), float(
-        np.nanmax(hold.temp_c) - np.nanmin(hold.temp_c)), hi - lo
+    (f_lo, f_hi), (h_lo, h_hi) = ((float(np.nanmin(t)), float(np.nanmax(t)))
+                                  for t in (fit.temp_c, hold.temp_c))
+    sf, sh, sw = f_hi - f_lo, h_hi - h_lo, max(f_hi, h_hi) - min(f_lo, h_lo)
     if sw > 0 and min(sf, sh) < HOLDOUT_TEMP_SPAN * sw:
         return sf, sh, sw
     return None
@@ -709,7 +708,7 @@ def _acceptable(c: Candidate, st: _Step) -> str:
             return (f"fitted and tested on the whole record{where}, where the temperature "
                     f"test still fires with it (z {st.temp_z:.1f} -> {c.temp_record_z:.1f})")
         return ""
-    if c.holdout is not None and st.hold is not None and c.effect != "bias_step":
+    if c.holdout is not None and st.hold is not None and not c.on_record:
         need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))
         if not c.holdout_dchi2 > need:
             parts = ", ".join(f"{k} {v:.1f}" for k, v in c.holdout_dparts.items())
