@@ -1,56 +1,160 @@
-"""The fit's temperature check: a rate that follows a varying die temperature is named
-with its slope; a rate that does not (white, flicker-like and random-walk noise with the
-same temperature cycle) is not, at the stated |t| limit."""
+"""The fit's temperature response: a rate that follows a varying die temperature is named
+with its slope and, with ``--fit-temperature``, taken out before the noise terms are fitted
+and written to the model file; a rate that does not (white and random-walk noise with the
+same temperature histories) is not, at the stated |t| limit. Records come from numpy
+generators here, not from the project's simulator."""
 
 from __future__ import annotations
 
-import numpy as np
+import json
+import subprocess
+import sys
+import warnings
+from pathlib import Path
 
-from imubench.noisefit.temperature import T_LIMIT, temperature_slope, temperature_warning
+import numpy as np
+import pytest
+from lsm6ds_sim.model import ChannelModel, load_model
+
+from imubench.noisefit.fit import fit_channel
+from imubench.noisefit.recording_fit import _fit_with_temperature
+from imubench.noisefit.temperature import T_LIMIT, fit_temperature_response
 
 RATE = 104.0
 N = int(3600 * RATE)
+WHITE, WALK = 0.004, 3e-5
+TRUE_NOISE = ChannelModel(white=WHITE, random_walk=WALK)
+CATS = Path(__file__).resolve().parents[2] / "shared" / "reference" / "imu-real" / \
+    "cats-tag-temperature" / "cats_temperature_calib.npz"
 
 
-def _record(seed: int, coeff: float) -> tuple[np.ndarray, np.ndarray]:
-    """White 0.004 dps/sqrt(Hz) + random walk 3e-5 dps/sqrt(s) (numpy, not the simulator)
-    + coeff x (25 + 4 sin(2 pi t / 900 s))."""
+def _record(seed: int, coeff: float, *, rate: float = RATE, walk: float = WALK,
+            warm_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """White 0.004 dps/sqrt(Hz) + random walk ``walk`` dps/sqrt(s) + coeff x (T - 25), T a
+    25 +- 4 degC cycle of 900 s, or (``warm_up``) a 20 -> 30 degC warm-up of time
+    constant 600 s read with 0.05 degC of noise; one hour at ``rate``."""
     rng = np.random.default_rng(seed)
-    t = np.arange(N) / RATE
-    temp = 25.0 + 4.0 * np.sin(2 * np.pi * t / 900.0)
-    y = (0.004 * np.sqrt(RATE) * rng.standard_normal(N)
-         + np.cumsum(3e-5 / np.sqrt(RATE) * rng.standard_normal(N)) + coeff * (temp - 25.0))
+    n = int(3600 * rate)
+    t = np.arange(n) / rate
+    temp = (20.0 + 10.0 * (1.0 - np.exp(-t / 600.0)) + 0.05 * rng.standard_normal(n)
+            if warm_up else 25.0 + 4.0 * np.sin(2 * np.pi * t / 900.0))
+    y = (WHITE * np.sqrt(rate) * rng.standard_normal(n)
+         + np.cumsum(walk / np.sqrt(rate) * rng.standard_normal(n)) + coeff * (temp - 25.0))
     return y, temp
 
 
-def test_a_temperature_slope_is_found_and_measured() -> None:
+def test_a_temperature_response_is_found_and_measured() -> None:
     y, temp = _record(1, 0.01)
-    found = temperature_slope(y, temp, RATE)
+    found = fit_temperature_response(y, temp, RATE, TRUE_NOISE)
     assert found is not None
-    slope, t, _ = found
-    assert abs(slope / 0.01 - 1) < 0.05 and t > T_LIMIT
-    text = temperature_warning("gx", "dps", y, temp, RATE)
-    assert text is not None and "dps/degC" in text and text.startswith("gx: the rate follows")
+    assert abs(found.temp_coeff / 0.01 - 1) < 0.05 and found.t > T_LIMIT
+    assert abs(found.temp_coeff - 0.01) < 3 * found.temp_coeff_se
+    assert found.temp_ref_c == pytest.approx(25.0, abs=0.1)
 
 
-def test_no_warning_without_a_temperature_effect_or_a_varying_temperature() -> None:
-    warned = sum(temperature_warning("gx", "dps", *_record(seed, 0.0), RATE) is not None
-                 for seed in range(100, 130))
-    assert warned <= 1  # |t| > 5 on about 0 of 30 nulls, allowing one
-    y, _ = _record(7, 0.01)
-    assert temperature_slope(y, np.full(N, 25.0), RATE) is None  # steady: nothing to say
+def test_the_responses_error_is_its_scatter_and_nulls_are_not_named() -> None:
+    """Under the noise's covariance the slope's z has unit spread (Aitken's GLS error),
+    and no null reaches |t| > 5 (seeds 100-129)."""
+    z = []
+    for seed in range(100, 130):
+        y, temp = _record(seed, 0.0, rate=26.0)
+        found = fit_temperature_response(y, temp, 26.0, TRUE_NOISE)
+        assert found is not None and not found.significant
+        z.append(found.t)
+    assert 0.6 < float(np.std(z)) < 1.4
+    y, _ = _record(7, 0.01, rate=26.0)
+    assert fit_temperature_response(y, np.full(len(y), 25.0), 26.0, TRUE_NOISE) is None
 
 
 def test_a_recording_without_temperature_is_checked_silently() -> None:
-    """A CSV without a temp column gives an all-NaN temperature: no slope, no numpy
+    """A CSV without a temp column gives an all-NaN temperature: no response, no numpy
     "Mean of empty slice" warning on the user's terminal; blocks partly lost still count."""
-    import warnings
-
     y, temp = _record(3, 0.01)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert temperature_slope(y, np.full(N, np.nan), RATE) is None
+        assert fit_temperature_response(y, np.full(N, np.nan), RATE, TRUE_NOISE) is None
         gappy = temp.copy()
         gappy[: 40 * int(30 * RATE)] = np.nan  # the first 40 blocks lost entirely
-        found = temperature_slope(y, gappy, RATE)
-    assert found is not None and abs(found[0] / 0.01 - 1) < 0.05
+        found = fit_temperature_response(y, gappy, RATE, TRUE_NOISE)
+    assert found is not None and abs(found.temp_coeff / 0.01 - 1) < 0.05
+
+
+def test_a_walk_too_weak_to_select_is_not_read_as_a_response_to_a_warm_up() -> None:
+    """Seed 205: the fit selects white noise alone; under its covariance the walk's
+    wander reads as a response at |t| > 5. The response's covariance holds the walk at
+    its upper limit, and nothing is taken out."""
+    rate = 104.0
+    y, temp = _record(205, 0.0, rate=rate, warm_up=True)
+    fit = fit_channel(y, rate)
+    assert "random_walk" not in fit.present
+    under_white = fit_temperature_response(y, temp, rate, fit.channel_model())
+    assert under_white is not None and under_white.significant  # the trap
+    kept, response = _fit_with_temperature(y, temp, rate, True, lambda v: fit_channel(v, rate))
+    assert kept.temperature is None
+    assert response is not None and not response.significant
+
+
+def _csv(path: Path, y: np.ndarray, temp: np.ndarray, rate: float) -> Path:
+    t = np.arange(len(y)) / rate
+    path.write_text(f"# odr_hz: {rate:g}\nt,gx,temp\n" + "\n".join(
+        f"{a:.6f},{b:.6g},{c:.4f}" for a, b, c in zip(t, y, temp, strict=True)) + "\n")
+    return path
+
+
+def test_fit_temperature_takes_a_warm_ups_response_out_and_writes_it(tmp_path: Path) -> None:
+    """3e-3 dps/degC on a 20 -> 30 degC warm-up: without --fit-temperature the fit names it
+    in a warning and carries it as a long-tau term (a ramp, at this seed); with it, the
+    response is taken out (within 3 standard errors of the truth), no long-tau term
+    carries it, and the model file holds temp_coeff and temp_ref."""
+    rate = 52.0
+    rec = _csv(tmp_path / "warm.csv", *_record(301, 3e-3, rate=rate, warm_up=True), rate)
+    outs = {}
+    for flag in ((), ("--fit-temperature",)):
+        model, js = tmp_path / f"m{len(flag)}.toml", tmp_path / f"f{len(flag)}.json"
+        run = subprocess.run([sys.executable, "-m", "imubench", "fit", str(rec), "-o",
+                              str(model), "--json", str(js), *flag],
+                             capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr
+        outs[bool(flag)] = (load_model(model)["gx"], json.loads(js.read_text())["channels"]
+                            ["gx"], run.stderr + run.stdout)
+    raw_model, raw, raw_text = outs[False]
+    model, fitted, text = outs[True]
+    assert raw["temperature_response"] is None and raw_model.temp_coeff == 0.0
+    assert "follows the die temperature" in raw_text and "--fit-temperature" in raw_text
+    assert {"ramp", "random_walk", "flicker"} & set(raw["present"])  # the drift, as noise
+    resp = fitted["temperature_response"]
+    assert resp["accepted"] and resp["units"]["temp_coeff"] == "dps/degC"
+    assert abs(resp["temp_coeff"] - 3e-3) < 3 * resp["temp_coeff_se"]
+    assert model.temp_coeff == pytest.approx(resp["temp_coeff"])
+    assert model.temp_ref == pytest.approx(resp["temp_ref_c"])
+    assert not {"ramp", "flicker"} & set(fitted["present"])
+    assert fitted["params"]["random_walk"] < 2 * WALK
+    assert "was taken out before the noise terms were fitted" in text
+
+
+@pytest.mark.skipif(not CATS.is_file(), reason="no CATS reference recording")
+def test_a_real_response_fitted_on_one_segment_describes_the_others() -> None:
+    """CATS tag (1 Hz, an MPU-9250-class part), first static orientation, accelerometer y:
+    the response fitted on the first third (8.5 h) takes out at least 90 % of the 600 s
+    block means' variation about their trend on each of the other two thirds, which the
+    fit never saw."""
+    z = np.load(CATS)
+    rate = float(z["fs_hz"])
+    rows = (CATS.parent / "events.csv").read_text().splitlines()[1:]
+    i0, i1 = (int(v) for v in next(r for r in rows if r.startswith("static,")).split(",")[1:3])
+    y_all, temp_all = z["accel_m_s2"][i0:i1, 1] / 9.80665, z["temperature_c"][i0:i1]
+    n = (i1 - i0) // 3
+    kept, _ = _fit_with_temperature(y_all[:n], temp_all[:n], rate, True,
+                                    lambda v: fit_channel(v, rate, channel="ay"))
+    assert kept.temperature is not None
+    for k in (1, 2):
+        m = n // 600 * 600
+        yb = y_all[k * n:k * n + m].reshape(-1, 600).mean(1)
+        tb = temp_all[k * n:k * n + m].reshape(-1, 600).mean(1)
+        assert _about_trend(yb - kept.temperature.response(tb)) < 0.1 * _about_trend(yb)
+
+
+def _about_trend(v: np.ndarray) -> float:
+    """Variance of ``v`` about its least-squares straight line."""
+    trend = np.column_stack([np.ones(len(v)), np.arange(len(v))])
+    return float(np.var(v - trend @ np.linalg.lstsq(trend, v, rcond=None)[0]))

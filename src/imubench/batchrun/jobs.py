@@ -202,14 +202,14 @@ def fit_plan(channels: str | None, options: InputOptions, path: Path, name: str
     return chans
 
 
-def fit_work(terms: str, method: str, options: InputOptions, path: Path, name: str,
-             channel: str) -> Any:
+def fit_work(terms: str, method: str, fit_temperature: bool, options: InputOptions,
+             path: Path, name: str, channel: str) -> Any:
     """``fit_recording``'s work for one channel (a RecordingFit with one fit)."""
     from imubench.noisefit.recording_fit import fit_loaded
     from imubench.recording import load_recording
 
     return fit_loaded(load_recording(path, options), name, channels=[channel], terms=terms,
-                      method=method)
+                      method=method, fit_temperature=fit_temperature)
 
 
 def fit_rows(rec: Path, result: Any) -> Iterable[dict[str, Any]]:
@@ -222,6 +222,10 @@ def fit_rows(rec: Path, result: Any) -> Iterable[dict[str, Any]]:
             row[key] = f.params.get(key)
             lo, hi = f.ci.get(key, (None, None))
             row[f"{key}_ci95_low"], row[f"{key}_ci95_high"] = lo, hi
+        tr = f.temperature  # --fit-temperature's response, when one was taken out
+        row["temp_coeff"] = None if tr is None else tr.temp_coeff
+        row["temp_coeff_se"] = None if tr is None else tr.temp_coeff_se
+        row["temp_ref"] = None if tr is None else tr.temp_ref_c
         yield row
 
 
@@ -232,7 +236,8 @@ def run_fit_batch(args: argparse.Namespace) -> int:
     options = input_options(args)
     outcomes = _run("fit", args, args.recording,
                     functools.partial(fit_plan, args.channels, options),
-                    functools.partial(fit_work, args.terms, args.method, options))
+                    functools.partial(fit_work, args.terms, args.method, args.fit_temperature,
+                                      options))
     rows: list[dict[str, Any]] = []
     for o in outcomes:
         done = [ch for ch in o.channels if ch in o.results]

@@ -49,6 +49,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "tangent: datasheet slope lines; whittle: spectral likelihood; "
                         "exact: whittle plus the exact block-mean likelihood for flicker "
                         "and random walk (no gaps)")
+    p.add_argument("--fit-temperature", action="store_true",
+                   help="where a channel follows the recording's temperature column, fit "
+                        "that response (30 s block means, AR(1) GLS), take it out before "
+                        "the noise terms are fitted and write it as temp_coeff "
+                        "[, temp_coeff2], temp_ref (default: only warn; the random walk "
+                        "and flicker then carry the drift)")
     p.add_argument("-o", "--output", type=Path, default=None, metavar="MODEL.toml",
                    help="model file to write (required for one recording)")
     p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")
@@ -128,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
         with progress(100, "fit", unit="%") as bar:
             result = fit_recording(args.recording, channels=args.channels, terms=args.terms,
                                    method=args.method, options=input_options(args),
+                                   fit_temperature=args.fit_temperature,
                                    on_channel=lambda done, total: bar.fraction(done / total))
         if args.kalibr is not None and result.units_assumed:
             raise FitError(

@@ -39,6 +39,7 @@ from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 from scipy.stats import t as student_t
 
+from imubench.noisefit.blockmean import gls_fit
 from imubench.stats.allan import oavar as oavar_kernel
 from imubench.stats.prep import to_phase
 from imubench.stats.taus import averaging_factors
@@ -978,31 +979,6 @@ def gls_slopes(dys: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool],
     x = np.column_stack([np.ones_like(dx), dx] + ([] if extra is None else [extra]))
     coef, se = gls_fit(dys, x, chol)
     return coef[1], se[1]
-
-
-def gls_fit(dys: np.ndarray, x: np.ndarray, chol: tuple[np.ndarray, bool]
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Generalized-least-squares coefficients (p, k) of each row of ``dys`` (k, n) on the
-    columns of the design ``x`` (n, p), with noise covariance ``chol`` (:func:`scipy.
-    linalg.cho_factor` of the model's), and their standard errors (p, k), each row's
-    variance factor ``s^2 = e' C^-1 e / (n - p)`` at least 1 (:func:`gls_slopes`);
-    Aitken (1935). NaN where the design is singular or a coefficient's variance is not
-    positive."""
-    from scipy.linalg import cho_solve
-
-    nan = np.full((x.shape[1], len(dys)), np.nan)
-    cx = cho_solve(chol, x)
-    info = x.T @ cx
-    if not (np.all(np.isfinite(info)) and np.linalg.det(info) > 0):
-        return nan, nan
-    inv = np.linalg.inv(info)
-    var = np.diag(inv)
-    if not np.all(var > 0):
-        return nan, nan
-    coef = inv @ (cx.T @ dys.T)  # (p, k)
-    e = dys - (x @ coef).T
-    s2 = np.einsum("kn,nk->k", e, cho_solve(chol, e.T)) / max(dys.shape[1] - x.shape[1], 1)
-    return coef, np.sqrt(np.maximum(s2, 1.0)[None, :] * var[:, None])
 
 
 def temp_level_against(real: Features, sims: SimFeatures,

@@ -27,7 +27,6 @@ from imubench.gap.curves import (
     compare,
     features,
     gls_against,
-    gls_fit,
     gls_slopes,
     only_trend,
     psd_segment,
@@ -35,6 +34,7 @@ from imubench.gap.curves import (
     welch_psd,
 )
 from imubench.gap.errors import GapError
+from imubench.noisefit.blockmean import gls_fit
 from imubench.noisefit.covariance import oavar_correlation
 from imubench.noisefit.model_avar import block_increment_acv, block_increment_key
 from imubench.stats import oadev
@@ -218,7 +218,7 @@ class RecordTemperature:
         """z of the curvature of ``y``'s temperature response (unit/degC^2 over its GLS
         standard error): the block-mean increments regressed on those of ``T - temp_ref``
         and ``(T - temp_ref)^2`` beside a constant, under the base model's covariance
-        (:func:`imubench.gap.curves.gls_fit`); NaN without the test (:attr:`note`).
+        (:func:`imubench.noisefit.blockmean.gls_fit`); NaN without the test (:attr:`note`).
 
         The quadratic candidate's least squares of the block means weighs every block
         alike; on a slow temperature (+-1.5 degC at periods of 19 and 27 min, flicker

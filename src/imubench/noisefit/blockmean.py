@@ -120,11 +120,40 @@ def toeplitz_nll(acv: np.ndarray, x: np.ndarray) -> np.ndarray:
     return out if np.ndim(acv) == 2 else out[:1]
 
 
+
+
+def gls_fit(dys: np.ndarray, x: np.ndarray, chol: tuple[np.ndarray, bool]
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Generalized-least-squares coefficients (p, k) of each row of ``dys`` (k, n) on the
+    columns of the design ``x`` (n, p), with noise covariance ``chol`` (:func:`scipy.
+    linalg.cho_factor` of the model's), and their standard errors (p, k), each row's
+    variance factor ``s^2 = e' C^-1 e / (n - p)`` at least 1 (the covariance is the
+    model's own scale: noisier data widen the error, quieter data never narrow it below
+    the model's); Aitken (1935), Proc. R. Soc. Edinb. 55, 42-48. NaN where the design is
+    singular or a coefficient's variance is not positive."""
+    from scipy.linalg import cho_solve
+
+    nan = np.full((x.shape[1], len(dys)), np.nan)
+    cx = cho_solve(chol, x)
+    info = x.T @ cx
+    if not (np.all(np.isfinite(info)) and np.linalg.det(info) > 0):
+        return nan, nan
+    inv = np.linalg.inv(info)
+    var = np.diag(inv)
+    if not np.all(var > 0):
+        return nan, nan
+    coef = inv @ (cx.T @ dys.T)  # (p, k)
+    e = dys - (x @ coef).T
+    s2 = np.einsum("kn,nk->k", e, cho_solve(chol, e.T)) / max(dys.shape[1] - x.shape[1], 1)
+    return coef, np.sqrt(np.maximum(s2, 1.0)[None, :] * var[:, None])
+
+
 __all__ = [
     "MAX_BLOCKS",
     "acv_from_gacv",
     "block_increments",
     "block_length",
+    "gls_fit",
     "term_acv",
     "toeplitz_nll",
     "weight_autocorrelation",

@@ -64,8 +64,10 @@ from imubench.noisefit.kernels import (
 )
 from imubench.noisefit.model_avar import model_avar
 from imubench.noisefit.spectral_line import PeakTest, find_peak
+from imubench.noisefit.temperature import TemperatureResponse
 from imubench.noisefit.units import (
     WHITE_EQUIVALENT,
+    param_units,
     term_value,
     white_equivalent,
     white_equivalent_interval,
@@ -197,6 +199,9 @@ class ChannelFit:
     """Term name -> its likelihood-ratio statistic in the selection (GLS chi2 without it
     minus with it; extensions: best setting of the search), compared with
     :func:`entry_dchi2` or :data:`EXTENSION_DCHI2`."""
+    temperature: TemperatureResponse | None = None
+    """The response to the die temperature taken out of the data before the noise terms
+    were fitted (``imubench fit --fit-temperature``), written to the model file."""
 
     def channel_model(self, base: ChannelModel | None = None) -> ChannelModel:
         """A ChannelModel with the fitted noise keys over ``base``.
@@ -207,6 +212,10 @@ class ChannelFit:
         cm = base if base is not None else ChannelModel()
         vals: dict[str, float] = {k: float(v) for k, v in self.params.items()}
         vals["filter_order"] = int(self.params.get("filter_order", 1))
+        if self.temperature is not None:
+            vals.update(temp_coeff=self.temperature.temp_coeff,
+                        temp_coeff2=0.0,
+                        temp_ref=self.temperature.temp_ref_c)
         return cm.replace(**vals)
 
     def coefficient(self, key: str) -> tuple[float, tuple[float, float] | None]:
@@ -268,6 +277,9 @@ class ChannelFit:
             "notes": list(self.notes),
             "reasons": dict(self.reasons),
             "chi2_drop": {k: _finite(v) for k, v in self.chi2_drop.items()},
+            "temperature_response": (
+                None if self.temperature is None
+                else self.temperature.to_dict(param_units(self.channel)["bias"])),
         }
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import logging
+import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -23,7 +24,15 @@ from imubench.noisefit.fit import (
 )
 from imubench.noisefit.kernels import AMPLITUDE_KEY
 from imubench.noisefit.outliers import outlier_warning
-from imubench.noisefit.temperature import temperature_warning
+from imubench.noisefit.temperature import (
+    SCREEN_T,
+    TemperatureResponse,
+    fit_temperature_response,
+    increment_nll,
+    removal_note,
+    temperature_warning,
+    with_halves,
+)
 from imubench.noisefit.units import (
     KALIBR_UNITS,
     WHITE_EQUIVALENT,
@@ -163,18 +172,25 @@ def parse_channels(text: str | Sequence[str] | None, available: Iterable[str]) -
 
 def fit_recording(path: str | Path, *, channels: str | Sequence[str] | None = None,
                   terms: str = "auto", method: str = "wls",
-                  options: InputOptions | None = None,
+                  options: InputOptions | None = None, fit_temperature: bool = False,
                   on_channel: Callable[[int, int], None] | None = None) -> RecordingFit:
     """Load a recording (any the reader takes, with ``options``) and fit the chosen
-    channels (``on_channel(done, total)`` after each one: a progress bar)."""
+    channels (``on_channel(done, total)`` after each one: a progress bar).
+
+    ``fit_temperature``: where a channel follows the recording's temperature column
+    (:func:`~imubench.noisefit.temperature.fit_temperature_response`, |t| above its
+    limit), that response is taken out before the noise terms are fitted and written to
+    the model (``temp_coeff``, ``temp_ref``); otherwise it is only named
+    in a warning, and the long-tau terms carry it."""
     from imubench.recording import load_recording
 
     return fit_loaded(load_recording(path, options), str(path), channels=channels,
-                      terms=terms, method=method, on_channel=on_channel)
+                      terms=terms, method=method, fit_temperature=fit_temperature,
+                      on_channel=on_channel)
 
 
 def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | None = None,
-               terms: str = "auto", method: str = "wls",
+               terms: str = "auto", method: str = "wls", fit_temperature: bool = False,
                on_channel: Callable[[int, int], None] | None = None) -> RecordingFit:
     """:func:`fit_recording` on a recording already in memory (``source`` names it)."""
     try:  # errors name the recording (a batch fits many)
@@ -196,11 +212,21 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
                            "or unconnected axis has no noise to fit")
             log.warning("%s: %s left out: %s", source, ch, skipped[ch])
             continue
+        def fit(v: np.ndarray, c: str = ch) -> ChannelFit:
+            return fit_channel(v, rec.rate_hz, terms=terms, method=method, channel=c)
+
         try:
-            fits[ch] = fit_channel(y, rec.rate_hz, terms=terms, method=method, channel=ch)
+            fits[ch], response = _fit_with_temperature(y, temp_c, rec.rate_hz,
+                                                       fit_temperature, fit)
         except FitError as exc:
             raise FitError(f"{source}: {exc}") from None
-        for warning in (temperature_warning(ch, UNITS[ch], y, temp_c, rec.rate_hz),
+        taken_out = fits[ch].temperature
+        if taken_out is not None:
+            note = removal_note(ch, UNITS[ch], taken_out)
+            log.info("%s: %s", source, note)
+            fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, note))
+        for warning in (None if taken_out else temperature_warning(
+                            ch, UNITS[ch], response, fit_temperature),
                         outlier_warning(ch, y)):
             if warning is not None:
                 log.warning("%s: %s", source, warning)
@@ -213,6 +239,80 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits,
                         tuple(rec.metadata.get("units_assumed", ())), *_coverage(rec),
                         skipped=skipped)
+
+
+TEMPERATURE_PASSES = 2
+"""Refits of the noise terms to the record less the temperature response."""
+UNSEEN_TERMS = ("flicker", "random_walk")
+"""Long-tau terms that the response's covariance holds at their upper 95 % limit when the
+fit judged them absent."""
+
+
+def _test_noise(f: ChannelFit) -> ChannelModel:
+    """The noise whose covariance the temperature response is estimated under: the fit's
+    terms, and each long-tau term it judged absent at its upper 95 % limit. A random walk
+    too weak for the selection (3e-5 dps/sqrt(s) under white 0.004 dps/sqrt(Hz), 1 h) still
+    wanders with a 20 -> 30 degC warm-up: under the white noise alone it read as a
+    response at t -8.3 on one of six such records."""
+    cm = f.channel_model()
+    upper = {key: f.ci[key][1] for key in UNSEEN_TERMS
+             if key not in f.present and key in f.ci and math.isfinite(f.ci[key][1])}
+    return cm.replace(**upper) if upper else cm
+
+
+def _fit_with_temperature(y: np.ndarray, temp_c: np.ndarray, rate_hz: float, take_out: bool,
+                          fit: Callable[[np.ndarray], ChannelFit]
+                          ) -> tuple[ChannelFit, TemperatureResponse | None]:
+    """The channel's noise fit and its response to the temperature.
+
+    The response is estimated under the covariance of the noise fitted to the record as
+    it is (:func:`~imubench.noisefit.temperature.fit_temperature_response`,
+    :func:`_test_noise`); without ``take_out`` that is all (one fit: the default
+    ``imubench fit`` warns on it, and the drift the noise carries only widens its error,
+    so the warning errs toward silence). That noise carries the response itself (as a
+    random walk, flicker or ramp): with ``take_out`` and |t| above :data:`SCREEN_T`,
+    feasible generalised least squares: the noise is refitted to the record less the
+    response and the response re-estimated under the refitted noise's covariance,
+    :data:`TEMPERATURE_PASSES` times. The last response decides (``accepted``): significant,
+    the same in the record's halves (:func:`~imubench.noisefit.temperature.with_halves`),
+    and the record's block means more likely with it taken out and the noise refitted
+    than as they are under the first fit's noise
+    (:func:`~imubench.noisefit.temperature.increment_nll`). An accepted response is taken
+    out and the noise refitted without it (``ChannelFit.temperature``); otherwise the first
+    fit is returned."""
+    first = fit(y)
+    response = fit_temperature_response(y, temp_c, rate_hz, _test_noise(first))
+    if not take_out or response is None or abs(response.t) <= SCREEN_T:
+        return first, response
+    filled = _filled(temp_c)
+    for _ in range(TEMPERATURE_PASSES):
+        less = fit(y - response.response(filled))
+        found = fit_temperature_response(y, temp_c, rate_hz, _test_noise(less))
+        if found is None:
+            return first, response
+        response = found
+    response = with_halves(response, y, temp_c, rate_hz, _test_noise(less))
+    final = fit(y - response.response(filled))
+    gain = (increment_nll(y, temp_c, rate_hz, _test_noise(first))
+            - increment_nll(y - response.response(filled), temp_c, rate_hz,
+                            _test_noise(final)))
+    response = replace(response, likelihood_gain=gain if math.isfinite(gain) else None)
+    if not response.accepted:
+        return first, response
+    return replace(final, temperature=response), response
+
+
+def _filled(temp_c: np.ndarray) -> np.ndarray:
+    """The temperature with its missing samples linearly interpolated (a response is
+    taken out of every sample the rate holds; NaN where the temperature is missing from
+    one end on: those samples are not in the blocks the response was fitted to)."""
+    ok = np.isfinite(temp_c)
+    if ok.all():
+        return temp_c
+    idx = np.arange(len(temp_c))
+    out = np.interp(idx, idx[ok], temp_c[ok])
+    out[(idx < idx[ok][0]) | (idx > idx[ok][-1])] = np.nan
+    return out
 
 
 def _coverage(rec: Recording) -> tuple[int, int, int]:

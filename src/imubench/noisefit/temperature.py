@@ -1,29 +1,145 @@
-"""Does a channel's rate follow the die temperature? A check before trusting a noise fit.
+"""Does a channel's rate follow the die temperature? A check before trusting a noise fit,
+and the response itself, for a fit that takes it out first (``imubench fit
+--fit-temperature``).
 
 The noise terms of :mod:`.fit` are stationary noise; a rate that drifts with a varying
 temperature (the ``temp_coeff`` of a model file) shows in the Allan variance as extra
 random walk or flicker at long taus, and the fit then reports those inflated (measured: a
 0.01 dps/degC sensitivity over a 4 degC, 900 s cycle gave a random walk 60 times the
-true one). The check: block means of the rate and of the temperature over blocks of
-:data:`BLOCK_S`, the least-squares slope of one on the other, and its t statistic with the
-residuals' lag-1 autocorrelation r counted by the effective number of blocks
-n (1 - r) / (1 + r) (the AR(1) variance-inflation rule, e.g. Bretherton et al. 1999,
-J. Climate 12, 1990-2009, eq. 31).
+true one).
+
+The response: block means of the rate and of the temperature (blocks of
+:data:`BLOCK_S`, longer where the record holds more than
+:data:`~imubench.noisefit.blockmean.MAX_BLOCKS`), differenced, and the rate's increments
+regressed on those of ``dT = T - temp_ref`` (and of ``dT^2``) beside a constant, by
+generalised least squares under the covariance of the increments of the channel's
+fitted noise (:func:`~imubench.noisefit.model_avar.block_increment_acv`;
+:func:`~imubench.noisefit.blockmean.gls_fit`, Aitken 1935). The constant is a linear
+trend of the levels, so a ramp or a wandering level's chance trend is not read as a
+response; a temperature that only drifts at a constant rate has no response that can be
+told from a ramp (None). A random walk or flicker makes the levels of any slow
+temperature history look related (Granger & Newbold 1974, J. Econometrics 2, "Spurious
+regressions in econometrics"): least squares of levels, with its lag-1 correction for
+autocorrelated residuals, called 10 of 40 records of white noise + a random walk of
+3e-5 dps/sqrt(s) on a 20 -> 30 degC warm-up a response at |t| > 5; under the noise's own
+covariance none is.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
+from lsm6ds_sim.model import ChannelModel
+from scipy.linalg import cho_factor, toeplitz
+
+from imubench.noisefit.blockmean import MAX_BLOCKS, gls_fit
+from imubench.noisefit.model_avar import block_increment_acv
 
 BLOCK_S = 30.0
-"""Block length (s) of the means the slope is fitted to."""
+"""Shortest block (s) of the means the response is fitted to."""
 MIN_BLOCKS = 20
 MIN_TEMP_SPREAD_C = 0.2
 """Standard deviation of the temperature block means (degC) below which nothing is said."""
 T_LIMIT = 5.0
 """|t| above which the rate is said to follow the temperature."""
+SCREEN_T = 3.0
+"""|t| under the first fit's noise above which the default fit warns, and above which
+``--fit-temperature`` makes its refits. That noise carries the drift and widens the
+response's error (a 3e-3 dps/degC warm-up: t 4.6 under it, 14 after the refits); under a
+right covariance |t| > 3 on 0.3 % of records without a response."""
+LIKELIHOOD_GAIN = T_LIMIT**2 / 2
+"""Least fall of the block-mean increments' -log L (:func:`increment_nll`) when the
+response is taken out and the noise refitted: 12.5, the likelihood ratio 25 of a
+one-parameter |t| of 5."""
+HALVES_Z = 3.0
+"""Difference of the two halves' slopes, in its standard errors, above which the response
+is not the same through the record (:attr:`TemperatureResponse.stable`)."""
+TREND_ONLY = 1e-3
+"""A temperature whose block increments vary by less than this fraction of their mean
+is a straight line in time: its response is a ramp."""
+
+
+@dataclass(frozen=True)
+class TemperatureResponse:
+    """A channel's response to the die temperature, ``temp_coeff (T - temp_ref_c)`` (the
+    model file's keys and units: unit/degC, degC)."""
+
+    temp_coeff: float
+    temp_coeff_se: float
+    curvature: float
+    """Curvature (unit/degC^2) of a quadratic fit beside the slope: reported, never
+    written to the model (a quadratic fitted over a few degC and replayed beyond them
+    grows without bound: CATS tag gx, 7.8 degC, -0.0057 dps/degC^2, made another
+    segment's drift worse 8-fold)."""
+    curvature_se: float
+    temp_ref_c: float
+    """The blocks' mean temperature, to 0.01 degC."""
+    blocks: int
+    block_s: float
+    temp_span_c: float
+    """Range of the block temperatures (degC)."""
+    halves: tuple[float, float, float, float] | None = None
+    """(slope, standard error) of the first and of the second half of the record, under
+    the same covariance (:func:`with_halves`); None when not made."""
+    likelihood_gain: float | None = None
+    """Fall of the block-mean increments' -log L when the response is taken out and the
+    noise refitted (:func:`increment_nll`); None when not made."""
+
+    @property
+    def t(self) -> float:
+        """The slope's t statistic: significant when ``|t| > T_LIMIT``."""
+        return self.temp_coeff / self.temp_coeff_se
+
+    @property
+    def significant(self) -> bool:
+        return abs(self.t) > T_LIMIT
+
+    @property
+    def halves_z(self) -> float | None:
+        """|first half's slope - second's| / its standard error, or None."""
+        if self.halves is None:
+            return None
+        a, sa, b, sb = self.halves
+        return abs(a - b) / math.hypot(sa, sb)
+
+    @property
+    def stable(self) -> bool:
+        """The two halves agree within :data:`HALVES_Z` (or a half cannot tell)."""
+        z = self.halves_z
+        return z is None or z <= HALVES_Z
+
+    @property
+    def describes_record(self) -> bool:
+        """Taking the response out raised the record's likelihood by more than
+        :data:`LIKELIHOOD_GAIN` (False when not compared)."""
+        return self.likelihood_gain is not None and self.likelihood_gain > LIKELIHOOD_GAIN
+
+    @property
+    def accepted(self) -> bool:
+        """Significant, the same in both halves, and describing the record better than
+        the noise terms it replaces: the response ``--fit-temperature`` takes out."""
+        return self.significant and self.stable and self.describes_record
+
+    def response(self, temp_c: np.ndarray) -> np.ndarray:
+        """The response (unit) at the temperatures ``temp_c`` (degC)."""
+        return self.temp_coeff * (np.asarray(temp_c, dtype=float) - self.temp_ref_c)
+
+    def to_dict(self, unit: str) -> dict[str, object]:
+        """JSON-ready, with ``units``."""
+        return {"temp_coeff": self.temp_coeff, "temp_coeff_se": self.temp_coeff_se,
+                "t": self.t, "temp_ref_c": self.temp_ref_c, "curvature": self.curvature,
+                "curvature_se": self.curvature_se, "blocks": self.blocks,
+                "block_s": self.block_s, "temp_span_c": self.temp_span_c,
+                "likelihood_gain": self.likelihood_gain, "accepted": self.accepted,
+                "halves": None if self.halves is None else {
+                    "first": self.halves[0], "first_se": self.halves[1],
+                    "second": self.halves[2], "second_se": self.halves[3]},
+                "units": {"temp_coeff": f"{unit}/degC", "temp_coeff_se": f"{unit}/degC",
+                          "temp_ref_c": "degC", "curvature": f"{unit}/degC^2",
+                          "curvature_se": f"{unit}/degC^2", "block_s": "s",
+                          "temp_span_c": "degC", "halves": f"{unit}/degC"}}
 
 
 def _block_means(a: np.ndarray, n: int, m: int) -> np.ndarray:
@@ -35,39 +151,146 @@ def _block_means(a: np.ndarray, n: int, m: int) -> np.ndarray:
     return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
 
-def temperature_slope(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
-                      ) -> tuple[float, float, int] | None:
-    """(slope per degC, t statistic, blocks) of the rate's block means on the temperature's,
-    or None when the record is too short or the temperature too steady to tell."""
-    m = max(int(BLOCK_S * rate_hz), 1)
-    n = min(len(y), len(temp_c)) // m
+def _blocks(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
+            ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | None:
+    """(samples per block, rate block means, temperature block means, mask of the
+    increments between two blocks with data), or None when the record is too short or
+    the temperature too steady (:func:`fit_temperature_response`)."""
+    n_samples = min(len(y), len(temp_c))
+    m = max(int(BLOCK_S * rate_hz), math.ceil(n_samples / MAX_BLOCKS), 1)
+    n = n_samples // m
     if n < MIN_BLOCKS:
         return None
     yb, tb = _block_means(y, n, m), _block_means(temp_c, n, m)
     ok = np.isfinite(yb) & np.isfinite(tb)
-    yb, tb = yb[ok], tb[ok]
-    if len(yb) < MIN_BLOCKS or float(np.std(tb)) < MIN_TEMP_SPREAD_C:
+    if ok.sum() < MIN_BLOCKS or float(np.std(tb[ok])) < MIN_TEMP_SPREAD_C:
         return None
-    x = tb - tb.mean()
-    slope = float(x @ (yb - yb.mean()) / (x @ x))
-    res = yb - yb.mean() - slope * x
-    r = float(np.corrcoef(res[:-1], res[1:])[0, 1]) if np.std(res) > 0 else 0.0
-    r = min(max(r, 0.0), 0.95) if math.isfinite(r) else 0.0
-    n_eff = max(len(yb) * (1 - r) / (1 + r), 3.0)
-    se = math.sqrt(float(res @ res) / max(n_eff - 2, 1.0) / float(x @ x)) * math.sqrt(
-        len(yb) / n_eff)
-    return slope, (slope / se if se > 0 else math.inf), len(yb)
+    return m, yb, tb, ok[1:] & ok[:-1]
 
 
-def temperature_warning(channel: str, unit: str, y: np.ndarray, temp_c: np.ndarray,
-                        rate_hz: float) -> str | None:
-    """A warning, in words, when the rate follows the temperature (|t| > T_LIMIT)."""
-    found = temperature_slope(y, temp_c, rate_hz)
-    if found is None or abs(found[1]) <= T_LIMIT:
+def _increment_chol(noise: ChannelModel, m: int, n_inc: int, rate_hz: float,
+                    inc: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Cholesky factor of the covariance of the block-mean increments kept by ``inc``."""
+    acv = block_increment_acv(noise, m, n_inc, rate_hz)
+    return cho_factor(toeplitz(acv)[np.ix_(inc, inc)])
+
+
+def fit_temperature_response(y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
+                             noise: ChannelModel) -> TemperatureResponse | None:
+    """The rate's response to the temperature under the covariance of ``noise`` (the
+    channel's fitted noise terms; module docstring), or None when the record is too short
+    (fewer than :data:`MIN_BLOCKS` blocks with data), the temperature too steady (block
+    means' standard deviation below :data:`MIN_TEMP_SPREAD_C`) or a straight line in time
+    (:data:`TREND_ONLY`)."""
+    found = _blocks(y, temp_c, rate_hz)
+    if found is None:
         return None
-    slope, t, n = found
+    m, yb, tb, inc = found
+    ok = np.isfinite(yb) & np.isfinite(tb)
+    ref = round(float(tb[ok].mean()), 2)
+    dt = tb - ref
+    dy, dx, dx2 = np.diff(yb)[inc], np.diff(dt)[inc], np.diff(dt * dt)[inc]
+    if len(dy) < MIN_BLOCKS or float(np.std(dx)) <= TREND_ONLY * abs(float(np.mean(dx))):
+        return None
+    chol = _increment_chol(noise, m, len(inc), rate_hz, inc)
+    one = np.ones_like(dx)
+    c1, se1 = gls_fit(dy[None, :], np.column_stack([one, dx]), chol)
+    c2, se2 = gls_fit(dy[None, :], np.column_stack([one, dx, dx2]), chol)
+    slope, slope_se = float(c1[1, 0]), float(se1[1, 0])
+    if not (math.isfinite(slope) and slope_se > 0):
+        return None
+    return TemperatureResponse(
+        temp_coeff=slope, temp_coeff_se=slope_se, curvature=float(c2[2, 0]),
+        curvature_se=float(se2[2, 0]), temp_ref_c=ref, blocks=int(ok.sum()),
+        block_s=m / rate_hz, temp_span_c=float(np.ptp(tb[ok])))
+
+
+def increment_nll(y: np.ndarray, temp_c: np.ndarray, rate_hz: float, noise: ChannelModel
+                  ) -> float:
+    """-log L (without the 2 pi term) of the record's block-mean increments (the blocks of
+    :func:`fit_temperature_response`) less their generalised-least-squares mean (a linear
+    trend of the levels), under the covariance of ``noise``: ``(log det C + e' C^-1 e) /
+    2``. Compared between the noise fitted to the record as it is and the noise fitted
+    to the record less a response (with that response taken out), it says whether the
+    response describes the record's slow variation better than the noise terms it
+    replaces. NaN when there are no blocks to compare."""
+    from scipy.linalg import cho_solve
+
+    found = _blocks(y, temp_c, rate_hz)
+    if found is None:
+        return math.nan
+    m, yb, _, inc = found
+    dy = np.diff(yb)[inc]
+    chol = _increment_chol(noise, m, len(inc), rate_hz, inc)
+    one = np.ones_like(dy)
+    mean = float(one @ cho_solve(chol, dy) / (one @ cho_solve(chol, one)))
+    e = dy - mean
+    return float(np.log(np.diag(chol[0])).sum() + 0.5 * e @ cho_solve(chol, e))
+
+
+def with_halves(response: TemperatureResponse, y: np.ndarray, temp_c: np.ndarray,
+                rate_hz: float, noise: ChannelModel) -> TemperatureResponse:
+    """``response`` with the slopes of the record's two halves (:attr:`halves`), each under
+    the covariance of ``noise``: a check that the response is one property of the sensor
+    through the record. A response the model cannot describe (a rate that also follows
+    something the temperature tracks in part of the record, a hysteresis) shows as halves
+    that disagree. Measured on the CATS tag's gyro x (three static orientations, fitted on
+    one 8.5 h segment): slopes of -0.032, +0.0067 and +0.018 dps/degC at |t| 6-16, against
+    -0.0017 to -0.012 on the other segments of the same orientation."""
+    half = min(len(y), len(temp_c)) // 2
+    a = fit_temperature_response(y[:half], temp_c[:half], rate_hz, noise)
+    b = fit_temperature_response(y[half:], temp_c[half:], rate_hz, noise)
+    if a is None or b is None:
+        return response
+    return replace(response, halves=(a.temp_coeff, a.temp_coeff_se, b.temp_coeff,
+                                     b.temp_coeff_se))
+
+
+def temperature_warning(channel: str, unit: str, response: TemperatureResponse | None,
+                        refitted: bool) -> str | None:
+    """A warning, in words, when the rate follows the temperature and the response was
+    left in the data the noise terms are fitted to: by default (``refitted`` False: the
+    first fit's response, at |t| > :data:`SCREEN_T`), or because ``--fit-temperature`` did
+    not accept it (the refitted response, at |t| > :data:`T_LIMIT`; the reason is
+    given)."""
+    if response is None or abs(response.t) <= (T_LIMIT if refitted else SCREEN_T):
+        return None
     what = "rate" if channel.startswith("g") else "acceleration"
-    return (f"{channel}: the {what} follows the die temperature ({slope:.3g} {unit}/degC, "
-            f"t {t:.1f} over {n} blocks of {BLOCK_S:g} s); the fitted long-tau terms "
-            "(random walk, flicker) include that drift: fit a recording at constant "
-            "temperature, or model the temperature effect (imubench gap)")
+    head = (f"{channel}: the {what} follows the die temperature ({response.temp_coeff:.3g} "
+            f"+- {response.temp_coeff_se:.2g} {unit}/degC, t {response.t:.1f} over "
+            f"{response.blocks} blocks of {response.block_s:g} s); the fitted long-tau terms "
+            "(random walk, flicker, ramp) include that drift")
+    if refitted and not response.stable:
+        assert response.halves is not None
+        a, sa, b, sb = response.halves
+        return (head + f"; no response can be taken out: the record's halves disagree "
+                f"({a:.3g} +- {sa:.2g} and {b:.3g} +- {sb:.2g} {unit}/degC, "
+                f"{response.halves_z:.1f} standard errors apart), so one response would "
+                "not describe the sensor")
+    if refitted and not response.describes_record:
+        gain = response.likelihood_gain
+        return (head + "; no response can be taken out: with it taken out and the noise "
+                "refitted, the record's block means are not described better (-log L "
+                f"falls by {gain if gain is not None else math.nan:.1f}, at least "
+                f"{LIKELIHOOD_GAIN:g} needed): the rate follows something that moves with "
+                "the temperature here, not the temperature alone")
+    return head + (": give --fit-temperature to fit the response and take it out first, "
+                   "or fit a recording at constant temperature")
+
+
+def removal_note(channel: str, unit: str, response: TemperatureResponse) -> str:
+    """What ``--fit-temperature`` did, in words."""
+    what = "rate" if channel.startswith("g") else "acceleration"
+    halves = f"; -log L falls by {response.likelihood_gain:.1f}" \
+        if response.likelihood_gain is not None else ""
+    if response.halves is not None:
+        a, sa, b, sb = response.halves
+        halves += f"; halves {a:.3g} +- {sa:.2g} and {b:.3g} +- {sb:.2g}"
+    return (f"{channel}: the {what}'s response to the die temperature, "
+            f"{response.temp_coeff:.4g} +- {response.temp_coeff_se:.2g} {unit}/degC about "
+            f"{response.temp_ref_c:g} degC (t {response.t:.1f}, {response.blocks} blocks of "
+            f"{response.block_s:g} s over {response.temp_span_c:.2g} degC{halves}), was "
+            "taken out before the noise terms were fitted and is written as temp_coeff, "
+            f"temp_ref (linear: a curvature of {response.curvature:.3g} +- "
+            f"{response.curvature_se:.2g} {unit}/degC^2 is not written, since a quadratic "
+            "replayed beyond the temperatures it was fitted on grows without bound)")
