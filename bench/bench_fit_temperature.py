@@ -51,9 +51,11 @@ WHITE = 0.004
 BLOCK_S = 600
 
 
-def write_imbr(path: Path, channel: str, y: np.ndarray, temp: np.ndarray, rate: float
+def write_imbr(tmp: Path, channel: str, y: np.ndarray, temp: np.ndarray, rate: float
                ) -> Path:
-    """A native recording holding ``y`` on ``channel`` (the others zero) and ``temp``."""
+    """A new native recording in ``tmp`` holding ``y`` on ``channel`` (the others zero)
+    and ``temp``."""
+    path = tmp / f"r{len(list(tmp.glob('*.imbr')))}.imbr"
     n = len(y)
     values = np.zeros((n, len(CHANNELS)))
     values[:, CHANNELS.index(channel)] = y
@@ -99,7 +101,7 @@ def generator(seeds: int, tmp: Path) -> None:
                     y = (WHITE * np.sqrt(RATE) * rng.standard_normal(n)
                          + np.cumsum(walk / np.sqrt(RATE) * rng.standard_normal(n))
                          + coeff * (temp - 25.0))
-                    raw, fit = fit_both(write_imbr(tmp / "g.imbr", "gx", y, temp, RATE), "gx")
+                    raw, fit = fit_both(write_imbr(tmp, "gx", y, temp, RATE), "gx")
                     if fit.temperature is not None:
                         taken += 1
                         zs.append((fit.temperature.temp_coeff - coeff)
@@ -148,7 +150,7 @@ def cats(tmp: Path) -> None:
                      else z["accel_m_s2"][i0:i1, i] / G)
             for seg in range(3):
                 sl = slice(seg * n, (seg + 1) * n)
-                raw, fit = fit_both(write_imbr(tmp / "c.imbr", ch, y_all[sl], temp_all[sl],
+                raw, fit = fit_both(write_imbr(tmp, ch, y_all[sl], temp_all[sl],
                                                fs), ch)
                 cases += 1
                 tr = fit.temperature

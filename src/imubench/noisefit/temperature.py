@@ -256,7 +256,8 @@ def temperature_warning(channel: str, unit: str, response: TemperatureResponse |
     if response is None or abs(response.t) <= (T_LIMIT if refitted else SCREEN_T):
         return None
     what = "rate" if channel.startswith("g") else "acceleration"
-    head = (f"{channel}: the {what} follows the die temperature ({response.temp_coeff:.3g} "
+    verb = "follows" if response.significant else "may follow"
+    head = (f"{channel}: the {what} {verb} the die temperature ({response.temp_coeff:.3g} "
             f"+- {response.temp_coeff_se:.2g} {unit}/degC, t {response.t:.1f} over "
             f"{response.blocks} blocks of {response.block_s:g} s); the fitted long-tau terms "
             "(random walk, flicker, ramp) include that drift")
