@@ -160,3 +160,31 @@ def _about_trend(v: np.ndarray) -> float:
     """Variance of ``v`` about its least-squares straight line."""
     trend = np.column_stack([np.ones(len(v)), np.arange(len(v))])
     return float(np.var(v - trend @ np.linalg.lstsq(trend, v, rcond=None)[0]))
+
+
+def test_a_temperature_that_stops_inside_a_block_does_not_spoil_the_response() -> None:
+    """The outside reviewer's record: the temperature column ends one sample into a
+    block. That block's rate mean was a single sample against a full block's covariance
+    (the response at t 21 refused on a likelihood 'gain' of -105); blocks less than 90 %
+    full are left out now."""
+    y, temp = _record(11, 3e-3, rate=26.0)
+    whole = fit_temperature_response(y, temp, 26.0, TRUE_NOISE)
+    cut = temp.copy()
+    cut[len(cut) // 2 + 1 - (len(cut) // 2) % int(30 * 26) + int(30 * 26):] = np.nan
+    part = fit_temperature_response(y, cut, 26.0, TRUE_NOISE)
+    assert whole is not None and part is not None
+    assert abs(part.temp_coeff - 3e-3) < 3 * part.temp_coeff_se and part.significant
+    assert part.blocks < whole.blocks
+
+
+def test_fit_temperature_says_when_it_has_nothing_to_take_out(tmp_path: Path) -> None:
+    rate = 26.0
+    y, _ = _record(5, 0.0, rate=rate)
+    rec = tmp_path / "notemp.csv"
+    rec.write_text(f"# odr_hz: {rate:g}\nt,gx\n" + "\n".join(
+        f"{i / rate:.6f},{v:.6g}" for i, v in enumerate(y[: int(1200 * rate)])) + "\n")
+    run = subprocess.run([sys.executable, "-m", "imubench", "fit", str(rec), "-o",
+                          str(tmp_path / "m.toml"), "--fit-temperature"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert "no response to the temperature could be estimated" in run.stderr + run.stdout

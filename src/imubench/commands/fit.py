@@ -51,10 +51,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "and random walk (no gaps)")
     p.add_argument("--fit-temperature", action="store_true",
                    help="where a channel follows the recording's temperature column, fit "
-                        "that response (30 s block means, AR(1) GLS), take it out before "
-                        "the noise terms are fitted and write it as temp_coeff "
-                        "[, temp_coeff2], temp_ref (default: only warn; the random walk "
-                        "and flicker then carry the drift)")
+                        "that linear response (GLS of block-mean increments under the "
+                        "fitted noise's covariance; accepted at |t| > 5 with halves that "
+                        "agree and a better likelihood), take it out before the noise terms "
+                        "are fitted and write it as temp_coeff, temp_ref (default: only "
+                        "warn; the random walk, flicker or ramp then carry the drift)")
     p.add_argument("-o", "--output", type=Path, default=None, metavar="MODEL.toml",
                    help="model file to write (required for one recording)")
     p.add_argument("--json", default=None, metavar="PATH|-", help="full result as JSON")

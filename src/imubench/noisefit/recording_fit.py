@@ -29,6 +29,7 @@ from imubench.noisefit.temperature import (
     TemperatureResponse,
     fit_temperature_response,
     increment_nll,
+    no_response_note,
     removal_note,
     temperature_warning,
     with_halves,
@@ -225,7 +226,8 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
             note = removal_note(ch, UNITS[ch], taken_out)
             log.info("%s: %s", source, note)
             fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, note))
-        for warning in (None if taken_out else temperature_warning(
+        missing = no_response_note(ch) if fit_temperature and response is None else None
+        for warning in (missing, None if taken_out else temperature_warning(
                             ch, UNITS[ch], response, fit_temperature),
                         outlier_warning(ch, y)):
             if warning is not None:

@@ -142,13 +142,21 @@ class TemperatureResponse:
                           "temp_span_c": "degC", "halves": f"{unit}/degC"}}
 
 
+MIN_FILL = 0.9
+"""Share of a block's samples that must hold data for its mean to be used: the increments'
+covariance is that of full blocks (a temperature column that stopped one sample into a
+block made that block's rate mean a single sample, and a 3e-3 dps/degC response at t 21
+was refused)."""
+
+
 def _block_means(a: np.ndarray, n: int, m: int) -> np.ndarray:
-    """Means of n blocks of m samples over their finite values (NaN for a block without)."""
+    """Means of n blocks of m samples over their finite values (NaN for a block with less
+    than :data:`MIN_FILL` of them)."""
     blocks = np.asarray(a[: n * m], dtype=float).reshape(n, m)
     ok = np.isfinite(blocks)
     count = ok.sum(axis=1)
     total = np.where(ok, blocks, 0.0).sum(axis=1)
-    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+    return np.where(count >= MIN_FILL * m, total / np.maximum(count, 1), np.nan)
 
 
 def _blocks(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
@@ -187,6 +195,7 @@ def fit_temperature_response(y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
         return None
     m, yb, tb, inc = found
     ok = np.isfinite(yb) & np.isfinite(tb)
+    yb, tb = np.where(ok, yb, np.nan), np.where(ok, tb, np.nan)
     ref = round(float(tb[ok].mean()), 2)
     dt = tb - ref
     dy, dx, dx2 = np.diff(yb)[inc], np.diff(dt)[inc], np.diff(dt * dt)[inc]
@@ -248,12 +257,12 @@ def with_halves(response: TemperatureResponse, y: np.ndarray, temp_c: np.ndarray
 
 def temperature_warning(channel: str, unit: str, response: TemperatureResponse | None,
                         refitted: bool) -> str | None:
-    """A warning, in words, when the rate follows the temperature and the response was
-    left in the data the noise terms are fitted to: by default (``refitted`` False: the
-    first fit's response, at |t| > :data:`SCREEN_T`), or because ``--fit-temperature`` did
-    not accept it (the refitted response, at |t| > :data:`T_LIMIT`; the reason is
+    """A warning, in words, when the rate may follow the temperature (|t| >
+    :data:`SCREEN_T`) and the response was left in the data the noise terms are fitted
+    to: by default (``refitted`` False: the first fit's response), or because
+    ``--fit-temperature`` did not accept it (the refitted response; the reason is
     given)."""
-    if response is None or abs(response.t) <= (T_LIMIT if refitted else SCREEN_T):
+    if response is None or abs(response.t) <= SCREEN_T:
         return None
     what = "rate" if channel.startswith("g") else "acceleration"
     verb = "follows" if response.significant else "may follow"
@@ -261,6 +270,9 @@ def temperature_warning(channel: str, unit: str, response: TemperatureResponse |
             f"+- {response.temp_coeff_se:.2g} {unit}/degC, t {response.t:.1f} over "
             f"{response.blocks} blocks of {response.block_s:g} s); the fitted long-tau terms "
             "(random walk, flicker, ramp) include that drift")
+    if refitted and not response.significant:
+        return (head + f"; it was not taken out: after the refits |t| is {abs(response.t):.1f}, "
+                f"at most {T_LIMIT:g} (a response this weak is not told from the noise)")
     if refitted and not response.stable:
         assert response.halves is not None
         a, sa, b, sb = response.halves
@@ -279,6 +291,15 @@ def temperature_warning(channel: str, unit: str, response: TemperatureResponse |
                    "or fit a recording at constant temperature")
 
 
+def no_response_note(channel: str) -> str:
+    """What ``--fit-temperature`` says when no response could be estimated."""
+    return (f"{channel}: --fit-temperature: no response to the temperature could be "
+            "estimated (no temperature column, or one that is missing, steady within "
+            f"{MIN_TEMP_SPREAD_C:g} degC, shorter than {MIN_BLOCKS} blocks of "
+            f"{BLOCK_S:g} s, or a straight line in time, whose response is a ramp); "
+            "nothing was taken out")
+
+
 def removal_note(channel: str, unit: str, response: TemperatureResponse) -> str:
     """What ``--fit-temperature`` did, in words."""
     what = "rate" if channel.startswith("g") else "acceleration"
@@ -287,6 +308,8 @@ def removal_note(channel: str, unit: str, response: TemperatureResponse) -> str:
     if response.halves is not None:
         a, sa, b, sb = response.halves
         halves += f"; halves {a:.3g} +- {sa:.2g} and {b:.3g} +- {sb:.2g}"
+    else:
+        halves += "; halves not compared: one half's temperature is too steady"
     return (f"{channel}: the {what}'s response to the die temperature, "
             f"{response.temp_coeff:.4g} +- {response.temp_coeff_se:.2g} {unit}/degC about "
             f"{response.temp_ref_c:g} degC (t {response.t:.1f}, {response.blocks} blocks of "
