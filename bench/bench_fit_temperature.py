@@ -43,9 +43,9 @@ from imubench.noisefit.fit import ChannelFit
 from imubench.noisefit.recording_fit import fit_recording
 from imubench.recording import open_writer
 
-CATS = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "imu-real" / \
-    "cats-tag-temperature"
-G = 9.80665
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_gap_real_temperature import CATS, G  # the CATS tag's folder, g in m/s2
+
 RATE = 52.0
 WHITE = 0.004
 BLOCK_S = 600

@@ -170,7 +170,9 @@ def test_a_temperature_that_stops_inside_a_block_does_not_spoil_the_response() -
     y, temp = _record(11, 3e-3, rate=26.0)
     whole = fit_temperature_response(y, temp, 26.0, TRUE_NOISE)
     cut = temp.copy()
-    cut[len(cut) // 2 + 1 - (len(cut) // 2) % int(30 * 26) + int(30 * 26):] = np.nan
+    block = 30 * 26  # samples in a 30 s block at 26 Hz
+    half = len(cut) // 2
+    cut[half - half % block + block + 1:] = np.nan  # one sample into a block
     part = fit_temperature_response(y, cut, 26.0, TRUE_NOISE)
     assert whole is not None and part is not None
     assert abs(part.temp_coeff - 3e-3) < 3 * part.temp_coeff_se and part.significant

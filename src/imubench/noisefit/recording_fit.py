@@ -213,6 +213,7 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
                            "or unconnected axis has no noise to fit")
             log.warning("%s: %s left out: %s", source, ch, skipped[ch])
             continue
+
         def fit(v: np.ndarray, c: str = ch) -> ChannelFit:
             return fit_channel(v, rec.rate_hz, terms=terms, method=method, channel=c)
 
@@ -224,6 +225,11 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
         taken_out = fits[ch].temperature
         if taken_out is not None:
             note = removal_note(ch, UNITS[ch], taken_out)
+            unused = int((np.isfinite(y) & ~np.isfinite(_filled(temp_c))).sum())
+            if unused:
+                note += (f"; {unused} samples before the first or after the last "
+                         "temperature reading have no response to take out and are left "
+                         "out of the noise fit")
             log.info("%s: %s", source, note)
             fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, note))
         missing = no_response_note(ch) if fit_temperature and response is None else None
