@@ -39,7 +39,7 @@ from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 from scipy.stats import t as student_t
 
-from imubench.noisefit.blockmean import gls_fit
+from imubench.noisefit.blockmean import gls_fit, only_trend
 from imubench.stats.allan import oavar as oavar_kernel
 from imubench.stats.prep import to_phase
 from imubench.stats.taus import averaging_factors
@@ -940,18 +940,6 @@ def z_against(value: float, sims: np.ndarray, sd_floor: float = 0.0) -> float:
     if not sd > 0:
         return float("nan")
     return float((value - sims[ok].mean()) / sd)
-
-
-TREND_ONLY = 1e-3
-"""Increments ``dx`` whose standard deviation is at most this share of their mean are a
-trend alone (a temperature that only drifts; its rounding leaves ~1e-5): no slope is
-fitted beside the constant (:func:`gls_slopes`)."""
-
-
-def only_trend(dx: np.ndarray) -> bool:
-    """The regressor's increments are a constant (its levels a straight line): its slope
-    cannot be told from the trend fitted beside it (:data:`TREND_ONLY`)."""
-    return bool(float(np.std(dx)) <= TREND_ONLY * abs(float(np.mean(dx))))
 
 
 def gls_slopes(dys: np.ndarray, dx: np.ndarray, chol: tuple[np.ndarray, bool],

@@ -28,13 +28,12 @@ from imubench.gap.curves import (
     features,
     gls_against,
     gls_slopes,
-    only_trend,
     psd_segment,
     stack,
     welch_psd,
 )
 from imubench.gap.errors import GapError
-from imubench.noisefit.blockmean import gls_fit
+from imubench.noisefit.blockmean import gls_fit, only_trend
 from imubench.noisefit.covariance import oavar_correlation
 from imubench.noisefit.model_avar import block_increment_acv, block_increment_key
 from imubench.stats import oadev

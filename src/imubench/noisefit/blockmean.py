@@ -120,6 +120,17 @@ def toeplitz_nll(acv: np.ndarray, x: np.ndarray) -> np.ndarray:
     return out if np.ndim(acv) == 2 else out[:1]
 
 
+TREND_ONLY = 1e-3
+"""Increments ``dx`` whose standard deviation is at most this share of their mean are a
+trend alone (a temperature that only drifts; its rounding leaves ~1e-5): no slope is
+fitted beside the constant (:func:`imubench.gap.curves.gls_slopes`,
+:func:`imubench.noisefit.temperature.fit_temperature_response`)."""
+
+
+def only_trend(dx: np.ndarray) -> bool:
+    """The regressor's increments are a constant (its levels a straight line): its slope
+    cannot be told from the trend fitted beside it (:data:`TREND_ONLY`)."""
+    return bool(float(np.std(dx)) <= TREND_ONLY * abs(float(np.mean(dx))))
 
 
 def gls_fit(dys: np.ndarray, x: np.ndarray, chol: tuple[np.ndarray, bool]
@@ -154,6 +165,7 @@ __all__ = [
     "block_increments",
     "block_length",
     "gls_fit",
+    "only_trend",
     "term_acv",
     "toeplitz_nll",
     "weight_autocorrelation",

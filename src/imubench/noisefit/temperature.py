@@ -32,9 +32,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from lsm6ds_sim.model import ChannelModel
-from scipy.linalg import cho_factor, toeplitz
+from scipy.linalg import cho_factor, cho_solve, toeplitz
 
-from imubench.noisefit.blockmean import MAX_BLOCKS, gls_fit
+from imubench.noisefit.blockmean import MAX_BLOCKS, gls_fit, only_trend
 from imubench.noisefit.model_avar import block_increment_acv
 
 BLOCK_S = 30.0
@@ -56,9 +56,6 @@ one-parameter |t| of 5."""
 HALVES_Z = 3.0
 """Difference of the two halves' slopes, in its standard errors, above which the response
 is not the same through the record (:attr:`TemperatureResponse.stable`)."""
-TREND_ONLY = 1e-3
-"""A temperature whose block increments vary by less than this fraction of their mean
-is a straight line in time: its response is a ramp."""
 
 
 @dataclass(frozen=True)
@@ -161,9 +158,9 @@ def _block_means(a: np.ndarray, n: int, m: int) -> np.ndarray:
 
 def _blocks(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
             ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | None:
-    """(samples per block, rate block means, temperature block means, mask of the
-    increments between two blocks with data), or None when the record is too short or
-    the temperature too steady (:func:`fit_temperature_response`)."""
+    """(samples per block, rate block means, temperature block means, mask of the blocks
+    where both hold data), or None when the record is too short or the temperature too
+    steady (:func:`fit_temperature_response`)."""
     n_samples = min(len(y), len(temp_c))
     m = max(int(BLOCK_S * rate_hz), math.ceil(n_samples / MAX_BLOCKS), 1)
     n = n_samples // m
@@ -173,7 +170,7 @@ def _blocks(y: np.ndarray, temp_c: np.ndarray, rate_hz: float
     ok = np.isfinite(yb) & np.isfinite(tb)
     if ok.sum() < MIN_BLOCKS or float(np.std(tb[ok])) < MIN_TEMP_SPREAD_C:
         return None
-    return m, yb, tb, ok[1:] & ok[:-1]
+    return m, yb, tb, ok
 
 
 def _increment_chol(noise: ChannelModel, m: int, n_inc: int, rate_hz: float,
@@ -189,17 +186,16 @@ def fit_temperature_response(y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
     channel's fitted noise terms; module docstring), or None when the record is too short
     (fewer than :data:`MIN_BLOCKS` blocks with data), the temperature too steady (block
     means' standard deviation below :data:`MIN_TEMP_SPREAD_C`) or a straight line in time
-    (:data:`TREND_ONLY`)."""
+    (:func:`~imubench.noisefit.blockmean.only_trend`)."""
     found = _blocks(y, temp_c, rate_hz)
     if found is None:
         return None
-    m, yb, tb, inc = found
-    ok = np.isfinite(yb) & np.isfinite(tb)
-    yb, tb = np.where(ok, yb, np.nan), np.where(ok, tb, np.nan)
+    m, yb, tb, ok = found
+    inc = ok[1:] & ok[:-1]  # increments between two blocks with data
     ref = round(float(tb[ok].mean()), 2)
     dt = tb - ref
     dy, dx, dx2 = np.diff(yb)[inc], np.diff(dt)[inc], np.diff(dt * dt)[inc]
-    if len(dy) < MIN_BLOCKS or float(np.std(dx)) <= TREND_ONLY * abs(float(np.mean(dx))):
+    if len(dy) < MIN_BLOCKS or only_trend(dx):
         return None
     chol = _increment_chol(noise, m, len(inc), rate_hz, inc)
     one = np.ones_like(dx)
@@ -223,12 +219,11 @@ def increment_nll(y: np.ndarray, temp_c: np.ndarray, rate_hz: float, noise: Chan
     to the record less a response (with that response taken out), it says whether the
     response describes the record's slow variation better than the noise terms it
     replaces. NaN when there are no blocks to compare."""
-    from scipy.linalg import cho_solve
-
     found = _blocks(y, temp_c, rate_hz)
     if found is None:
         return math.nan
-    m, yb, _, inc = found
+    m, yb, _, ok = found
+    inc = ok[1:] & ok[:-1]
     dy = np.diff(yb)[inc]
     chol = _increment_chol(noise, m, len(inc), rate_hz, inc)
     one = np.ones_like(dy)
@@ -242,10 +237,11 @@ def with_halves(response: TemperatureResponse, y: np.ndarray, temp_c: np.ndarray
     """``response`` with the slopes of the record's two halves (:attr:`halves`), each under
     the covariance of ``noise``: a check that the response is one property of the sensor
     through the record. A response the model cannot describe (a rate that also follows
-    something the temperature tracks in part of the record, a hysteresis) shows as halves
-    that disagree. Measured on the CATS tag's gyro x (three static orientations, fitted on
-    one 8.5 h segment): slopes of -0.032, +0.0067 and +0.018 dps/degC at |t| 6-16, against
-    -0.0017 to -0.012 on the other segments of the same orientation."""
+    something the temperature tracks in part of the record, a hysteresis) can show as
+    halves that disagree; it need not: on the CATS tag's gyro x, fitted on one 8.5 h
+    segment of each static orientation (+0.0067, -0.023 and -0.032 dps/degC at |t| 6-16),
+    the halves agreed (z 0.7 and 1.6, or not compared) while the other segments read
+    -0.002 to -0.012 (docs/noise-fit.md, Limits)."""
     half = min(len(y), len(temp_c)) // 2
     a = fit_temperature_response(y[:half], temp_c[:half], rate_hz, noise)
     b = fit_temperature_response(y[half:], temp_c[half:], rate_hz, noise)
@@ -303,17 +299,17 @@ def no_response_note(channel: str) -> str:
 def removal_note(channel: str, unit: str, response: TemperatureResponse) -> str:
     """What ``--fit-temperature`` did, in words."""
     what = "rate" if channel.startswith("g") else "acceleration"
-    halves = f"; -log L falls by {response.likelihood_gain:.1f}" \
+    checks = f"; -log L falls by {response.likelihood_gain:.1f}" \
         if response.likelihood_gain is not None else ""
     if response.halves is not None:
         a, sa, b, sb = response.halves
-        halves += f"; halves {a:.3g} +- {sa:.2g} and {b:.3g} +- {sb:.2g}"
+        checks += f"; halves {a:.3g} +- {sa:.2g} and {b:.3g} +- {sb:.2g}"
     else:
-        halves += "; halves not compared: one half's temperature is too steady"
+        checks += "; halves not compared: one half's temperature is too steady"
     return (f"{channel}: the {what}'s response to the die temperature, "
             f"{response.temp_coeff:.4g} +- {response.temp_coeff_se:.2g} {unit}/degC about "
             f"{response.temp_ref_c:g} degC (t {response.t:.1f}, {response.blocks} blocks of "
-            f"{response.block_s:g} s over {response.temp_span_c:.2g} degC{halves}), was "
+            f"{response.block_s:g} s over {response.temp_span_c:.2g} degC{checks}), was "
             "taken out before the noise terms were fitted and is written as temp_coeff, "
             f"temp_ref (linear: a curvature of {response.curvature:.3g} +- "
             f"{response.curvature_se:.2g} {unit}/degC^2 is not written, since a quadratic "
