@@ -190,3 +190,36 @@ def test_fit_temperature_says_when_it_has_nothing_to_take_out(tmp_path: Path) ->
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert "no response to the temperature could be estimated" in run.stderr + run.stdout
+
+
+def test_report_compares_a_model_with_the_data_less_its_temperature_response(
+        tmp_path: Path) -> None:
+    """``report --model`` with the true model (white, random walk, temp_coeff 3e-3
+    dps/degC about 25 degC) of a 20 -> 30 degC warm-up: the model's response is taken out
+    of the recording before the comparison, so the model is not called a misfit; the same
+    noise without temp_coeff is (the warm-up's drift is then in the data only).
+    ``report --fit-temperature`` fits as ``fit --fit-temperature`` does."""
+    rate = 52.0
+    rec = _csv(tmp_path / "warm.csv", *_record(301, 3e-3, rate=rate, warm_up=True), rate)
+    notes = {}
+    for name, coeff in (("with", 3e-3), ("without", 0.0)):
+        model = tmp_path / f"{name}.toml"
+        model.write_text(f"[channels.gx]\nwhite = {WHITE}\nrandom_walk = {WALK}\n"
+                         f"temp_coeff = {coeff}\ntemp_ref = 25.0\n")
+        run = subprocess.run([sys.executable, "-m", "imubench", "report", str(rec), "--model",
+                              str(model), "--out", str(tmp_path / name)],
+                             capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr
+        doc = json.loads((tmp_path / name / "fit.json").read_text())
+        notes[name] = " ".join(doc["model_notes"]) + " " + " ".join(
+            doc["channels"]["gx"]["notes"])
+    assert "temp_coeff 0.003 dps/degC" in notes["with"] and "was taken out" in notes["with"]
+    assert "lies outside" not in notes["with"]
+    assert "gx: the model lies outside" in notes["without"]
+    run = subprocess.run([sys.executable, "-m", "imubench", "report", str(rec),
+                          "--fit-temperature", "--out", str(tmp_path / "fitted")],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    fitted = json.loads((tmp_path / "fitted" / "fit.json").read_text())["channels"]["gx"]
+    assert fitted["temperature_response"]["accepted"]
+    assert "lies outside" not in " ".join(fitted["notes"])

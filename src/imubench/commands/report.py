@@ -8,7 +8,10 @@ log-band averaged, with the model's terms) and ``<sensor>.html`` (one-page summa
 datasheet comparison); and ``model.toml``, ``fit.json``, ``imu.yaml`` (Kalibr),
 ``index.html``. With ``--model`` the noise values are those of the model file (written by
 ``imubench fit -o``): nothing is refitted and, as such a file has no intervals, the pages
-say so. See docs/reports.md.
+say so; a model's ``temp_coeff`` is taken out of the recording (where it has a temperature
+column) before the comparison. ``--fit-temperature`` fits as ``imubench fit
+--fit-temperature`` does, and the plots show the data less the response taken out. See
+docs/reports.md.
 """
 
 from __future__ import annotations
@@ -33,6 +36,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--terms", default=None, help="as for imubench fit (default auto)")
     p.add_argument("--method", choices=METHODS, default=None,
                    help="as for imubench fit (default wls)")
+    p.add_argument("--fit-temperature", action="store_true",
+                   help="as for imubench fit: take a channel's response to the recording's "
+                        "temperature out before the noise terms are fitted; the plots then "
+                        "show the data less that response")
     add_input_arguments(p)
     p.set_defaults(func=run)
 
@@ -40,15 +47,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from imubench.noisefit.report import write_report
 
-    if args.model is not None and (args.terms is not None or args.method is not None):
-        print("imubench report: error: --terms and --method choose how to fit; --model "
+    if args.model is not None and (args.terms is not None or args.method is not None
+                                   or args.fit_temperature):
+        print("imubench report: error: --terms, --method and --fit-temperature choose how "
+              "to fit; --model "
               f"{args.model} reuses a fit and fits nothing (drop one of them)",
               file=sys.stderr)
         return 2
     try:
         files = write_report(args.recording, args.out, terms=args.terms or "auto",
                              method=args.method or "wls", options=input_options(args),
-                             model_file=args.model)
+                             model_file=args.model, fit_temperature=args.fit_temperature)
     except BrokenPipeError:
         raise  # stdout's reader went away: cli.main exits 141, no message
     except OSError as exc:

@@ -8,7 +8,7 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel
@@ -49,6 +49,22 @@ if TYPE_CHECKING:
     from imubench.recording import InputOptions, Recording
 
 
+class TemperatureTerms(NamedTuple):
+    """A model's response to the die temperature (the model file's keys): ``temp_coeff
+    dT + temp_coeff2 dT^2``, dT = T - temp_ref (unit/degC, unit/degC^2, degC)."""
+
+    temp_coeff: float
+    temp_coeff2: float
+    temp_ref: float
+
+    def response(self, temp_c: np.ndarray) -> np.ndarray:
+        """The response (unit) at the temperatures ``temp_c`` (degC), missing readings
+        inside the record linearly interpolated, NaN before the first and after the last
+        (:func:`_filled`)."""
+        dt = _filled(np.asarray(temp_c, dtype=float)) - self.temp_ref
+        return self.temp_coeff * dt + self.temp_coeff2 * dt * dt
+
+
 @dataclass(frozen=True)
 class RecordingFit:
     """The fits of a recording's channels."""
@@ -69,6 +85,18 @@ class RecordingFit:
     skipped: dict[str, str] = field(default_factory=dict)
     """Channels left out, with why (a constant, dead axis when no ``--channels`` named
     it): they stay quiet in the model file."""
+    temperature_out: dict[str, TemperatureTerms] = field(default_factory=dict)
+    """Channel -> the response to the recording's temperature taken out of its data
+    before the noise terms were fitted (``--fit-temperature``) or compared with a model
+    file's (the file's ``temp_coeff``): :meth:`noise_data` is what the fit describes."""
+
+    def noise_data(self, rec: Recording, channel: str) -> np.ndarray:
+        """The recording's ``channel`` (unit, NaN where lost) as the noise terms describe
+        it: less the temperature response in :attr:`temperature_out`, if any (NaN
+        outside the temperature readings, where no response can be taken out)."""
+        y = rec.channel(channel)
+        terms = self.temperature_out.get(channel)
+        return y if terms is None else y - terms.response(rec.channel("temp"))
 
     def coverage(self) -> str:
         """``54950 samples, 2 holes (6050 samples, 9.9 % missing)``, or ``""``."""
@@ -246,7 +274,10 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
     chip = rec.metadata.get("chip")
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits,
                         tuple(rec.metadata.get("units_assumed", ())), *_coverage(rec),
-                        skipped=skipped)
+                        skipped=skipped, temperature_out={
+                            ch: TemperatureTerms(f.temperature.temp_coeff, 0.0,
+                                                 f.temperature.temp_ref_c)
+                            for ch, f in fits.items() if f.temperature is not None})
 
 
 TEMPERATURE_PASSES = 2
@@ -315,7 +346,7 @@ def _filled(temp_c: np.ndarray) -> np.ndarray:
     taken out of every sample the rate holds; NaN where the temperature is missing from
     one end on: those samples are not in the blocks the response was fitted to)."""
     ok = np.isfinite(temp_c)
-    if ok.all():
+    if ok.all() or not ok.any():
         return temp_c
     idx = np.arange(len(temp_c))
     out = np.interp(idx, idx[ok], temp_c[ok])
@@ -371,11 +402,34 @@ def model_file_fit(model: NoiseModel, rec: Recording, source: str, *,
     if not chans:
         raise FitError(f"{model.source}: gives no noise term to any channel of {source} "
                        f"(recording channels {list(rec.channels)})")
-    fits = {ch: channel_from_model(model[ch], rec.channel(ch), rec.rate_hz, ch)
-            for ch in chans}
+    temp_c = rec.channel("temp")
+    has_temp = int(np.isfinite(temp_c).sum()) >= 2
+    out: dict[str, TemperatureTerms] = {}
+    fits = {}
+    for ch in chans:
+        cm = model[ch]
+        terms = TemperatureTerms(float(cm.temp_coeff), float(cm.temp_coeff2),
+                                 float(cm.temp_ref))
+        y = rec.channel(ch)
+        note = None
+        if terms.temp_coeff or terms.temp_coeff2:
+            what = (f"the model's response to the die temperature (temp_coeff "
+                    f"{terms.temp_coeff:.4g} {UNITS[ch]}/degC, temp_coeff2 "
+                    f"{terms.temp_coeff2:.3g} {UNITS[ch]}/degC^2 about {terms.temp_ref:g} degC)")
+            if has_temp:
+                out[ch] = terms
+                y = y - terms.response(temp_c)
+                note = (f"{ch}: {what} was taken out of the recording before its Allan "
+                        "curve was compared with the model's noise terms")
+            else:
+                note = (f"{ch}: {what} is not in this comparison: the recording has no "
+                        "temperature readings, so its drift, if any, is compared with the "
+                        "noise terms alone")
+        f = channel_from_model(cm, y, rec.rate_hz, ch)
+        fits[ch] = f if note is None else replace(f, notes=(*f.notes, note))
     chip = rec.metadata.get("chip")  # the recording's: a model's chip is not its sensor
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, MODEL_FILE_METHOD,
-                        fits, (), *_coverage(rec))
+                        fits, (), *_coverage(rec), temperature_out=out)
 
 
 __all__ = ["MODEL_FILE_METHOD", "RecordingFit", "channel_from_model", "fit_loaded",

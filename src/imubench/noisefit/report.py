@@ -108,11 +108,15 @@ def misfit_notes(fits: dict[str, ChannelFit], curves: dict[str, Any]) -> list[st
 
 def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "auto",
                  method: str = "wls", options: InputOptions | None = None,
-                 model_file: str | Path | None = None) -> list[Path]:
-    """Fit the recording (read with ``options``), or take the noise values from
+                 model_file: str | Path | None = None,
+                 fit_temperature: bool = False) -> list[Path]:
+    """Fit the recording (read with ``options``; ``fit_temperature`` as for
+    :func:`~imubench.noisefit.recording_fit.fit_loaded`), or take the noise values from
     ``model_file`` (a file or ``datasheet:CHIP``) without fitting, and write every report
-    file into ``out_dir``; return the paths. The model and the recording are read before
-    anything is written, so a bad one leaves no folder behind."""
+    file into ``out_dir``; return the paths. The curves are of the data the noise terms
+    describe (:meth:`~imubench.noisefit.recording_fit.RecordingFit.noise_data`: less a
+    temperature response taken out or given by the model file). The model and the
+    recording are read before anything is written, so a bad one leaves no folder behind."""
     from imubench.recording import load_recording
 
     out = Path(out_dir)
@@ -123,13 +127,14 @@ def write_report(recording: str | Path, out_dir: str | Path, *, terms: str = "au
     with progress(100, "report", unit="%") as bar:
         if model is None:
             result = fit_loaded(rec, str(recording), terms=terms, method=method,
+                                fit_temperature=fit_temperature,
                                 on_channel=lambda done, total:
                                 bar.fraction(FIT_SHARE * done / total))
         else:
             result = model_file_fit(model, rec, str(recording))
             bar.fraction(FIT_SHARE)
         out.mkdir(parents=True, exist_ok=True)
-        data = {ch: rec.channel(ch) for ch in result.fits}
+        data = {ch: result.noise_data(rec, ch) for ch in result.fits}
         n_samples = max(int(np.size(v)) for v in data.values())
         curves = {ch: oadev_curve(data[ch], result.rate_hz) for ch in result.fits}
         info = _info(result, n_samples, model,
