@@ -1,4 +1,4 @@
-"""``imubench report REC [--model MODEL.toml] --out DIR``: plots, fit, HTML per sensor.
+"""``imubench report REC [--model MODEL.toml | --fit-temperature] --out DIR``: plots, fit, HTML.
 
 Writes into DIR, per sensor (gyro, accel): ``sigma_tau_<sensor>.png/.svg`` (OADEV with 95 %
 error bars, the model and each term's line clipped to the data, IEEE 952 readouts N at
