@@ -1,7 +1,7 @@
 """``imubench fit --fit-temperature``: the response it takes out, and the noise it leaves.
 
 Usage: ``PYTHONPATH=src:drivers:simulator .venv/bin/python bench/bench_fit_temperature.py
-[--part generator,cats] [--seeds 3]``
+[--part generator,dominant,cats] [--seeds 3]``
 
 Both parts go through the fit's public engine on a recording file
 (``imubench.noisefit.recording_fit.fit_recording``, a native ``.imbr`` written here), once
@@ -15,6 +15,10 @@ degC of noise). Printed per history, K and c: responses taken out, the median |z
 taken-out coefficient against the truth and the share within 2 standard errors, and the
 long-tau terms of the model (ramp or flicker present; random walk over its truth) by
 default and with the response taken out. Nulls (c = 0) must never have one taken out.
+
+**dominant**: the same at 10 Hz with c in {0, 0.01, 0.03} dps/degC: responses that
+dominate the record, which the first fit takes for a random walk (the second screen of
+``_fit_with_temperature``); the nulls check that screen.
 
 **cats**: the CATS tag's temperature-calibration run (../shared/reference/imu-real/
 cats-tag-temperature/, 1 Hz, an MPU-9250-class part nobody tuned this on): three static
@@ -47,6 +51,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_gap_real_temperature import CATS, G  # the CATS tag's folder, g in m/s2
 
 RATE = 52.0
+DOMINANT_RATE = 10.0
+"""Rate of the ``dominant`` part: responses of 0.01 and 0.03 dps/degC that the first fit
+takes for its noise (a random walk of ~0.015 dps/sqrt(s) and no white term)."""
 WHITE = 0.004
 BLOCK_S = 600
 
@@ -84,24 +91,25 @@ def long_terms(f: ChannelFit) -> str:
     return "+".join(t for t in ("ramp", "flicker", "random_walk") if t in f.present) or "-"
 
 
-def generator(seeds: int, tmp: Path) -> None:
-    n = int(3600 * RATE)
-    print("\n## generator (1 h at 52 Hz; white 0.004 dps/sqrt(Hz))")
+def generator(seeds: int, tmp: Path, rate: float = RATE,
+              coeffs: tuple[float, ...] = (0.0, 1e-3, 3e-3)) -> None:
+    n = int(3600 * rate)
+    print(f"\n## generator (1 h at {rate:g} Hz; white 0.004 dps/sqrt(Hz))")
     print("| history | K dps/sqrt(s) | c dps/degC | taken out | median abs z | within 2 SE "
           "| long-tau terms, default | with --fit-temperature | K fitted / K, default | "
           "with |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for kind in ("cycle", "warm-up", "cool-down"):
         for walk in (3e-5, 3e-4):
-            for coeff in (0.0, 1e-3, 3e-3):
+            for coeff in coeffs:
                 taken, zs, raw_terms, terms, raw_k, k = 0, [], [], [], [], []
                 for seed in range(seeds):
                     rng = np.random.default_rng(1000 * seed + int(coeff * 1e4) + int(walk * 1e6))
-                    temp = history(kind, rng, n, RATE)
-                    y = (WHITE * np.sqrt(RATE) * rng.standard_normal(n)
-                         + np.cumsum(walk / np.sqrt(RATE) * rng.standard_normal(n))
+                    temp = history(kind, rng, n, rate)
+                    y = (WHITE * np.sqrt(rate) * rng.standard_normal(n)
+                         + np.cumsum(walk / np.sqrt(rate) * rng.standard_normal(n))
                          + coeff * (temp - 25.0))
-                    raw, fit = fit_both(write_imbr(tmp, "gx", y, temp, RATE), "gx")
+                    raw, fit = fit_both(write_imbr(tmp, "gx", y, temp, rate), "gx")
                     if fit.temperature is not None:
                         taken += 1
                         zs.append((fit.temperature.temp_coeff - coeff)
@@ -191,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
         parts = args.part.split(",")
         if "generator" in parts:
             generator(args.seeds, Path(d))
+        if "dominant" in parts:
+            generator(args.seeds, Path(d), DOMINANT_RATE, (0.0, 0.01, 0.03))
         if "cats" in parts:
             cats(Path(d))
     print(f"\n({time.perf_counter() - t0:.0f} s)")

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from lsm6ds_sim.model import ChannelModel, load_model
 
 from imubench.noisefit.fit import fit_channel
 from imubench.noisefit.recording_fit import _fit_with_temperature
-from imubench.noisefit.temperature import T_LIMIT, fit_temperature_response
+from imubench.noisefit.temperature import T_LIMIT, fit_temperature_response, temperature_warning
 
 RATE = 104.0
 N = int(3600 * RATE)
@@ -126,6 +127,7 @@ def test_fit_temperature_takes_a_warm_ups_response_out_and_writes_it(tmp_path: P
     assert {"ramp", "random_walk", "flicker"} & set(raw["present"])  # the drift, as noise
     resp = fitted["temperature_response"]
     assert resp["accepted"] and resp["units"]["temp_coeff"] == "dps/degC"
+    assert resp["curved"] is False and "although the response curves" not in text
     assert abs(resp["temp_coeff"] - 3e-3) < 3 * resp["temp_coeff_se"]
     assert model.temp_coeff == pytest.approx(resp["temp_coeff"])
     assert model.temp_ref == pytest.approx(resp["temp_ref_c"])
@@ -223,3 +225,49 @@ def test_report_compares_a_model_with_the_data_less_its_temperature_response(
     fitted = json.loads((tmp_path / "fitted" / "fit.json").read_text())["channels"]["gx"]
     assert fitted["temperature_response"]["accepted"]
     assert "lies outside" not in " ".join(fitted["notes"])
+
+
+def test_a_curved_response_is_taken_out_as_its_mean_slope_and_said_to_curve() -> None:
+    """A response of 0.01 dps/degC plus 1e-3 dps/degC^2 about 25 degC, on a 25 +- 4 degC
+    cycle of 900 s beside a random walk of 3e-4 dps/sqrt(s), 10 Hz: the linear coefficient
+    taken out is the mean slope over the record's temperatures (0.01: the cycle is
+    symmetric about 25 degC), and the note says the response curves and where the
+    coefficient holds; a linear response (the CLI test above) is not said to curve."""
+    from imubench.noisefit.temperature import removal_note
+
+    rate = 10.0
+    y, temp = _record(302, 0.01, rate=rate, walk=3e-4)
+    y = y + 1e-3 * (temp - 25.0) ** 2
+    fit, response = _fit_with_temperature(
+        y, temp, rate, True, lambda v: fit_channel(v, rate, channel="gx"))
+    assert response is not None and response.accepted and response.curved
+    assert fit.temperature is response
+    assert response.temp_coeff == pytest.approx(0.01, abs=3 * response.temp_coeff_se)
+    assert response.curvature == pytest.approx(1e-3, abs=4 * response.curvature_se)
+    note = removal_note("gx", "dps", response)
+    assert "although the response curves" in note and "not its slope beyond them" in note
+
+
+def test_a_response_that_dominates_the_record_is_still_found() -> None:
+    """0.01 dps/degC on the 25 +- 4 degC, 900 s cycle beside white 0.004 dps/sqrt(Hz) at
+    10 Hz: the first fit takes the response for a random walk of about 0.015
+    dps/sqrt(s) with no white term, under whose covariance the response reads t 0.8, and
+    neither the warning nor --fit-temperature saw it. The second screen (the record's
+    white scatter) sends it to the refits: taken out within 3 standard errors, the
+    white level refitted to the truth, no random walk left; by default the warning names
+    it."""
+    rate = 10.0
+    y, temp = _record(302, 0.01, rate=rate)
+
+    def fit(v: np.ndarray) -> Any:
+        return fit_channel(v, rate, channel="gx")
+
+    raw, warned = _fit_with_temperature(y, temp, rate, False, fit)
+    assert "random_walk" in raw.present and raw.temperature is None
+    assert warned is not None and warned.significant
+    assert temperature_warning("gx", "dps", warned, False) is not None
+    taken, response = _fit_with_temperature(y, temp, rate, True, fit)
+    assert response is not None and taken.temperature is response
+    assert abs(response.temp_coeff - 0.01) < 3 * response.temp_coeff_se
+    assert taken.present == ("white",)
+    assert taken.params["white"] == pytest.approx(WHITE, rel=0.05)

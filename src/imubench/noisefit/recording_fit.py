@@ -26,6 +26,7 @@ from imubench.noisefit.kernels import AMPLITUDE_KEY
 from imubench.noisefit.outliers import outlier_warning
 from imubench.noisefit.temperature import (
     SCREEN_T,
+    T_LIMIT,
     TemperatureResponse,
     fit_temperature_response,
     increment_nll,
@@ -306,23 +307,34 @@ def _fit_with_temperature(y: np.ndarray, temp_c: np.ndarray, rate_hz: float, tak
 
     The response is estimated under the covariance of the noise fitted to the record as
     it is (:func:`~imubench.noisefit.temperature.fit_temperature_response`,
-    :func:`_test_noise`); without ``take_out`` that is all (one fit: the default
-    ``imubench fit`` warns on it, and the drift the noise carries only widens its error,
-    so the warning errs toward silence). That noise carries the response itself (as a
-    random walk, flicker or ramp): with ``take_out`` and |t| above :data:`SCREEN_T`,
-    feasible generalised least squares: the noise is refitted to the record less the
+    :func:`_test_noise`); without ``take_out`` and at |t| above :data:`SCREEN_T` that is
+    all (one fit: the default ``imubench fit`` warns on it). That noise carries the
+    response itself (as a random walk, flicker or ramp), which widens its error; where it
+    reads |t| <= :data:`SCREEN_T`, a second screen under the record's white scatter
+    (:func:`_white_noise`) at |t| above :data:`~imubench.noisefit.temperature.T_LIMIT`
+    still goes on (a response that dominates the record). With ``take_out``, or from the
+    second screen, feasible generalised least squares: the noise is refitted to the record less the
     response and the response re-estimated under the refitted noise's covariance,
     :data:`TEMPERATURE_PASSES` times. The last response decides (``accepted``): significant,
     the same in the record's halves (:func:`~imubench.noisefit.temperature.with_halves`),
     and the record's block means more likely with it taken out and the noise refitted
     than as they are under the first fit's noise
     (:func:`~imubench.noisefit.temperature.increment_nll`). An accepted response is taken
-    out and the noise refitted without it (``ChannelFit.temperature``); otherwise the first
-    fit is returned."""
+    out and the noise refitted without it (``ChannelFit.temperature``; without
+    ``take_out`` it is returned for the warning only); otherwise the first fit is
+    returned, with the first screen's response unless the refitted one was screened."""
     first = fit(y)
-    response = fit_temperature_response(y, temp_c, rate_hz, _test_noise(first))
-    if not take_out or response is None or abs(response.t) <= SCREEN_T:
-        return first, response
+    screened = fit_temperature_response(y, temp_c, rate_hz, _test_noise(first))
+    if screened is None:
+        return first, None
+    response = screened
+    if abs(screened.t) <= SCREEN_T:
+        white = fit_temperature_response(y, temp_c, rate_hz, _white_noise(y, rate_hz))
+        if white is None or abs(white.t) <= T_LIMIT:
+            return first, screened
+        response = white  # refitted below; kept only if it is then accepted
+    elif not take_out:
+        return first, screened
     filled = _filled(temp_c)
     for _ in range(TEMPERATURE_PASSES):
         less = fit(y - response.response(filled))
@@ -337,8 +349,21 @@ def _fit_with_temperature(y: np.ndarray, temp_c: np.ndarray, rate_hz: float, tak
                             _test_noise(final)))
     response = replace(response, likelihood_gain=gain if math.isfinite(gain) else None)
     if not response.accepted:
+        return first, (response if abs(screened.t) > SCREEN_T else screened)
+    if not take_out:
         return first, response
     return replace(final, temperature=response), response
+
+
+def _white_noise(y: np.ndarray, rate_hz: float) -> ChannelModel:
+    """White noise of the record's sample-to-sample scatter (``std(diff y) / sqrt(2
+    rate)``, unit/sqrt(Hz)): the covariance of a second screen for a response that
+    dominates the record. The first fit then takes the response for its noise (a 0.01
+    dps/degC response to a +-4 degC cycle of 900 s beside white 0.004 dps/sqrt(Hz) at
+    10 Hz: a random walk of 0.0148 dps/sqrt(s) and no white term), under whose covariance
+    the response reads t 0.8; under this one every slow wander that moves with the
+    temperature reads large, so the refits and the acceptance rules decide."""
+    return ChannelModel(white=float(np.nanstd(np.diff(y))) / math.sqrt(2.0 * rate_hz))
 
 
 def _filled(temp_c: np.ndarray) -> np.ndarray:

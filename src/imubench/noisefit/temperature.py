@@ -94,6 +94,13 @@ class TemperatureResponse:
         return abs(self.t) > T_LIMIT
 
     @property
+    def curved(self) -> bool:
+        """The quadratic's curvature is significant (|t| > :data:`T_LIMIT`): the linear
+        coefficient is the mean slope over the record's temperatures only (the reviewer's
+        CATS gx segment: curvature t -7.8 beside a linear response accepted at t 16)."""
+        return self.curvature_se > 0 and abs(self.curvature / self.curvature_se) > T_LIMIT
+
+    @property
     def halves_z(self) -> float | None:
         """|first half's slope - second's| / its standard error, or None."""
         if self.halves is None:
@@ -130,6 +137,7 @@ class TemperatureResponse:
                 "curvature_se": self.curvature_se, "blocks": self.blocks,
                 "block_s": self.block_s, "temp_span_c": self.temp_span_c,
                 "likelihood_gain": self.likelihood_gain, "accepted": self.accepted,
+                "curved": self.curved,
                 "halves": None if self.halves is None else {
                     "first": self.halves[0], "first_se": self.halves[1],
                     "second": self.halves[2], "second_se": self.halves[3]},
@@ -306,11 +314,18 @@ def removal_note(channel: str, unit: str, response: TemperatureResponse) -> str:
         checks += f"; halves {a:.3g} +- {sa:.2g} and {b:.3g} +- {sb:.2g}"
     else:
         checks += "; halves not compared: one half's temperature is too steady"
+    curvature = (f"a curvature of {response.curvature:.3g} +- {response.curvature_se:.2g} "
+                 f"{unit}/degC^2")
+    linear = (f"linear, although the response curves ({curvature}, t "
+              f"{response.curvature / response.curvature_se:.1f}): temp_coeff is its mean "
+              f"slope over this record's {response.temp_span_c:.2g} degC about "
+              f"{response.temp_ref_c:g} degC, not its slope beyond them; measure it over the "
+              "temperatures the model will be used at" if response.curved else
+              f"linear: {curvature} is not written, since a quadratic replayed beyond the "
+              "temperatures it was fitted on grows without bound")
     return (f"{channel}: the {what}'s response to the die temperature, "
             f"{response.temp_coeff:.4g} +- {response.temp_coeff_se:.2g} {unit}/degC about "
             f"{response.temp_ref_c:g} degC (t {response.t:.1f}, {response.blocks} blocks of "
             f"{response.block_s:g} s over {response.temp_span_c:.2g} degC{checks}), was "
-            "taken out before the noise terms were fitted and is written as temp_coeff, "
-            f"temp_ref (linear: a curvature of {response.curvature:.3g} +- "
-            f"{response.curvature_se:.2g} {unit}/degC^2 is not written, since a quadratic "
-            "replayed beyond the temperatures it was fitted on grows without bound)")
+            f"taken out before the noise terms were fitted and is written as temp_coeff, "
+            f"temp_ref ({linear})")
