@@ -58,6 +58,13 @@ def _loss(real_avar: np.ndarray, model_avar: np.ndarray, add: np.ndarray,
     return float(np.sum(w[ok] * r[ok] ** 2))
 
 
+def scaled_loss(real_avar: np.ndarray, model_avar: np.ndarray, ratio: np.ndarray,
+                sigma_ln_adev: np.ndarray) -> float:
+    """The weighted ln-AVAR misfit of the model's expected curve scaled per tau by
+    ``ratio`` (a term of the model itself changed, as the base model's refit does)."""
+    return _loss(real_avar, model_avar * ratio, np.zeros_like(model_avar), sigma_ln_adev)
+
+
 def _scale_range(tau_s: np.ndarray, model_avar: np.ndarray, unit_avar: np.ndarray
                  ) -> tuple[float, float]:
     """log10 range of the parameter whose AVAR spans 1e-4..1e4 of the model's."""

@@ -17,12 +17,21 @@ from typing import Any
 import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel
 from lsm6ds_sim.noise import avar_sine_sampled
+from scipy.optimize import minimize_scalar
 from scipy.stats import chi2 as chi2_dist
 
 from imubench.gap import avarfit, evidence, extras
-from imubench.gap.curves import Comparison, SimFeatures, line_segment, stat_dof, t_threshold
+from imubench.gap.curves import (
+    Comparison,
+    SimFeatures,
+    line_segment,
+    oavar_at,
+    stat_dof,
+    t_threshold,
+)
 from imubench.gap.parts import PartSetup, RecordTemperature, Series, simulate_channel
 from imubench.gap.two_level import detrend_span
+from imubench.noisefit.model_avar import model_avar as exact_avar
 from imubench.noisefit.spectral_line import PEAK_MIN_BINS, SCAN_LOW_FRACTION
 
 EFFECTS: tuple[str, ...] = (
@@ -187,6 +196,10 @@ class Candidate:
     params_n: dict[str, int] = field(default_factory=dict)
     """How many of the K refits gave each parameter an estimate (filled with
     :attr:`params_se`)."""
+    slow_scale: float = 1.0
+    """A temperature response that takes the place of part of the model's slow noise
+    terms: their amplitudes scaled by this (:func:`slow_noise_scale`; 1: left as they
+    are)."""
 
     def to_dict(self, before: Comparison) -> dict[str, Any]:
         assert self.fit is not None
@@ -286,7 +299,8 @@ def candidate_sims(model: NoiseModel, channel: str, effect: str, params: dict[st
     n = len(series.y)
     if effect in extras.LOCAL_EFFECTS:
         return current + extras.increments(effect, params, n, series.rate_hz, seeds)
-    if additive(cm, effect):
+    if additive(cm, effect) and not (effect == "temperature"
+                                     and set(SLOW_NOISE) & params.keys()):
         keep = {"bandwidth_hz": cm.bandwidth_hz, "filter_order": cm.filter_order,
                 "temp_ref": cm.temp_ref}
         inc = {k: v - getattr(cm, k) for k, v in params.items()}
@@ -472,7 +486,8 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
 def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comparison,
                    cur: SimFeatures, sigma_ln_adev: np.ndarray, effects: tuple[str, ...],
                    step_y: np.ndarray | None, temp_record_z: float,
-                   temp_whole: RecordTemperature | None = None
+                   temp_whole: RecordTemperature | None = None, *,
+                   slow_of_model: bool = False
                    ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
@@ -488,8 +503,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
     the fit part's level test does; ``temp_whole``: that test under the covariance of
     ``cm``'s noise when the temperature response is to be fitted on ``whole`` rather than
-    on the fit part (:attr:`Candidate.whole_record`; None: on the fit part). ``fit`` and
-    ``cur`` are the record's fit part and
+    on the fit part (:attr:`Candidate.whole_record`; None: on the fit part);
+    ``slow_of_model``: ``cm``'s slow noise terms are the model's as given (no noise
+    process kept yet), so a temperature response may take the place of part of them
+    (:func:`slow_noise_scale`; a kept random walk scaled with the model's true flicker
+    took both out, beside a ramp, on an outside reviewer's record). ``fit`` and ``cur``
+    are the record's fit part and
     the realisations less the kept effects' deterministic parts
     (:meth:`imubench.gap.parts.PartSetup.less`), so the realisations' mean AVAR is the
     model's noise (the Markov candidate's share, :func:`markov_share`);
@@ -598,6 +617,14 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + gls,
                                                  "temp_coeff2": cm.temp_coeff2}, 1,
                                            estimator="gls"))
+                    scale = (slow_noise_scale(cm, fit, s.y - gls * np.asarray(s.temp_c),
+                                              model_avar, sig) if slow_of_model else None)
+                    if scale is not None and scale <= SLOW_SCALE_MAX:
+                        cands.append(Candidate(eff, {
+                            **cands[-1].params,
+                            **{k: scale * getattr(cm, k) for k in SLOW_NOISE
+                               if getattr(cm, k) > 0}}, 2, estimator="gls",
+                            slow_scale=scale))
                 if tf is not None:
                     ev["temperature"] = tf
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff
@@ -650,6 +677,45 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                                              ev.get("markov_fit"))
                         for eff in effects if eff not in fitted}
     return cands, ev
+
+
+SLOW_NOISE = ("flicker", "random_walk", "markov_sigma")
+"""The model's noise terms a temperature response can stand in for: a model fitted on a
+record whose temperature moved carries that record's response as flicker, random walk or
+a long Gauss-Markov process (the fit's temperature check, :mod:`imubench.noisefit.
+temperature`), and a response added on top of them then over-predicts the long taus."""
+SLOW_SCALE_MAX = 0.9
+"""Largest scale of the slow noise terms (:func:`slow_noise_scale`) for which the
+candidate that takes their place is tried: above, the terms stay as they are."""
+
+
+def slow_noise_scale(cm: ChannelModel, fit: PartSetup, y_less: np.ndarray,
+                     model_avar: np.ndarray, sigma_ln_adev: np.ndarray) -> float | None:
+    """The factor s in [0, 1] by which the model's slow noise terms (:data:`SLOW_NOISE`,
+    amplitudes) are scaled so that the model describes the fit part less its temperature
+    response (``y_less``), or None when the model has none of them.
+
+    The model's expected Allan variance (``model_avar``, the realisations' mean) is scaled
+    per tau by ``(A_base + s^2 A_slow) / (A_base + A_slow)``, with A the exact AVAR of the
+    terms (:func:`imubench.noisefit.model_avar.model_avar`), as the base model's refit
+    scales it (:mod:`imubench.gap.avarfit`), and s fitted by weighted least squares in ln
+    AVAR to the OAVAR of ``y_less``. A model fitted on a CATS tag segment while its
+    temperature rose 13 degC held a Gauss-Markov process of 7.4e-4 g, tau_c 760 s, that
+    was the response; on the next segment the response (-2.4e-3 g/degC, whole-record z
+    -10.9) added on top of it raised the held-out gap from 0.45 to 0.48 and was refused."""
+    slow = {k: float(getattr(cm, k)) for k in SLOW_NOISE if getattr(cm, k) > 0}
+    if not slow:
+        return None
+    rate = fit.series.rate_hz
+    quiet = cm.replace(**dict.fromkeys(slow, 0.0))
+    base = exact_avar(quiet, fit.tau_s, rate)
+    alone = exact_avar(ChannelModel(markov_tau=cm.markov_tau).replace(**slow), fit.tau_s, rate)
+    real = oavar_at(y_less, rate, fit.afs)[:len(fit.tau_s)]
+    res = minimize_scalar(
+        lambda sc: avarfit.scaled_loss(real, model_avar, (base + sc * sc * alone)
+                                       / (base + alone), sigma_ln_adev),
+        bounds=(0.0, 1.0), method="bounded", options={"xatol": 1e-3})
+    return float(res.x)
 
 
 def _temperature_gates(dof: int) -> tuple[float, float]:

@@ -388,6 +388,8 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
                          **c.fitted_on(), **c.holdout_dict()}
     if c.estimator:
         d["estimator"] = c.estimator
+    if c.slow_scale < 1.0:
+        d["slow_noise_scale"] = c.slow_scale
     if math.isfinite(c.unique_chi2):
         d["chi2_rise_without"] = c.unique_chi2
     return d
@@ -753,7 +755,8 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     cands, ev = fit_candidates(cm, st.fit_part, whole, st.before, st.noise_feats,
                                st.noise_sigma, effects,
                                st.step_y if st.step_fired else None, st.temp_z,
-                               st.temp if r.temp_spans is not None else None)
+                               st.temp if r.temp_spans is not None else None,
+                               slow_of_model=all(c.effect == "base_model" for c in kept))
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms

@@ -22,7 +22,7 @@ from typing import Any
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as student_t
 
-from imubench.gap.candidates import DENSE_TAIL
+from imubench.gap.candidates import DENSE_TAIL, SLOW_NOISE
 from imubench.gap.curves import (
     POOLED_DOF,
     POOLED_STATS,
@@ -290,18 +290,27 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
                 f"{like(e['sine_amplitude_at_output'], 'sine_amplitude')} at "
                 f"{num('sine_freq', 'Hz')} as recorded ({g('sine_amplitude')} before "
                 "the model's output filter, the model file's value)")
+    slow = ""
+    if effect == "temperature" and e.get("slow_noise_scale") is not None:
+        terms = [k for k in SLOW_NOISE if k in p]
+        slow = (f", in place of part of the model's slow noise ({', '.join(terms)} scaled "
+                f"by {e['slow_noise_scale']:.2f} to " + ", ".join(g(k) for k in terms)
+                + "): a model fitted on a record whose temperature moved carries that "
+                "record's response as such noise; refit it with `imubench fit "
+                "--fit-temperature`")
     if effect == "temperature" and p.get("temp_coeff2") and \
             e.get("temp_slope_at_mean") is not None:
         return (f"{what} drifts with temperature, "
                 f"{like(e['temp_slope_at_mean'], 'temp_coeff')} at the record's mean "
                 f"{_f(e.get('temp_mean_c'), 3)} degC, curving by {g('temp_coeff2')} "
-                f"(model-file coefficients at temp_ref: temp_coeff {g('temp_coeff')})")
+                f"(model-file coefficients at temp_ref: temp_coeff {g('temp_coeff')})"
+                + slow)
 
     bw = p.get("bandwidth_hz")
     filt = (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
             if bw is not None and bw > 0 else "no output filter")
     return {
-        "temperature": f"{what} drifts with temperature, {g('temp_coeff')}",
+        "temperature": f"{what} drifts with temperature, {g('temp_coeff')}{slow}",
         "sine": f"a sinusoidal disturbance of amplitude {g('sine_amplitude')} at "
                 f"{num('sine_freq', 'Hz')}",
         "random_walk": f"the bias wanders as a random walk (K = {g('random_walk')})",
