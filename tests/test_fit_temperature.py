@@ -122,10 +122,15 @@ def test_fit_temperature_takes_a_warm_ups_response_out_and_writes_it(tmp_path: P
     raw_model, raw, raw_text = outs[False]
     model, fitted, text = outs[True]
     assert raw["temperature_response"] is None and raw_model.temp_coeff == 0.0
+    check = raw["temperature_check"]  # the warning's numbers, for tools
+    assert check is not None and not check["taken_out"] and abs(check["t"]) > 3
+    assert check["units"]["temp_coeff"] == "dps/degC"
     assert re.search(r"gx: the rate (follows|may follow) the die temperature", raw_text)
     assert "--fit-temperature" in raw_text
     assert {"ramp", "random_walk", "flicker"} & set(raw["present"])  # the drift, as noise
     resp = fitted["temperature_response"]
+    assert fitted["temperature_check"]["taken_out"]
+    assert fitted["temperature_check"]["temp_coeff"] == resp["temp_coeff"]
     assert resp["accepted"] and resp["units"]["temp_coeff"] == "dps/degC"
     assert resp["curved"] is False and "although the response curves" not in text
     assert abs(resp["temp_coeff"] - 3e-3) < 3 * resp["temp_coeff_se"]
@@ -271,3 +276,24 @@ def test_a_response_that_dominates_the_record_is_still_found() -> None:
     assert abs(response.temp_coeff - 0.01) < 3 * response.temp_coeff_se
     assert taken.present == ("white",)
     assert taken.params["white"] == pytest.approx(WHITE, rel=0.05)
+
+
+def test_a_refused_curved_response_says_it_curves() -> None:
+    """0.01 dps/degC plus 1e-3 dps/degC^2 about 25 degC, the temperature cycling +-3
+    degC about 23 degC in the first half hour and about 27 degC in the second (an outside
+    reviewer's case, in this generator): the halves' slopes differ (0.006 and 0.014), so
+    nothing is taken out, and the warning says the response curves, which is why."""
+    rate = 10.0
+    n = int(3600 * rate)
+    t = np.arange(n) / rate
+    temp = np.where(t < 1800.0, 23.0, 27.0) + 3.0 * np.sin(2 * np.pi * t / 900.0)
+    rng = np.random.default_rng(304)
+    y = (WHITE * np.sqrt(rate) * rng.standard_normal(n) + 0.01 * (temp - 25.0)
+         + 1e-3 * (temp - 25.0) ** 2)
+    fit, response = _fit_with_temperature(
+        y, temp, rate, True, lambda v: fit_channel(v, rate, channel="gx"))
+    assert response is not None and fit.temperature is None
+    assert response.curved and not response.stable
+    warning = temperature_warning("gx", "dps", response, True)
+    assert warning is not None and "halves disagree" in warning
+    assert "the response curves" in warning

@@ -294,7 +294,7 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
     if effect == "temperature" and e.get("slow_noise_scale") is not None:
         terms = [k for k in SLOW_NOISE if k in p]
         slow = (f", in place of part of the model's slow noise ({', '.join(terms)} scaled "
-                f"by {e['slow_noise_scale']:.2f} to " + ", ".join(g(k) for k in terms)
+                f"by {e['slow_noise_scale']:.2g} to " + ", ".join(g(k) for k in terms)
                 + "): a model fitted on a record whose temperature moved carries that "
                 "record's response as such noise; refit it with `imubench fit "
                 "--fit-temperature`")

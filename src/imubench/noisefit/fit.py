@@ -202,6 +202,9 @@ class ChannelFit:
     temperature: TemperatureResponse | None = None
     """The response to the die temperature taken out of the data before the noise terms
     were fitted (``imubench fit --fit-temperature``), written to the model file."""
+    temperature_check: TemperatureResponse | None = None
+    """The response the temperature check estimated, taken out or not (the numbers of
+    the fit's temperature warning; None without a usable temperature)."""
 
     def channel_model(self, base: ChannelModel | None = None) -> ChannelModel:
         """A ChannelModel with the fitted noise keys over ``base``.
@@ -280,6 +283,10 @@ class ChannelFit:
             "temperature_response": (
                 None if self.temperature is None
                 else self.temperature.to_dict(param_units(self.channel)["bias"])),
+            "temperature_check": (
+                None if self.temperature_check is None
+                else {**self.temperature_check.to_dict(param_units(self.channel)["bias"]),
+                      "taken_out": self.temperature is not None}),
         }
 
 

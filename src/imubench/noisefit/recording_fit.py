@@ -251,6 +251,7 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
                                                        fit_temperature, fit)
         except FitError as exc:
             raise FitError(f"{source}: {exc}") from None
+        fits[ch] = replace(fits[ch], temperature_check=response)
         taken_out = fits[ch].temperature
         if taken_out is not None:
             note = removal_note(ch, UNITS[ch], taken_out)

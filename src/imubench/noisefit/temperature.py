@@ -274,25 +274,31 @@ def temperature_warning(channel: str, unit: str, response: TemperatureResponse |
             f"+- {response.temp_coeff_se:.2g} {unit}/degC, t {response.t:.1f} over "
             f"{response.blocks} blocks of {response.block_s:g} s); the fitted long-tau terms "
             "(random walk, flicker, ramp) include that drift")
+    curves = (f"; the response curves (curvature {response.curvature:.3g} +- "
+              f"{response.curvature_se:.2g} {unit}/degC^2, t "
+              f"{response.curvature / response.curvature_se:.1f}): a linear temp_coeff "
+              "cannot describe it (its slope differs between temperatures); fit it over "
+              "the temperatures the model will be used at" if response.curved else "")
     if refitted and not response.significant:
         return (head + f"; it was not taken out: after the refits |t| is {abs(response.t):.1f}, "
-                f"at most {T_LIMIT:g} (a response this weak is not told from the noise)")
+                f"at most {T_LIMIT:g} (a response this weak is not told from the noise)"
+                + curves)
     if refitted and not response.stable:
         assert response.halves is not None
         a, sa, b, sb = response.halves
         return (head + f"; no response can be taken out: the record's halves disagree "
                 f"({a:.3g} +- {sa:.2g} and {b:.3g} +- {sb:.2g} {unit}/degC, "
                 f"{response.halves_z:.1f} standard errors apart), so one response would "
-                "not describe the sensor")
+                "not describe the sensor" + curves)
     if refitted and not response.describes_record:
         gain = response.likelihood_gain
         return (head + "; no response can be taken out: with it taken out and the noise "
                 "refitted, the record's block means are not described better (-log L "
                 f"falls by {gain if gain is not None else math.nan:.1f}, at least "
                 f"{LIKELIHOOD_GAIN:g} needed): the rate follows something that moves with "
-                "the temperature here, not the temperature alone")
+                "the temperature here, not the temperature alone" + curves)
     return head + (": give --fit-temperature to fit the response and take it out first, "
-                   "or fit a recording at constant temperature")
+                   "or fit a recording at constant temperature" + curves)
 
 
 def no_response_note(channel: str) -> str:
