@@ -840,3 +840,11 @@ def test_an_accelerometers_drift_is_no_rate() -> None:
         "the acceleration drifts linearly in time")
     assert describe("temperature", temp, param_units("gy")).startswith(
         "the rate drifts with temperature, 0.00157 dps/degC")
+
+
+def test_a_corrected_value_in_exponent_notation_keeps_its_exponent() -> None:
+    """"(corrected (8.8))" was the value of "(8.8 +- 2.7)e-07" cut at its error."""
+    from imubench.gap.explain import _value_only, _with_error
+
+    assert _value_only(_with_error(8.8e-7, 2.7e-7)) == "8.8e-07"
+    assert _value_only(_with_error(-1.234, 0.04)) == "-1.234"

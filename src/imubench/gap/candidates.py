@@ -197,8 +197,8 @@ class Candidate:
     """How many of the K refits gave each parameter an estimate (filled with
     :attr:`params_se`)."""
     slow_scale: float = 1.0
-    """A temperature response that takes the place of part of the model's slow noise
-    terms: their amplitudes scaled by this (:func:`slow_noise_scale`; 1: left as they
+    """A temperature response that takes the place of part of the model's slow terms
+    terms: their amplitudes scaled by this (:func:`slow_terms_scale`; 1: left as they
     are)."""
 
     def to_dict(self, before: Comparison) -> dict[str, Any]:
@@ -300,7 +300,7 @@ def candidate_sims(model: NoiseModel, channel: str, effect: str, params: dict[st
     if effect in extras.LOCAL_EFFECTS:
         return current + extras.increments(effect, params, n, series.rate_hz, seeds)
     if additive(cm, effect) and not (effect == "temperature"
-                                     and set(SLOW_NOISE) & params.keys()):
+                                     and set(SLOW_TERMS) & params.keys()):
         keep = {"bandwidth_hz": cm.bandwidth_hz, "filter_order": cm.filter_order,
                 "temp_ref": cm.temp_ref}
         inc = {k: v - getattr(cm, k) for k, v in params.items()}
@@ -504,9 +504,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     the fit part's level test does; ``temp_whole``: that test under the covariance of
     ``cm``'s noise when the temperature response is to be fitted on ``whole`` rather than
     on the fit part (:attr:`Candidate.whole_record`; None: on the fit part);
-    ``slow_of_model``: ``cm``'s slow noise terms are the model's as given (no noise
+    ``slow_of_model``: ``cm``'s slow terms are the model's as given (no noise
     process kept yet), so a temperature response may take the place of part of them
-    (:func:`slow_noise_scale`; a kept random walk scaled with the model's true flicker
+    (:func:`slow_terms_scale`; a kept random walk scaled with the model's true flicker
     took both out, beside a ramp, on an outside reviewer's record). ``fit`` and ``cur``
     are the record's fit part and
     the realisations less the kept effects' deterministic parts
@@ -617,12 +617,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff + gls,
                                                  "temp_coeff2": cm.temp_coeff2}, 1,
                                            estimator="gls"))
-                    scale = (slow_noise_scale(cm, fit, s.y - gls * np.asarray(s.temp_c),
+                    scale = (slow_terms_scale(cm, fit, s.y - gls * np.asarray(s.temp_c),
                                               model_avar, sig) if slow_of_model else None)
                     if scale is not None and scale <= SLOW_SCALE_MAX:
                         cands.append(Candidate(eff, {
                             **cands[-1].params,
-                            **{k: scale * getattr(cm, k) for k in SLOW_NOISE
+                            **{k: scale * getattr(cm, k) for k in SLOW_TERMS
                                if getattr(cm, k) > 0}}, 2, estimator="gls",
                             slow_scale=scale))
                 if tf is not None:
@@ -679,19 +679,20 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     return cands, ev
 
 
-SLOW_NOISE = ("flicker", "random_walk", "markov_sigma")
-"""The model's noise terms a temperature response can stand in for: a model fitted on a
-record whose temperature moved carries that record's response as flicker, random walk or
-a long Gauss-Markov process (the fit's temperature check, :mod:`imubench.noisefit.
-temperature`), and a response added on top of them then over-predicts the long taus."""
+SLOW_TERMS = ("flicker", "random_walk", "markov_sigma", "ramp")
+"""The model's slow terms a temperature response can stand in for: a model fitted on a
+record whose temperature moved carries that record's response as flicker, random walk, a
+long Gauss-Markov process or a ramp (the fit's temperature check, :mod:`imubench.noisefit.
+temperature`; an outside reviewer's warm-up gave a ramp of 3.5e-5 dps/s), and a response
+added on top of them over-predicts the long taus or the trend."""
 SLOW_SCALE_MAX = 0.9
-"""Largest scale of the slow noise terms (:func:`slow_noise_scale`) for which the
+"""Largest scale of the slow terms (:func:`slow_terms_scale`) for which the
 candidate that takes their place is tried: above, the terms stay as they are."""
 
 
-def slow_noise_scale(cm: ChannelModel, fit: PartSetup, y_less: np.ndarray,
+def slow_terms_scale(cm: ChannelModel, fit: PartSetup, y_less: np.ndarray,
                      model_avar: np.ndarray, sigma_ln_adev: np.ndarray) -> float | None:
-    """The factor s in [0, 1] by which the model's slow noise terms (:data:`SLOW_NOISE`,
+    """The factor s in [0, 1] by which the model's slow terms (:data:`SLOW_TERMS`,
     amplitudes) are scaled so that the model describes the fit part less its temperature
     response (``y_less``), or None when the model has none of them.
 
@@ -703,7 +704,7 @@ def slow_noise_scale(cm: ChannelModel, fit: PartSetup, y_less: np.ndarray,
     temperature rose 13 degC held a Gauss-Markov process of 7.4e-4 g, tau_c 760 s, that
     was the response; on the next segment the response (-2.4e-3 g/degC, whole-record z
     -10.9) added on top of it raised the held-out gap from 0.45 to 0.48 and was refused."""
-    slow = {k: float(getattr(cm, k)) for k in SLOW_NOISE if getattr(cm, k) > 0}
+    slow = {k: float(getattr(cm, k)) for k in SLOW_TERMS if getattr(cm, k) > 0}
     if not slow:
         return None
     rate = fit.series.rate_hz

@@ -389,7 +389,7 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
     if c.estimator:
         d["estimator"] = c.estimator
     if c.slow_scale < 1.0:
-        d["slow_noise_scale"] = c.slow_scale
+        d["slow_terms_scale"] = c.slow_scale
     if math.isfinite(c.unique_chi2):
         d["chi2_rise_without"] = c.unique_chi2
     return d

@@ -22,7 +22,7 @@ from typing import Any
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as student_t
 
-from imubench.gap.candidates import DENSE_TAIL, SLOW_NOISE
+from imubench.gap.candidates import DENSE_TAIL, SLOW_TERMS
 from imubench.gap.curves import (
     POOLED_DOF,
     POOLED_STATS,
@@ -84,6 +84,15 @@ def _with_error(v: float, err: float) -> str:
     return f"({v / 10**exp:.{d}f} +- {err / 10**exp:.{d}f})e{exp:+03d}"
 
 
+def _value_only(text: str) -> str:
+    """The value of a :func:`_with_error` text: ``1.23`` of ``1.23 +- 0.04``, ``8.8e-07``
+    of ``(8.8 +- 2.7)e-07`` (the bracket was cut in half: "(corrected (8.8)")."""
+    value, _, rest = text.partition(" +- ")
+    if value.startswith("("):
+        return value[1:] + rest[rest.index(")") + 1:]
+    return value
+
+
 BIAS_SHOWN = 2.0 / math.sqrt(10.0)
 """A bootstrap bias is said when it exceeds this many standard errors: twice its own
 scatter, SE / sqrt(K), at the default K = 10 (an outside reviewer: an outliers rate's
@@ -109,7 +118,7 @@ def _number(p: Mapping[str, Any], key: str, digits: int, se: Uncertainty | None,
     note = ""
     if b is not None and math.isfinite(b) and abs(b) > BIAS_SHOWN * err:
         note = (f", refits read {_f(abs(b), 2)} {'high' if b > 0 else 'low'} (corrected "
-                f"{_with_error(float(v) - b, float(err)).split(' +- ')[0]})")
+                f"{_value_only(_with_error(float(v) - b, float(err)))})")
     return _with_error(float(v), float(err)), note
 
 
@@ -291,10 +300,10 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
                 f"{num('sine_freq', 'Hz')} as recorded ({g('sine_amplitude')} before "
                 "the model's output filter, the model file's value)")
     slow = ""
-    if effect == "temperature" and e.get("slow_noise_scale") is not None:
-        terms = [k for k in SLOW_NOISE if k in p]
-        slow = (f", in place of part of the model's slow noise ({', '.join(terms)} scaled "
-                f"by {e['slow_noise_scale']:.2g} to " + ", ".join(g(k) for k in terms)
+    if effect == "temperature" and e.get("slow_terms_scale") is not None:
+        terms = [k for k in SLOW_TERMS if k in p]
+        slow = (f", in place of part of the model's slow terms ({', '.join(terms)} scaled "
+                f"by {e['slow_terms_scale']:.2g} to " + ", ".join(g(k) for k in terms)
                 + "): a model fitted on a record whose temperature moved carries that "
                 "record's response as such noise; refit it with `imubench fit "
                 "--fit-temperature`")

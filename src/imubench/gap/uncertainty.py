@@ -55,7 +55,7 @@ import numpy as np
 from lsm6ds_sim.model import ChannelModel
 
 from imubench.gap import avarfit, evidence
-from imubench.gap.candidates import SLOW_NOISE, Candidate, filter_power_gain, slow_noise_scale
+from imubench.gap.candidates import SLOW_TERMS, Candidate, filter_power_gain, slow_terms_scale
 from imubench.gap.curves import SimFeatures, gls_slopes, line_segment
 from imubench.gap.parts import PartSetup, RecordTemperature
 from imubench.noisefit.spectral_line import SCAN_LOW_FRACTION
@@ -138,9 +138,9 @@ def _refits(c: Candidate, r: Refit) -> dict[str, list[float]]:
     if eff == "ramp":
         return {"ramp": list(r.final.trend_slope)}
     if eff == "temperature" and c.whole_record:
-        return {**_temperature_on_record(c, r), **_slow_noise(c, r)}
+        return {**_temperature_on_record(c, r), **_slow_terms(c, r)}
     if eff == "temperature":
-        return {**_temperature(c, fit, r.final, r.cm), **_slow_noise(c, r)}
+        return {**_temperature(c, fit, r.final, r.cm), **_slow_terms(c, r)}
     if eff == "resonance":
         ref_psd = r.reference.psd.mean(axis=0)
         g2 = c.output_gain2
@@ -201,22 +201,22 @@ def _temperature(c: Candidate, fit: PartSetup, final: SimFeatures, cm: ChannelMo
     return out
 
 
-def _slow_noise(c: Candidate, r: Refit) -> dict[str, list[float]]:
-    """The slow noise terms a temperature response took the place of
+def _slow_terms(c: Candidate, r: Refit) -> dict[str, list[float]]:
+    """The slow terms a temperature response took the place of
     (:attr:`Candidate.slow_scale` < 1), refitted on each realisation's fit part less its
-    own GLS temperature response (:func:`imubench.gap.candidates.slow_noise_scale`);
+    own GLS temperature response (:func:`imubench.gap.candidates.slow_terms_scale`);
     empty when it took none."""
     if c.slow_scale >= 1.0:
         return {}
     fit, s = r.fit, r.fit.series
-    keys = [k for k in SLOW_NOISE if k in c.params]
+    keys = [k for k in SLOW_TERMS if k in c.params]
     out: dict[str, list[float]] = {k: [] for k in keys}
     temp = np.asarray(s.temp_c)
     ys = r.raw()[:, :len(s.y)]
     ref_avar = r.reference.avar.mean(axis=0)
     for y, b in zip(ys, RecordTemperature(r.cm, s).slopes(ys), strict=True):
         added = b - r.cm.temp_coeff  # the real record's fit took out the added slope
-        sc = (slow_noise_scale(r.cm, fit, y - added * temp, ref_avar, r.sigma)
+        sc = (slow_terms_scale(r.cm, fit, y - added * temp, ref_avar, r.sigma)
               if math.isfinite(b) else None)
         for k in keys:
             if sc is not None:
