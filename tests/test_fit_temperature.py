@@ -223,6 +223,8 @@ def test_report_compares_a_model_with_the_data_less_its_temperature_response(
     assert "temp_coeff 0.003 dps/degC" in notes["with"] and "was taken out" in notes["with"]
     assert "lies outside" not in notes["with"]
     assert "gx: the model lies outside" in notes["without"]
+    assert "gx: the recording's rate follows the die temperature" in notes["without"]
+    assert "follows the die temperature" not in notes["with"]
     run = subprocess.run([sys.executable, "-m", "imubench", "report", str(rec),
                           "--fit-temperature", "--out", str(tmp_path / "fitted")],
                          capture_output=True, text=True, timeout=300)

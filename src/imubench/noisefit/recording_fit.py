@@ -367,6 +367,24 @@ def _white_noise(y: np.ndarray, rate_hz: float) -> ChannelModel:
     return ChannelModel(white=float(np.nanstd(np.diff(y))) / math.sqrt(2.0 * rate_hz))
 
 
+def _unmodelled_response(channel: str, y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
+                         cm: ChannelModel) -> str | None:
+    """A note when a model file without a temperature response is compared with a
+    recording whose ``channel`` follows its temperature (|t| above
+    :data:`~imubench.noisefit.temperature.T_LIMIT` under the model's noise covariance,
+    :func:`~imubench.noisefit.temperature.fit_temperature_response`): the comparison
+    then holds that drift, which the model's noise terms do not describe."""
+    found = fit_temperature_response(y, temp_c, rate_hz, cm)
+    if found is None or not found.significant:
+        return None
+    what = "rate" if channel.startswith("g") else "acceleration"
+    return (f"{channel}: the recording's {what} follows the die temperature "
+            f"({found.temp_coeff:.3g} +- {found.temp_coeff_se:.2g} {UNITS[channel]}/degC, t "
+            f"{found.t:.1f} under the model's noise) and the model has no temperature "
+            "response (temp_coeff): that drift is in the compared curves; fit one with "
+            "`imubench fit --fit-temperature`")
+
+
 def _filled(temp_c: np.ndarray) -> np.ndarray:
     """The temperature with its missing samples linearly interpolated (a response is
     taken out of every sample the rate holds; NaN where the temperature is missing from
@@ -451,6 +469,8 @@ def model_file_fit(model: NoiseModel, rec: Recording, source: str, *,
                 note = (f"{ch}: {what} is not in this comparison: the recording has no "
                         "temperature readings, so its drift, if any, is compared with the "
                         "noise terms alone")
+        elif has_temp:
+            note = _unmodelled_response(ch, y, temp_c, rec.rate_hz, cm)
         f = channel_from_model(cm, y, rec.rate_hz, ch)
         fits[ch] = f if note is None else replace(f, notes=(*f.notes, note))
     chip = rec.metadata.get("chip")  # the recording's: a model's chip is not its sensor
