@@ -281,10 +281,14 @@ class Candidate:
                 "holdout_check_applied": not self.on_record}
 
 
-def additive(cm: ChannelModel, effect: str) -> bool:
-    """True when the simulator's term for ``effect`` simulates alone and adds."""
+def additive(cm: ChannelModel, effect: str, params: Mapping[str, float]) -> bool:
+    """True when the simulator's term for ``effect`` with ``params`` simulates alone and
+    adds (not a temperature response that scales the model's slow terms,
+    :data:`SLOW_TERMS`)."""
     if effect == "markov":
         return cm.markov_sigma == 0.0
+    if effect == "temperature":
+        return not set(SLOW_TERMS) & params.keys()
     return effect != "base_model"
 
 
@@ -299,8 +303,7 @@ def candidate_sims(model: NoiseModel, channel: str, effect: str, params: dict[st
     n = len(series.y)
     if effect in extras.LOCAL_EFFECTS:
         return current + extras.increments(effect, params, n, series.rate_hz, seeds)
-    if additive(cm, effect) and not (effect == "temperature"
-                                     and set(SLOW_TERMS) & params.keys()):
+    if additive(cm, effect, params):
         keep = {"bandwidth_hz": cm.bandwidth_hz, "filter_order": cm.filter_order,
                 "temp_ref": cm.temp_ref}
         inc = {k: v - getattr(cm, k) for k, v in params.items()}

@@ -216,9 +216,7 @@ class ChannelFit:
         vals: dict[str, float] = {k: float(v) for k, v in self.params.items()}
         vals["filter_order"] = int(self.params.get("filter_order", 1))
         if self.temperature is not None:
-            vals.update(temp_coeff=self.temperature.temp_coeff,
-                        temp_coeff2=0.0,
-                        temp_ref=self.temperature.temp_ref_c)
+            vals.update(self.temperature.terms._asdict())
         return cm.replace(**vals)
 
     def coefficient(self, key: str) -> tuple[float, tuple[float, float] | None]:

@@ -8,7 +8,7 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from lsm6ds_sim.model import ChannelModel, NoiseModel
@@ -28,10 +28,13 @@ from imubench.noisefit.temperature import (
     SCREEN_T,
     T_LIMIT,
     TemperatureResponse,
+    TemperatureTerms,
+    filled_temperature,
     fit_temperature_response,
     increment_nll,
     no_response_note,
     removal_note,
+    sensed,
     temperature_warning,
     with_halves,
 )
@@ -48,22 +51,6 @@ log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from imubench.recording import InputOptions, Recording
-
-
-class TemperatureTerms(NamedTuple):
-    """A model's response to the die temperature (the model file's keys): ``temp_coeff
-    dT + temp_coeff2 dT^2``, dT = T - temp_ref (unit/degC, unit/degC^2, degC)."""
-
-    temp_coeff: float
-    temp_coeff2: float
-    temp_ref: float
-
-    def response(self, temp_c: np.ndarray) -> np.ndarray:
-        """The response (unit) at the temperatures ``temp_c`` (degC), missing readings
-        inside the record linearly interpolated, NaN before the first and after the last
-        (:func:`_filled`)."""
-        dt = _filled(np.asarray(temp_c, dtype=float)) - self.temp_ref
-        return self.temp_coeff * dt + self.temp_coeff2 * dt * dt
 
 
 @dataclass(frozen=True)
@@ -255,7 +242,7 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
         taken_out = fits[ch].temperature
         if taken_out is not None:
             note = removal_note(ch, UNITS[ch], taken_out)
-            unused = int((np.isfinite(y) & ~np.isfinite(_filled(temp_c))).sum())
+            unused = int((np.isfinite(y) & ~np.isfinite(filled_temperature(temp_c))).sum())
             if unused:
                 note += (f"; {unused} samples before the first or after the last "
                          "temperature reading have no response to take out and are left "
@@ -277,9 +264,8 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
     return RecordingFit(source, rec.rate_hz, str(chip) if chip else None, method, fits,
                         tuple(rec.metadata.get("units_assumed", ())), *_coverage(rec),
                         skipped=skipped, temperature_out={
-                            ch: TemperatureTerms(f.temperature.temp_coeff, 0.0,
-                                                 f.temperature.temp_ref_c)
-                            for ch, f in fits.items() if f.temperature is not None})
+                            ch: f.temperature.terms for ch, f in fits.items()
+                            if f.temperature is not None})
 
 
 TEMPERATURE_PASSES = 2
@@ -336,17 +322,16 @@ def _fit_with_temperature(y: np.ndarray, temp_c: np.ndarray, rate_hz: float, tak
         response = white  # refitted below; kept only if it is then accepted
     elif not take_out:
         return first, screened
-    filled = _filled(temp_c)
     for _ in range(TEMPERATURE_PASSES):
-        less = fit(y - response.response(filled))
+        less = fit(y - response.response(temp_c))
         found = fit_temperature_response(y, temp_c, rate_hz, _test_noise(less))
         if found is None:
             return first, response
         response = found
     response = with_halves(response, y, temp_c, rate_hz, _test_noise(less))
-    final = fit(y - response.response(filled))
+    final = fit(y - response.response(temp_c))
     gain = (increment_nll(y, temp_c, rate_hz, _test_noise(first))
-            - increment_nll(y - response.response(filled), temp_c, rate_hz,
+            - increment_nll(y - response.response(temp_c), temp_c, rate_hz,
                             _test_noise(final)))
     response = replace(response, likelihood_gain=gain if math.isfinite(gain) else None)
     if not response.accepted:
@@ -377,25 +362,11 @@ def _unmodelled_response(channel: str, y: np.ndarray, temp_c: np.ndarray, rate_h
     found = fit_temperature_response(y, temp_c, rate_hz, cm)
     if found is None or not found.significant:
         return None
-    what = "rate" if channel.startswith("g") else "acceleration"
-    return (f"{channel}: the recording's {what} follows the die temperature "
+    return (f"{channel}: the recording's {sensed(channel)} follows the die temperature "
             f"({found.temp_coeff:.3g} +- {found.temp_coeff_se:.2g} {UNITS[channel]}/degC, t "
             f"{found.t:.1f} under the model's noise) and the model has no temperature "
             "response (temp_coeff): that drift is in the compared curves; fit one with "
             "`imubench fit --fit-temperature`")
-
-
-def _filled(temp_c: np.ndarray) -> np.ndarray:
-    """The temperature with its missing samples linearly interpolated (a response is
-    taken out of every sample the rate holds; NaN where the temperature is missing from
-    one end on: those samples are not in the blocks the response was fitted to)."""
-    ok = np.isfinite(temp_c)
-    if ok.all() or not ok.any():
-        return temp_c
-    idx = np.arange(len(temp_c))
-    out = np.interp(idx, idx[ok], temp_c[ok])
-    out[(idx < idx[ok][0]) | (idx > idx[ok][-1])] = np.nan
-    return out
 
 
 def _coverage(rec: Recording) -> tuple[int, int, int]:

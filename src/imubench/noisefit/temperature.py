@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 from lsm6ds_sim.model import ChannelModel
@@ -56,6 +57,40 @@ one-parameter |t| of 5."""
 HALVES_Z = 3.0
 """Difference of the two halves' slopes, in its standard errors, above which the response
 is not the same through the record (:attr:`TemperatureResponse.stable`)."""
+
+
+class TemperatureTerms(NamedTuple):
+    """A model's response to the die temperature (the model file's keys): ``temp_coeff
+    dT + temp_coeff2 dT^2``, dT = T - temp_ref (unit/degC, unit/degC^2, degC)."""
+
+    temp_coeff: float
+    temp_coeff2: float
+    temp_ref: float
+
+    def response(self, temp_c: np.ndarray) -> np.ndarray:
+        """The response (unit) at the temperatures ``temp_c`` (degC), missing readings
+        inside the record linearly interpolated, NaN before the first and after the last
+        (:func:`filled_temperature`)."""
+        dt = filled_temperature(np.asarray(temp_c, dtype=float)) - self.temp_ref
+        return self.temp_coeff * dt + self.temp_coeff2 * dt * dt
+
+
+def filled_temperature(temp_c: np.ndarray) -> np.ndarray:
+    """The temperature with its missing samples linearly interpolated (a response is
+    taken out of every sample the rate holds; NaN where the temperature is missing from
+    one end on: those samples are not in the blocks the response was fitted to)."""
+    ok = np.isfinite(temp_c)
+    if ok.all() or not ok.any():
+        return temp_c
+    idx = np.arange(len(temp_c))
+    out = np.interp(idx, idx[ok], temp_c[ok])
+    out[(idx < idx[ok][0]) | (idx > idx[ok][-1])] = np.nan
+    return out
+
+
+def sensed(channel: str) -> str:
+    """What a channel reads, in words: ``rate`` (gyro) or ``acceleration``."""
+    return "rate" if channel.startswith("g") else "acceleration"
 
 
 @dataclass(frozen=True)
@@ -94,11 +129,16 @@ class TemperatureResponse:
         return abs(self.t) > T_LIMIT
 
     @property
+    def curvature_t(self) -> float:
+        """The curvature's t statistic (NaN without a standard error)."""
+        return self.curvature / self.curvature_se if self.curvature_se > 0 else math.nan
+
+    @property
     def curved(self) -> bool:
         """The quadratic's curvature is significant (|t| > :data:`T_LIMIT`): the linear
         coefficient is the mean slope over the record's temperatures only (the reviewer's
         CATS gx segment: curvature t -7.8 beside a linear response accepted at t 16)."""
-        return self.curvature_se > 0 and abs(self.curvature / self.curvature_se) > T_LIMIT
+        return abs(self.curvature_t) > T_LIMIT
 
     @property
     def halves_z(self) -> float | None:
@@ -126,9 +166,15 @@ class TemperatureResponse:
         the noise terms it replaces: the response ``--fit-temperature`` takes out."""
         return self.significant and self.stable and self.describes_record
 
+    @property
+    def terms(self) -> TemperatureTerms:
+        """The response as a model file holds it (linear: ``temp_coeff2`` 0)."""
+        return TemperatureTerms(self.temp_coeff, 0.0, self.temp_ref_c)
+
     def response(self, temp_c: np.ndarray) -> np.ndarray:
-        """The response (unit) at the temperatures ``temp_c`` (degC)."""
-        return self.temp_coeff * (np.asarray(temp_c, dtype=float) - self.temp_ref_c)
+        """The response (unit) at the temperatures ``temp_c`` (degC;
+        :meth:`TemperatureTerms.response`)."""
+        return self.terms.response(temp_c)
 
     def to_dict(self, unit: str) -> dict[str, object]:
         """JSON-ready, with ``units``."""
@@ -234,9 +280,8 @@ def increment_nll(y: np.ndarray, temp_c: np.ndarray, rate_hz: float, noise: Chan
     inc = ok[1:] & ok[:-1]
     dy = np.diff(yb)[inc]
     chol = _increment_chol(noise, m, len(inc), rate_hz, inc)
-    one = np.ones_like(dy)
-    mean = float(one @ cho_solve(chol, dy) / (one @ cho_solve(chol, one)))
-    e = dy - mean
+    mean, _ = gls_fit(dy[None, :], np.ones((len(dy), 1)), chol)
+    e = dy - float(mean[0, 0])
     return float(np.log(np.diag(chol[0])).sum() + 0.5 * e @ cho_solve(chol, e))
 
 
@@ -268,7 +313,7 @@ def temperature_warning(channel: str, unit: str, response: TemperatureResponse |
     given)."""
     if response is None or abs(response.t) <= SCREEN_T:
         return None
-    what = "rate" if channel.startswith("g") else "acceleration"
+    what = sensed(channel)
     verb = "follows" if response.significant else "may follow"
     head = (f"{channel}: the {what} {verb} the die temperature ({response.temp_coeff:.3g} "
             f"+- {response.temp_coeff_se:.2g} {unit}/degC, t {response.t:.1f} over "
@@ -276,7 +321,7 @@ def temperature_warning(channel: str, unit: str, response: TemperatureResponse |
             "(random walk, flicker, ramp) include that drift")
     curves = (f"; the response curves (curvature {response.curvature:.3g} +- "
               f"{response.curvature_se:.2g} {unit}/degC^2, t "
-              f"{response.curvature / response.curvature_se:.1f}): a linear temp_coeff "
+              f"{response.curvature_t:.1f}): a linear temp_coeff "
               "cannot describe it (its slope differs between temperatures); fit it over "
               "the temperatures the model will be used at" if response.curved else "")
     if refitted and not response.significant:
@@ -312,7 +357,7 @@ def no_response_note(channel: str) -> str:
 
 def removal_note(channel: str, unit: str, response: TemperatureResponse) -> str:
     """What ``--fit-temperature`` did, in words."""
-    what = "rate" if channel.startswith("g") else "acceleration"
+    what = sensed(channel)
     checks = f"; -log L falls by {response.likelihood_gain:.1f}" \
         if response.likelihood_gain is not None else ""
     if response.halves is not None:
@@ -323,7 +368,7 @@ def removal_note(channel: str, unit: str, response: TemperatureResponse) -> str:
     curvature = (f"a curvature of {response.curvature:.3g} +- {response.curvature_se:.2g} "
                  f"{unit}/degC^2")
     linear = (f"linear, although the response curves ({curvature}, t "
-              f"{response.curvature / response.curvature_se:.1f}): temp_coeff is its mean "
+              f"{response.curvature_t:.1f}): temp_coeff is its mean "
               f"slope over this record's {response.temp_span_c:.2g} degC about "
               f"{response.temp_ref_c:g} degC, not its slope beyond them; measure it over the "
               "temperatures the model will be used at" if response.curved else
