@@ -221,6 +221,7 @@ def test_report_compares_a_model_with_the_data_less_its_temperature_response(
         notes[name] = " ".join(doc["model_notes"]) + " " + " ".join(
             doc["channels"]["gx"]["notes"])
     assert "temp_coeff 0.003 dps/degC" in notes["with"] and "was taken out" in notes["with"]
+    assert "left out of the comparison" not in notes["with"]  # temperature in every row
     assert "lies outside" not in notes["with"]
     assert "gx: the model lies outside" in notes["without"]
     assert "gx: the recording's rate follows the die temperature" in notes["without"]
@@ -299,3 +300,30 @@ def test_a_refused_curved_response_says_it_curves() -> None:
     warning = temperature_warning("gx", "dps", response, True)
     assert warning is not None and "halves disagree" in warning
     assert "the response curves" in warning
+
+
+def test_a_model_response_leaves_out_the_samples_without_a_temperature(
+        tmp_path: Path) -> None:
+    """A model file's response compared with a recording whose temperature column ends
+    600 s before the record: those samples have no response to take out, are left out of
+    the comparison, and the note counts them (delivered + left out = recorded)."""
+    from imubench.noisefit.recording_fit import model_file_fit
+    from imubench.recording import load_recording
+
+    rate = 10.0
+    y, temp = _record(7, 3e-3, rate=rate, warm_up=True)
+    cut = len(y) - int(600 * rate)
+    path = tmp_path / "partial.csv"
+    path.write_text(f"# odr_hz: {rate:g}\nt,gx,temp\n" + "\n".join(
+        f"{i / rate:.6f},{v:.6g}," + (f"{c:.4f}" if i < cut else "")
+        for i, (v, c) in enumerate(zip(y, temp, strict=True))) + "\n")
+    model = tmp_path / "m.toml"
+    model.write_text(f"[channels.gx]\nwhite = {WHITE}\nrandom_walk = {WALK}\n"
+                     "temp_coeff = 0.003\ntemp_ref = 25.0\n")
+    rec = load_recording(path)
+    result = model_file_fit(load_model(model), rec, str(path))
+    note = " ".join(result.fits["gx"].notes)
+    left = len(y) - cut
+    assert f"; {left} samples before the first or after the last temperature reading" in note
+    data = result.noise_data(rec, "gx")
+    assert int(np.isfinite(data).sum()) + left == len(y)

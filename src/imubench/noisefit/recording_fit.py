@@ -241,12 +241,8 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
         fits[ch] = replace(fits[ch], temperature_check=response)
         taken_out = fits[ch].temperature
         if taken_out is not None:
-            note = removal_note(ch, UNITS[ch], taken_out)
-            unused = int((np.isfinite(y) & ~np.isfinite(filled_temperature(temp_c))).sum())
-            if unused:
-                note += (f"; {unused} samples before the first or after the last "
-                         "temperature reading have no response to take out and are left "
-                         "out of the noise fit")
+            note = removal_note(ch, UNITS[ch], taken_out) + _left_out(
+                y, filled_temperature(temp_c), "the noise fit")
             log.info("%s: %s", source, note)
             fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, note))
         missing = no_response_note(ch) if fit_temperature and response is None else None
@@ -352,6 +348,16 @@ def _white_noise(y: np.ndarray, rate_hz: float) -> ChannelModel:
     return ChannelModel(white=float(np.nanstd(np.diff(y))) / math.sqrt(2.0 * rate_hz))
 
 
+def _left_out(y: np.ndarray, filled_temp_c: np.ndarray, where: str) -> str:
+    """``; N samples before the first or after the last temperature reading ... are left
+    out of <where>`` when a response taken out leaves samples of ``y`` without one (NaN
+    in the filled temperature, :func:`~imubench.noisefit.temperature.filled_temperature`),
+    else ``""``: every sample is accounted for."""
+    unused = int((np.isfinite(y) & ~np.isfinite(filled_temp_c)).sum())
+    return (f"; {unused} samples before the first or after the last temperature reading "
+            f"have no response to take out and are left out of {where}" if unused else "")
+
+
 def _unmodelled_response(channel: str, y: np.ndarray, temp_c: np.ndarray, rate_hz: float,
                          cm: ChannelModel) -> str | None:
     """A note when a model file without a temperature response is compared with a
@@ -433,9 +439,10 @@ def model_file_fit(model: NoiseModel, rec: Recording, source: str, *,
                     f"{terms.temp_coeff2:.3g} {UNITS[ch]}/degC^2 about {terms.temp_ref:g} degC)")
             if has_temp:
                 out[ch] = terms
-                y = y - terms.response(temp_c)
                 note = (f"{ch}: {what} was taken out of the recording before its Allan "
-                        "curve was compared with the model's noise terms")
+                        "curve was compared with the model's noise terms"
+                        + _left_out(y, filled_temperature(temp_c), "the comparison"))
+                y = y - terms.response(temp_c)
             else:
                 note = (f"{ch}: {what} is not in this comparison: the recording has no "
                         "temperature readings, so its drift, if any, is compared with the "
