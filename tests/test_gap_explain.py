@@ -534,6 +534,16 @@ def test_a_verdict_that_does_not_close_the_gap_alone_says_so_beside_the_others()
     text = headline(flat, 10)
     assert "closes" not in text
     assert "within its scatter before and after (systematic gap 0.034 -> 0)" in text
+    # an outside reviewer's true random walk: within the scatter without it, departing
+    # with it (the words said "within its scatter before and after (0 -> 0.179)")
+    rw = {"effect": "random_walk", "params": {"random_walk": 1.44e-3}, "gap_after": 0.05,
+          "holdout_gap_after": 0.209, "holdout_gap_excess_after": 0.179}
+    departs = _entry("random_walk", kept=[rw],
+                     holdout={"gap_before": 0.14, "gap_after": 0.209,
+                              "gap_excess_before": 0.0, "gap_excess_after": 0.179})
+    text = headline(departs, 10)
+    assert ("within its scatter without it and departs with it (systematic gap 0 -> 0.179; "
+            "its gap widens 0.14 -> 0.209)") in text, text
 
 
 def test_headline_gives_the_held_out_gap_beside_the_fit_part_s() -> None:

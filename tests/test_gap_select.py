@@ -2021,3 +2021,26 @@ def test_a_temperature_that_steps_between_the_parts_is_fitted_on_the_whole_recor
     k = out["kept"][0]
     assert k["fitted_on"] == "whole_record"
     assert k["params"]["temp_coeff"] == pytest.approx(coeff, rel=0.1)
+
+
+def test_a_short_markov_process_is_no_slow_term_a_response_can_stand_for() -> None:
+    """An outside reviewer's Samsung S5 model (white, Markov of tau_c 1.26 s): beside a
+    response to a temperature that cycles over 600-1500 s, its Markov was scaled by 0.81
+    as if it carried the response. Only a Markov process whose Allan-deviation peak
+    (1.89 tau_c) lies within a decade of the temperature's time scale counts as slow."""
+    from imubench.gap.candidates import slow_terms
+    from imubench.gap.parts import PartSetup
+
+    fs, n = 10.0, 18000
+    t = np.arange(n) / fs
+    temp = (25.0 + 2.5 * np.sin(2 * np.pi * t / 1500.0)
+            + 1.5 * np.sin(2 * np.pi * t / 600.0 + 1.0))
+    y = np.random.default_rng(3).standard_normal(n)
+    series = Series(y, temp, fs, "cycle")
+    short = NoiseModel.single_term("gx", white=0.003, markov_sigma=0.05, markov_tau=1.26,
+                                   random_walk=2e-4).channels["gx"]
+    assert slow_terms(short, PartSetup(series, short)) == ("random_walk",)
+    long = short.replace(markov_tau=760.0)
+    assert slow_terms(long, PartSetup(series, long)) == ("random_walk", "markov_sigma")
+    assert slow_terms(long, PartSetup(Series(y, None, fs, "no temperature"),
+                                      long)) == ("random_walk", "markov_sigma")

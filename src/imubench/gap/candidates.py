@@ -625,9 +625,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                     if scale is not None and scale <= SLOW_SCALE_MAX:
                         cands.append(Candidate(eff, {
                             **cands[-1].params,
-                            **{k: scale * getattr(cm, k) for k in SLOW_TERMS
-                               if getattr(cm, k) > 0}}, 2, estimator="gls",
-                            slow_scale=scale))
+                            **{k: scale * getattr(cm, k) for k in slow_terms(cm, fit)}},
+                            2, estimator="gls", slow_scale=scale))
                 if tf is not None:
                     ev["temperature"] = tf
                     cands.append(Candidate(eff, {"temp_coeff": cm.temp_coeff
@@ -691,11 +690,35 @@ added on top of them over-predicts the long taus or the trend."""
 SLOW_SCALE_MAX = 0.9
 """Largest scale of the slow terms (:func:`slow_terms_scale`) for which the
 candidate that takes their place is tried: above, the terms stay as they are."""
+MARKOV_PEAK_TAU = 1.89
+"""The Allan deviation of a first-order Gauss-Markov process peaks at tau = 1.89 tau_c
+(El-Sheimy, Hou & Niu 2008, IEEE Trans. Instrum. Meas. 57(1), 140-149)."""
+
+
+def slow_terms(cm: ChannelModel, fit: PartSetup) -> tuple[str, ...]:
+    """The model's terms (of :data:`SLOW_TERMS`, non-zero) that can carry a temperature
+    response on the fit part: flicker, random walk and ramp, and the Gauss-Markov process
+    when its Allan-deviation peak (:data:`MARKOV_PEAK_TAU` tau_c) is within a decade of
+    the temperature's own time scale, the tau at which the fit part's temperature has its
+    largest Allan variance. A Markov process of tau_c 1.26 s on a phone gyro, whose
+    temperature cycled over 600-1500 s, was scaled by 0.81 as if it were the response (an
+    outside reviewer's Samsung S5 record): it stood for the model's short-tau noise."""
+    keys = tuple(k for k in SLOW_TERMS if getattr(cm, k) > 0)
+    s = fit.series
+    if "markov_sigma" not in keys or s.temp_c is None:
+        return keys
+    temp_avar = oavar_at(np.asarray(s.temp_c, dtype=float), s.rate_hz,
+                         fit.afs)[:len(fit.tau_s)]
+    ok = np.isfinite(temp_avar)
+    tau_temp = float(fit.tau_s[ok][np.argmax(temp_avar[ok])]) if ok.any() else math.inf
+    if MARKOV_PEAK_TAU * cm.markov_tau * 10.0 >= tau_temp:
+        return keys
+    return tuple(k for k in keys if k != "markov_sigma")
 
 
 def slow_terms_scale(cm: ChannelModel, fit: PartSetup, y_less: np.ndarray,
                      model_avar: np.ndarray, sigma_ln_adev: np.ndarray) -> float | None:
-    """The factor s in [0, 1] by which the model's slow terms (:data:`SLOW_TERMS`,
+    """The factor s in [0, 1] by which the model's slow terms (:func:`slow_terms`,
     amplitudes) are scaled so that the model describes the fit part less its temperature
     response (``y_less``), or None when the model has none of them.
 
@@ -707,7 +730,7 @@ def slow_terms_scale(cm: ChannelModel, fit: PartSetup, y_less: np.ndarray,
     temperature rose 13 degC held a Gauss-Markov process of 7.4e-4 g, tau_c 760 s, that
     was the response; on the next segment the response (-2.4e-3 g/degC, whole-record z
     -10.9) added on top of it raised the held-out gap from 0.45 to 0.48 and was refused."""
-    slow = {k: float(getattr(cm, k)) for k in SLOW_TERMS if getattr(cm, k) > 0}
+    slow = {k: float(getattr(cm, k)) for k in slow_terms(cm, fit)}
     if not slow:
         return None
     rate = fit.series.rate_hz

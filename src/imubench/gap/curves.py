@@ -344,12 +344,13 @@ class Comparison:
 
     @property
     def chi2(self) -> float:
-        """Sum of squared z over taus and bands, plus the one-sided line and tail excess."""
+        """Sum of squared z over taus and bands, plus the one-sided line and tail excess,
+        each capped (:data:`TAIL_Z_CAP`, :func:`line_z_cap`)."""
         zz = np.concatenate([self.z[np.isfinite(self.z)], self.band_z[np.isfinite(self.band_z)]])
         slopes = [v**2 for v in (self.temp_z, self.trend_z, self.level_z)
                   if math.isfinite(v)]
         return float(
-            np.sum(zz**2) + max(self.line_z, 0.0) ** 2
+            np.sum(zz**2) + min(max(self.line_z, 0.0), line_z_cap(self.realisations)) ** 2
             + min(max(self.tail_z, 0.0), TAIL_Z_CAP) ** 2
             + sum(slopes)
         )
@@ -488,6 +489,23 @@ uncapped square then ranked every candidate by its side effect on the impulse co
 correctly fitted sine of line z 55 raised the total and was never examined). Capped, a
 tail far beyond its threshold still weighs 100 (the outliers candidate that removes it
 gains that), and no other candidate can win or lose more than that through it."""
+LINE_CAP_FACTOR = 2.0
+"""The line statistic enters :attr:`Comparison.chi2` at most this many times its
+threshold (:func:`line_z_cap`)."""
+
+
+def line_z_cap(realisations: int) -> float:
+    """The largest line statistic :attr:`Comparison.chi2` counts: :data:`LINE_CAP_FACTOR`
+    times the line's threshold with ``realisations`` (11.8 at K = 10), as the tail's
+    (:data:`TAIL_Z_CAP`). A line far beyond its threshold that the base model's misfit keeps
+    a sine from explaining (an outside reviewer's phone gyro, 10 Hz, held samples: line z
+    36-39) moved by a fraction of a sigma with any broadband candidate, and its square
+    then weighed tens of chi-squared: a flicker of 1.4e-4 +- 1.1e-3 dps was kept on 32 of
+    them. Capped, the sine that removes the line still gains up to the cap's square, and
+    no other candidate wins or loses more than that through it."""
+    return LINE_CAP_FACTOR * t_threshold(Z_LINE_FAMILY, stat_dof("line_z", realisations - 1))
+
+
 Z_SLOPE = 3.5
 """|z| of the temperature slope or of the linear trend against the realisations."""
 STAT_TESTS: tuple[tuple[str, float, bool], ...] = (

@@ -305,8 +305,8 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
         slow = (f", in place of part of the model's slow terms ({', '.join(terms)} scaled "
                 f"by {e['slow_terms_scale']:.2g} to " + ", ".join(g(k) for k in terms)
                 + "): a model fitted on a record whose temperature moved carries that "
-                "record's response as such noise; refit it with `imubench fit "
-                "--fit-temperature`")
+                "record's response as such noise; refit the model from a recording with "
+                "temperature readings, with `imubench fit --fit-temperature`")
     if effect == "temperature" and p.get("temp_coeff2") and \
             e.get("temp_slope_at_mean") is not None:
         return (f"{what} drifts with temperature, "
@@ -386,7 +386,8 @@ def _closed(h: dict[str, Any] | None, after: dict[str, Any] | None) -> str:
         frac, what = 1.0 - ea / eb, "the systematic Allan-curve gap"
     elif eb is not None and ea is not None and not on_record(after):
         # nothing systematic to close there: a share of the raw gap would be of scatter
-        text = (f"; the held-out Allan curve is within its scatter before and after "
+        after_too = "before and after " if ea <= 0.05 else "without it and departs with it "
+        text = (f"; the held-out Allan curve is within its scatter {after_too}"
                 f"(systematic gap {_f(eb)} -> {_f(ea)}")
         gb = h.get("gap_before")
         if ga is not None and gb and ga > (1.0 + UNMOVED) * gb:
