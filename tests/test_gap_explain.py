@@ -9,7 +9,7 @@ import pytest
 
 from imubench.commands.gap import gap_units, headline
 from imubench.gap.candidates import DENSE_TAIL
-from imubench.gap.curves import Z_SLOPE, t_threshold
+from imubench.gap.curves import POOLED_DOF, Z_SLOPE, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
 from imubench.gap.explain import describe, explain_channel, params_text
 
@@ -95,6 +95,12 @@ def test_none_names_the_closest_statistic() -> None:
     assert f"closest to its threshold is trend (t 4.0 against {thr:.1f})" in lines[1]
     assert any(s.startswith("Verdict none") for s in lines)
     assert not any(s.startswith("Held-out") for s in lines)
+    # a whole-record temperature z of 2.5 is closer to its threshold than the line's t 1.2
+    warm = _entry("none", temperature_record_z=-2.5, holdout=None, gap_after=0.5,
+                  line={"f_hz": 3.3, "z": 1.2})
+    rec_thr = t_threshold(Z_SLOPE, POOLED_DOF)
+    assert (f"closest to its threshold is the whole-record temperature (z 2.5 against "
+            f"{rec_thr:.1f})") in explain_channel(warm, 10)[1]
 
 
 def test_replicates_are_listed() -> None:
@@ -551,8 +557,10 @@ def test_headline_gives_the_held_out_gap_beside_the_fit_part_s() -> None:
     0.179" (the fit part's) while the held-out part closed to 0.02."""
     c = _entry("bias_step", gap_before=0.179, gap_after=0.179)
     c["holdout"]["gap_before"], c["holdout"]["gap_after"] = 0.52, 0.02
+    c["holdout"]["gap_excess_before"], c["holdout"]["gap_excess_after"] = 0.5, 0.0
     assert headline("gx", c) == ("gx: verdict bias_step, gap 0.179 -> 0.179 on the fit part; "
-                                 "held out 0.520 -> 0.020")
+                                 "held out 0.520 -> 0.020 (beyond its scatter 0.500 -> "
+                                 "0.000)")
     c["holdout"] = None
     assert headline("gx", c) == "gx: verdict bias_step, gap 0.179 -> 0.179 on the fit part"
 

@@ -89,6 +89,7 @@ from imubench.gap.errors import GapError
 from imubench.gap.parts import PartSetup, RecordTemperature, Series, seeds_of, simulate_channel
 from imubench.gap.two_level import two_level_llr as llr
 from imubench.gap.uncertainty import Refit, standard_errors
+from imubench.noisefit.outliers import held_runs
 
 MIN_CLOSURE = 1.0 / 3.0
 """Share of the significant excess chi-squared (over the taus, bands and statistics that
@@ -217,6 +218,10 @@ class ChannelDiagnosis:
     """The whole-record temperature test fired at the first step."""
     temp_note: str = ""
     """Why the temperature test could not be made (:attr:`RecordTemperature.note`)."""
+    held_samples: tuple[float, float] | None = None
+    """(share of the record's samples that repeat the previous one, median length of
+    their runs) when the record holds its output (:func:`imubench.noisefit.outliers.
+    held_runs`), else None: the realisations do not hold theirs."""
     residual_significant: bool = False
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
@@ -301,6 +306,9 @@ class ChannelDiagnosis:
             "whole_record_after": self._whole_record_after(),
             "global_after": ff.global_dict(),
             "temperature_note": self.temp_note or None,
+            "held_samples": (None if self.held_samples is None else
+                             {"share": self.held_samples[0],
+                              "median_run": self.held_samples[1]}),
             "temperature_spans_c": (None if self.temp_spans_c is None else
                                     {"fit_part": self.temp_spans_c[0],
                                      "held_out": self.temp_spans_c[1],
@@ -1573,7 +1581,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
                             step_fired=first.step_fired, drift_fired=first.drift_fired,
                             temp_record_z=first.temp_z, temp_fired=first.temp_fired,
-                            temp_note=rtemp.note,
+                            temp_note=rtemp.note, held_samples=held_runs(series.y),
                             temp_mean_c=(float(np.nanmean(series.temp_c))
                                          if series.has_temperature and series.temp_c is not None
                                          else math.nan),
