@@ -62,6 +62,7 @@ from imubench.noisefit.kernels import (
     key_value,
     term_avar,
 )
+from imubench.noisefit.misfit import curve_misfit
 from imubench.noisefit.model_avar import model_avar
 from imubench.noisefit.spectral_line import PeakTest, find_peak
 from imubench.noisefit.temperature import TemperatureResponse
@@ -1284,6 +1285,8 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
         notes.append(f"model discrepancy floor delta = {pts.delta:.3g} (relative std added "
                      "to every AVAR point so that chi2 = dof)")
     notes.extend(entangled_terms(st.terms, sol.cov_theta))
+    notes.extend(curve_misfit(pts.tau_s, pts.avar, design(st, pts) @ sol.theta, pts.edf,
+                              pts.delta))
     if "bandwidth_hz" in present:
         lo, hi = ci.get("bandwidth_hz", (math.nan, math.nan))
         if not (lo > 0 and hi / lo <= UNIDENTIFIED_RANGE):
