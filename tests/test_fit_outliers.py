@@ -62,3 +62,20 @@ def test_held_samples_are_named_not_called_outliers() -> None:
     assert outlier_warning("gy", x) is None
     coarse = np.round(0.4 * rng.standard_normal(N) / 0.5) * 0.5  # zeros, but short runs
     assert outlier_warning("gx", coarse) is None
+
+
+def test_a_hold_is_counted_in_samples_and_coarse_rounding_is_no_hold() -> None:
+    """An outside reviewer: runs of 5 held samples read "runs of median 4" (the repeats
+    after the first), and white noise rounded at 3-4 LSB per sigma, which repeats 76-91 %
+    of its samples in geometric runs, was called a hold."""
+    from imubench.noisefit.outliers import held_runs
+
+    rng = np.random.default_rng(2)
+    x = rng.standard_normal(N)
+    held = held_runs(np.repeat(x[::5], 5)[:N])
+    assert held is not None and held[1] == 5.0 and 0.79 < held[0] < 0.82
+    assert held_runs(np.repeat(x[::3], 3)[:N]) is None  # 2-3 samples: not told from rounding
+    for sigma_lsb in (0.25, 0.33, 0.5, 1.0, 2.0):
+        assert held_runs(np.round(sigma_lsb * rng.standard_normal(N))) is None, sigma_lsb
+    rounded_and_held = np.repeat(np.round(2.0 * rng.standard_normal(N))[::4], 4)[:N]
+    assert held_runs(rounded_and_held) is not None

@@ -219,9 +219,10 @@ class ChannelDiagnosis:
     temp_note: str = ""
     """Why the temperature test could not be made (:attr:`RecordTemperature.note`)."""
     held_samples: tuple[float, float] | None = None
-    """(share of the record's samples that repeat the previous one, median length of
-    their runs) when the record holds its output (:func:`imubench.noisefit.outliers.
-    held_runs`), else None: the realisations do not hold theirs."""
+    """(share of the record's samples that repeat the previous one, median number of
+    samples a value is held for) when the record holds its output
+    (:func:`imubench.noisefit.outliers.held_runs`), else None: the realisations do not
+    hold theirs."""
     residual_significant: bool = False
     """A significant departure remains after the kept effects."""
     background: dict[str, Any] | None = None
@@ -308,7 +309,7 @@ class ChannelDiagnosis:
             "temperature_note": self.temp_note or None,
             "held_samples": (None if self.held_samples is None else
                              {"share": self.held_samples[0],
-                              "median_run": self.held_samples[1]}),
+                              "median_hold_samples": self.held_samples[1]}),
             "temperature_spans_c": (None if self.temp_spans_c is None else
                                     {"fit_part": self.temp_spans_c[0],
                                      "held_out": self.temp_spans_c[1],

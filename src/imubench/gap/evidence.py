@@ -136,8 +136,11 @@ def fit_outliers(y: np.ndarray, rate_hz: float, false_per_record: float = 0.0
 
     if excess(30.0) >= 0.0:  # the tail is no heavier than a normal law's beyond thr
         return None
-    # excess falls monotonically in u from +inf (u -> 0) to thr^2 - m2 < 0
-    u = brentq(excess, 1e-3, 30.0)
+    # excess falls monotonically in u from +inf (u -> 0) to thr^2 - m2 < 0, and is
+    # positive below u = thr / sqrt(m2), which lies below 1e-3 when the robust sigma is
+    # far below the hits' size (a record that holds every sample for 7: a reviewer's
+    # brentq failed there)
+    u = brentq(excess, min(1e-3, 0.5 * thr / math.sqrt(m2)), 30.0)
     v = thr / u
     amp = math.sqrt(max(v * v - sigma * sigma, 0.0))
     duration = np.isfinite(y).sum() / rate_hz

@@ -777,8 +777,9 @@ def explain_channel(c: dict[str, Any], realisations: int,
     if held:
         lines.append(
             f"The record holds its output: {held['share']:.0%} of its samples repeat the "
-            f"previous one, in runs of median {held['median_run']:g} samples, and the "
-            "model's realisations do not. The shortest taus and the upper spectrum depart "
+            f"previous one, each value held for a median of {held['median_hold_samples']:g} "
+            "samples, and the model's realisations do not. The shortest taus and the upper "
+            "spectrum depart "
             "for that reason alone: a base_model verdict may be the hold, and an effect "
             "that acts there (a sine, resonance, telegraph or quantization) can be missed "
             "or misnamed.")

@@ -62,7 +62,7 @@ from imubench.noisefit.kernels import (
     key_value,
     term_avar,
 )
-from imubench.noisefit.misfit import curve_misfit
+from imubench.noisefit.misfit import broad_misfit, curve_misfit
 from imubench.noisefit.model_avar import model_avar
 from imubench.noisefit.spectral_line import PeakTest, find_peak
 from imubench.noisefit.temperature import TemperatureResponse
@@ -1287,6 +1287,9 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     notes.extend(entangled_terms(st.terms, sol.cov_theta))
     notes.extend(curve_misfit(pts.tau_s, pts.avar, design(st, pts) @ sol.theta, pts.edf,
                               pts.delta))
+    broad = broad_misfit(pts.delta)
+    if broad is not None:
+        notes.append(broad)
     if "bandwidth_hz" in present:
         lo, hi = ci.get("bandwidth_hz", (math.nan, math.nan))
         if not (lo > 0 and hi / lo <= UNIDENTIFIED_RANGE):
