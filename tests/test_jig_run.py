@@ -376,7 +376,9 @@ def test_an_interrupted_run_leaves_no_junit_that_reads_as_a_result(tmp_path: Pat
     line system reading it saw a green board."""
     import signal
 
-    station = write_station(tmp_path, "stop", capture=FAST.format(static_s=2000.0))
+    # 20000 s: a 2000 s capture could finish the whole suite inside the 2 s below (the
+    # full suite on a loaded machine: exit 0 before the signal)
+    station = write_station(tmp_path, "stop", capture=FAST.format(static_s=20000.0))
     report = tmp_path / "reports"
     proc = subprocess.Popen(
         [sys.executable, "-m", "imubench.cli", "jig", "run", "--station", str(station),

@@ -779,10 +779,9 @@ def explain_channel(c: dict[str, Any], realisations: int,
             f"The record holds its output: {held['share']:.0%} of its samples repeat the "
             f"previous one, each value held for a median of {held['median_hold_samples']:g} "
             "samples, and the model's realisations do not. The shortest taus and the upper "
-            "spectrum depart "
-            "for that reason alone: a base_model verdict may be the hold, and an effect "
-            "that acts there (a sine, resonance, telegraph or quantization) can be missed "
-            "or misnamed.")
+            "spectrum depart for that reason alone: a base_model verdict may be the hold, "
+            "and an effect that acts there (a sine, resonance, telegraph or quantization) "
+            "can be missed or misnamed.")
     alias = c.get("ramp_temperature_alias")
     if alias:
         lines.append(
