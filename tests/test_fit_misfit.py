@@ -57,6 +57,6 @@ def test_a_floor_that_hides_the_misfit_is_named() -> None:
     reviewer); the floors of fits that follow their curves stay unnamed."""
     from imubench.noisefit.misfit import broad_misfit
 
-    text = broad_misfit(0.682)
-    assert text is not None and "by about 68 % (rms)" in text
-    assert broad_misfit(0.26) is None and broad_misfit(0.0) is None
+    notes = broad_misfit(0.682)
+    assert len(notes) == 1 and "by about 68 % (rms)" in notes[0]
+    assert broad_misfit(0.26) == [] and broad_misfit(0.0) == []

@@ -699,21 +699,14 @@ def slow_terms(cm: ChannelModel, fit: PartSetup) -> tuple[str, ...]:
     """The model's terms (of :data:`SLOW_TERMS`, non-zero) that can carry a temperature
     response on the fit part: flicker, random walk and ramp, and the Gauss-Markov process
     when its Allan-deviation peak (:data:`MARKOV_PEAK_TAU` tau_c) is within a decade of
-    the temperature's own time scale, the tau at which the fit part's temperature has its
-    largest Allan variance. A Markov process of tau_c 1.26 s on a phone gyro, whose
+    the temperature's own time scale (:attr:`imubench.gap.parts.PartSetup.
+    temperature_tau_s`). A Markov process of tau_c 1.26 s on a phone gyro, whose
     temperature cycled over 600-1500 s, was scaled by 0.81 as if it were the response (an
     outside reviewer's Samsung S5 record): it stood for the model's short-tau noise."""
-    keys = tuple(k for k in SLOW_TERMS if getattr(cm, k) > 0)
-    s = fit.series
-    if "markov_sigma" not in keys or s.temp_c is None:
-        return keys
-    temp_avar = oavar_at(np.asarray(s.temp_c, dtype=float), s.rate_hz,
-                         fit.afs)[:len(fit.tau_s)]
-    ok = np.isfinite(temp_avar)
-    tau_temp = float(fit.tau_s[ok][np.argmax(temp_avar[ok])]) if ok.any() else math.inf
-    if MARKOV_PEAK_TAU * cm.markov_tau * 10.0 >= tau_temp:
-        return keys
-    return tuple(k for k in keys if k != "markov_sigma")
+    slow_markov = (fit.series.temp_c is None
+                   or MARKOV_PEAK_TAU * cm.markov_tau * 10.0 >= fit.temperature_tau_s)
+    return tuple(k for k in SLOW_TERMS
+                 if getattr(cm, k) > 0 and (k != "markov_sigma" or slow_markov))
 
 
 def slow_terms_scale(cm: ChannelModel, fit: PartSetup, y_less: np.ndarray,

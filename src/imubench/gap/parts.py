@@ -9,6 +9,8 @@ realisations with it (:mod:`imubench.gap.curves`).
 from __future__ import annotations
 
 import copy
+import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +30,7 @@ from imubench.gap.curves import (
     features,
     gls_against,
     gls_slopes,
+    oavar_at,
     psd_segment,
     stack,
     welch_psd,
@@ -284,6 +287,19 @@ class PartSetup:
         self.det: np.ndarray | float = 0.0
         """The deterministic part taken out of the record and of every realisation
         compared with it (:meth:`less`; 0.0 for the part as recorded)."""
+
+    @functools.cached_property
+    def temperature_tau_s(self) -> float:
+        """The temperature's own time scale (s): the analysed tau at which the part's
+        temperature has its largest overlapping Allan variance; inf where none is finite
+        (or without a temperature). Unchanged by :meth:`less`, whose copies keep it."""
+        s = self.series
+        if s.temp_c is None:
+            return math.inf
+        avar = oavar_at(np.asarray(s.temp_c, dtype=float), s.rate_hz,
+                        self.afs)[:len(self.tau_s)]
+        ok = np.isfinite(avar)
+        return float(self.tau_s[ok][np.argmax(avar[ok])]) if ok.any() else math.inf
 
     def less(self, det: np.ndarray | float) -> PartSetup:
         """This part with ``det`` (a deterministic part over its samples: the kept

@@ -1287,9 +1287,7 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
     notes.extend(entangled_terms(st.terms, sol.cov_theta))
     notes.extend(curve_misfit(pts.tau_s, pts.avar, design(st, pts) @ sol.theta, pts.edf,
                               pts.delta))
-    broad = broad_misfit(pts.delta)
-    if broad is not None:
-        notes.append(broad)
+    notes.extend(broad_misfit(pts.delta))
     if "bandwidth_hz" in present:
         lo, hi = ci.get("bandwidth_hz", (math.nan, math.nan))
         if not (lo > 0 and hi / lo <= UNIDENTIFIED_RANGE):

@@ -29,17 +29,9 @@ MISFIT_ALPHA = 1e-3
 
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first, last) index of each run of consecutive True values."""
-    out: list[tuple[int, int]] = []
-    start = -1
-    for i, f in enumerate(flags):
-        if f and start < 0:
-            start = i
-        if not f and start >= 0:
-            out.append((start, i - 1))
-            start = -1
-    if start >= 0:
-        out.append((start, len(flags) - 1))
-    return out
+    edges = np.diff(np.concatenate(([0], flags.astype(np.int8), [0])))
+    return list(zip(np.flatnonzero(edges == 1).tolist(),
+                    (np.flatnonzero(edges == -1) - 1).tolist(), strict=True))
 
 
 def curve_misfit(tau_s: np.ndarray, avar: np.ndarray, model_avar: np.ndarray,
@@ -66,11 +58,14 @@ def curve_misfit(tau_s: np.ndarray, avar: np.ndarray, model_avar: np.ndarray,
             where = (f"{tau_s[a]:.4g} s" if a == b else f"{tau_s[a]:.4g}-{tau_s[b]:.4g} s")
             ratios = (f"{adev[0]:.3g}x" if a == b else
                       f"{adev.min():.3g}-{adev.max():.3g}x")
-            cause = ("a slow term the selection did not keep (a random walk, ramp, flicker "
-                     "or a temperature response; see the upper limits of the terms judged "
-                     "absent)" if word == "under-predicts" and b == len(flags) - 1 else
-                     "a term the model lacks there" if word == "under-predicts" else
-                     "a term fitted too large there")
+            if word == "over-predicts":
+                cause = "a term fitted too large there"
+            elif b == len(flags) - 1:  # up to the longest tau
+                cause = ("a slow term the selection did not keep (a random walk, ramp, "
+                         "flicker or a temperature response; see the upper limits of the "
+                         "terms judged absent)")
+            else:
+                cause = "a term the model lacks there"
             worst = float(p[a:b + 1].min())
             out.append((worst, (
                 f"the model {word} the Allan deviation at {where} (the record's is "
@@ -86,16 +81,17 @@ BROAD_FLOOR = 0.4
 6 h and the MTi-G, which follow their curves, have 0-0.17."""
 
 
-def broad_misfit(delta: float) -> str | None:
-    """A note when the fit's discrepancy floor ``delta`` is :data:`BROAD_FLOOR` or more:
-    the floor widens every point, so :func:`curve_misfit` can then stay silent where the
-    misfit is largest (an outside reviewer: a sine of period 300 s over white noise, 3.2x
-    above the model at 327-655 s, delta 0.68; `--terms white` on a random walk, delta 2)."""
+def broad_misfit(delta: float) -> list[str]:
+    """A note (a list of one, or empty) when the fit's discrepancy floor ``delta`` is
+    :data:`BROAD_FLOOR` or more: the floor widens every point, so :func:`curve_misfit`
+    can then stay silent where the misfit is largest (an outside reviewer: a sine of
+    period 300 s over white noise, 3.2x above the model at 327-655 s, delta 0.68;
+    `--terms white` on a random walk, delta 2)."""
     if not delta >= BROAD_FLOOR:
-        return None
-    return (f"the model misses the Allan curve broadly: its AVAR departs from the record's "
+        return []
+    return [f"the model misses the Allan curve broadly: its AVAR departs from the record's "
             f"by about {100 * delta:.0f} % (rms) beyond the estimates' scatter, a term the "
             "model lacks or one the record does not hold; the per-tau misfit test is "
             "widened by that floor and may name no taus: compare the curves (imubench "
-            "report)")
+            "report)"]
 
