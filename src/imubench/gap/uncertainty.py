@@ -218,9 +218,10 @@ def _slow_terms(c: Candidate, r: Refit) -> dict[str, list[float]]:
         added = b - r.cm.temp_coeff  # the real record's fit took out the added slope
         sc = (slow_terms_scale(r.cm, fit, y - added * temp, ref_avar, r.sigma)
               if math.isfinite(b) else None)
+        if sc is None:
+            continue
         for k in keys:
-            if sc is not None:
-                out[k].append(sc * float(getattr(r.cm, k)))
+            out[k].append(sc * float(getattr(r.cm, k)))
     return out
 
 
