@@ -141,6 +141,8 @@ def test_a_backfitted_response_is_refitted_as_it_was_fitted() -> None:
         assert abs(bias) < 3.0 * se, (key, bias, se)
 
 
+@pytest.mark.slow  # ~45 s; by default test_gap_select.py's
+# test_fired_deterministic_tests_first_is_a_second_start_of_the_selection checks the second start
 def test_the_two_starts_are_compared_once_each_is_refitted() -> None:
     """The forward selection from the best score kept a random walk and then a temperature
     response by the levels' least squares, which took part of the ramp (0.00226 dps/degC
@@ -185,6 +187,8 @@ def _reviewer_b_record(seed: int, temp_coeff: float, ramp: float) -> Series:
                   f"reviewer B {seed}")
 
 
+@pytest.mark.slow  # ~45 s; by default the in-place refit is checked by
+# test_a_noise_process_refitted_in_place_has_its_errors_refitted_the_same_way
 def test_a_kept_noise_process_is_refitted_beside_the_effects_kept_after_it() -> None:
     """A random walk kept before a ramp took the ramp's long-tau excess (4.3e-4, then
     2.3e-4 dps/sqrt(s) beside the temperature response); refitted beside the response
