@@ -38,7 +38,11 @@ from imubench.gap.curves import (
 from imubench.gap.errors import GapError
 from imubench.noisefit.blockmean import gls_fit, only_trend
 from imubench.noisefit.covariance import oavar_correlation
-from imubench.noisefit.model_avar import block_increment_acv, block_increment_key
+from imubench.noisefit.model_avar import (
+    block_increment_acv,
+    block_increment_key,
+    stochastic_amplitudes,
+)
 from imubench.stats import oadev
 
 
@@ -94,15 +98,8 @@ def tau_correlation(cm: ChannelModel, afs: np.ndarray, n: int, rate_hz: float) -
     From the channel's stochastic terms (:func:`imubench.noisefit.covariance.
     oavar_correlation`); the global test (:func:`imubench.gap.curves.global_chi2`) needs it.
     """
-    amp2 = {"white": cm.white**2, "flicker": cm.flicker**2,
-            "random_walk": cm.random_walk**2, "quantization": cm.quantization**2,
-            "output_white": cm.output_white**2}
-    tau_c = 0.0
-    if cm.markov_sigma > 0 and cm.markov_tau > 0:
-        amp2["markov"] = cm.markov_sigma**2
-        tau_c = float(cm.markov_tau)
-    if cm.resonance_height > 0:
-        amp2["resonance"] = cm.resonance_height
+    amp2 = stochastic_amplitudes(cm)
+    tau_c = float(cm.markov_tau) if "markov" in amp2 else 0.0
     m = np.asarray(afs, dtype=np.int64)
     return oavar_correlation(m, n - 2 * m, amp2, rate_hz, tau_c_s=tau_c,
                              bandwidth_hz=float(cm.bandwidth_hz),

@@ -34,10 +34,19 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
                     (np.flatnonzero(edges == -1) - 1).tolist(), strict=True))
 
 
+MODEL_FILE_FLOOR = 0.1
+"""The relative model error allowed a model that was not fitted to the recording (``imubench
+report --model``: another fit of the same sensor, a datasheet model): 10 % in AVAR,
+the size of the fits' own floors on real curves (:data:`BROAD_FLOOR`)."""
+
+
 def curve_misfit(tau_s: np.ndarray, avar: np.ndarray, model_avar: np.ndarray,
-                 edf: np.ndarray, delta: float) -> list[str]:
+                 edf: np.ndarray, delta: float, *, fitted: bool = True) -> list[str]:
     """Sentences naming each run of taus (s) where the model's AVAR lies beyond the
-    estimates' scatter (module docstring), worst first; empty where the curve fits."""
+    estimates' scatter (module docstring), worst first; empty where the curve fits.
+    ``fitted``: the model was fitted to this curve (the sentences then name the term it
+    lacks); else it was given (a model file), and they say that it does not describe the
+    recording there."""
     tau_s, avar, model_avar, edf = (np.asarray(v, dtype=float)
                                     for v in (tau_s, avar, model_avar, edf))
     ok = np.isfinite(avar) & np.isfinite(model_avar) & (model_avar > 0) & (edf > 0)
@@ -58,7 +67,10 @@ def curve_misfit(tau_s: np.ndarray, avar: np.ndarray, model_avar: np.ndarray,
             where = (f"{tau_s[a]:.4g} s" if a == b else f"{tau_s[a]:.4g}-{tau_s[b]:.4g} s")
             ratios = (f"{adev[0]:.3g}x" if a == b else
                       f"{adev.min():.3g}-{adev.max():.3g}x")
-            if word == "over-predicts":
+            if not fitted:
+                cause = ("it does not describe this recording there, and its values there "
+                         "are not this sensor's")
+            elif word == "over-predicts":
                 cause = "a term fitted too large there"
             elif b == len(flags) - 1:  # up to the longest tau
                 cause = ("a slow term the selection did not keep (a random walk, ramp, "

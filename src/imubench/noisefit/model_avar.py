@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 from lsm6ds_sim.model import ChannelModel
 
+from imubench.noisefit.covariance import oavar_edf
 from imubench.noisefit.errors import FitError
 from imubench.noisefit.kernels import (
     apply_filter,
@@ -48,6 +49,34 @@ def channel_terms(cm: ChannelModel) -> list[tuple[str, float, dict[str, float]]]
     if cm.outlier_rate > 0 and cm.outlier_amplitude > 0:
         out.append(("outliers", cm.outlier_rate * cm.outlier_amplitude**2, {}))
     return out
+
+
+def stochastic_amplitudes(cm: ChannelModel) -> dict[str, float]:
+    """The channel's stochastic terms as :mod:`imubench.noisefit.covariance` takes them:
+    squared amplitudes (white, flicker, random walk, quantization, output white, Markov
+    sigma) and the resonance's PSD height; deterministic terms (ramp, sine) are left out,
+    as that module's covariance leaves them out."""
+    amp2 = {"white": cm.white**2, "flicker": cm.flicker**2,
+            "random_walk": cm.random_walk**2, "quantization": cm.quantization**2,
+            "output_white": cm.output_white**2}
+    if cm.markov_sigma > 0 and cm.markov_tau > 0:
+        amp2["markov"] = cm.markov_sigma**2
+    if cm.resonance_height > 0:
+        amp2["resonance"] = cm.resonance_height
+    return amp2
+
+
+def model_oavar_edf(cm: ChannelModel, m: np.ndarray, n_terms: np.ndarray,
+                    rate_hz: float) -> np.ndarray:
+    """EDF of OAVAR estimates at averaging factors ``m`` (``n_terms`` terms each) of data
+    that ``cm`` describes (:func:`imubench.noisefit.covariance.oavar_edf`: 2 A^2 / Var(A)
+    under the model's covariance, SP 1065 eq. 44)."""
+    m = np.asarray(m, dtype=np.int64)
+    return oavar_edf(m, np.asarray(n_terms, dtype=np.int64), stochastic_amplitudes(cm),
+                     model_avar_m(cm, m, rate_hz), rate_hz,
+                     tau_c_s=float(cm.markov_tau) if cm.markov_sigma > 0 else 0.0,
+                     bandwidth_hz=float(cm.bandwidth_hz), filter_order=int(cm.filter_order),
+                     resonance=(cm.resonance_freq_hz, cm.resonance_width_hz))
 
 
 def model_avar_m(cm: ChannelModel, m: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -146,4 +175,5 @@ def model_avar(channel_model: ChannelModel, tau_s: Sequence[float] | np.ndarray,
     return model_avar_m(channel_model, averaging_factors(tau, rate_hz), rate_hz)
 
 
-__all__ = ["block_increment_acv", "channel_terms", "model_avar", "model_avar_m"]
+__all__ = ["block_increment_acv", "channel_terms", "model_avar", "model_avar_m",
+           "model_oavar_edf", "stochastic_amplitudes"]
