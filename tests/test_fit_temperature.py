@@ -222,8 +222,8 @@ def test_report_compares_a_model_with_the_data_less_its_temperature_response(
             doc["channels"]["gx"]["notes"])
     assert "temp_coeff 0.003 dps/degC" in notes["with"] and "was taken out" in notes["with"]
     assert "left out of the comparison" not in notes["with"]  # temperature in every row
-    assert "lies outside" not in notes["with"]
-    assert "gx: the model lies outside" in notes["without"]
+    assert "the model under-predicts" not in notes["with"]
+    assert "gx: the model under-predicts the Allan deviation" in notes["without"]
     assert "gx: the recording's rate follows the die temperature" in notes["without"]
     assert "follows the die temperature" not in notes["with"]
     run = subprocess.run([sys.executable, "-m", "imubench", "report", str(rec),
@@ -232,7 +232,7 @@ def test_report_compares_a_model_with_the_data_less_its_temperature_response(
     assert run.returncode == 0, run.stderr
     fitted = json.loads((tmp_path / "fitted" / "fit.json").read_text())["channels"]["gx"]
     assert fitted["temperature_response"]["accepted"]
-    assert "lies outside" not in " ".join(fitted["notes"])
+    assert "the model under-predicts" not in " ".join(fitted["notes"])
 
 
 def test_a_curved_response_is_taken_out_as_its_mean_slope_and_said_to_curve() -> None:

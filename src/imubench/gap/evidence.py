@@ -275,6 +275,25 @@ def step_persistence(y: np.ndarray, rate_hz: float, step: StepFit) -> float:
     return float((np.median(after) - np.median(before)) / step.step_size)
 
 
+STEP_WANDER_Z = 2.0
+"""A step whose far levels keep less than :data:`STEP_PERSISTENCE` of it is refused only
+when the share it keeps lies more than this many standard deviations of the model's own
+wander (:func:`step_persistence_spread`) below 1."""
+
+
+def step_persistence_spread(sims: np.ndarray, rate_hz: float, step: StepFit) -> float:
+    """Standard deviation over the model's realisations (``sims``, K x n, seen as the
+    record is) of :func:`step_persistence` at the record's located step: how far the
+    share a true step keeps moves with the model's slow noise alone. A random walk of
+    4e-4 dps/sqrt(s) moves the far medians of an hour by ~K sqrt(1800 s) = 0.017 dps, as
+    much as a 0.02 dps step (an outside reviewer's record, whose step kept 37 % of its
+    size and was refused while the walk took it, read 53 % high). NaN with fewer than 3
+    finite shares."""
+    shares = np.array([step_persistence(y, rate_hz, step) for y in sims])
+    shares = shares[np.isfinite(shares)]
+    return float(np.std(shares, ddof=1)) if shares.size >= 3 else float("nan")
+
+
 @dataclass(frozen=True)
 class ResonanceFit:
     resonance_freq_hz: float
