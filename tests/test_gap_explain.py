@@ -866,3 +866,23 @@ def test_a_corrected_value_in_exponent_notation_keeps_its_exponent() -> None:
 
     assert _value_only(_with_error(8.8e-7, 2.7e-7)) == "8.8e-07"
     assert _value_only(_with_error(-1.234, 0.04)) == "-1.234"
+
+
+def test_a_slow_term_the_model_lacks_is_said_to_be_lacking_and_why_that_happens() -> None:
+    """An outside reviewer fitted white-only models (`imubench fit` left out a weak
+    flicker on 15 of 27 clean hours) and `gap` named `flicker` on clean replicates, "larger
+    than modelled" against a model with none: the kept effect's JSON gives the model's own
+    value (``model_params``), and a zero is said in words, with the likely cause."""
+    units = {"flicker": "dps", "random_walk": "dps/sqrt(s)"}
+    lacking = describe("flicker", {"flicker": 5.8e-4}, units,
+                       {"effect": "flicker", "model_params": {"flicker": 0.0}})
+    assert lacking.startswith("the record has a bias instability (flicker) that the model "
+                              "lacks (B = 0.00058 dps)")
+    assert "imubench fit" in lacking and "under-predicts the longest taus" in lacking
+    larger = describe("flicker", {"flicker": 5.8e-4}, units,
+                      {"effect": "flicker", "model_params": {"flicker": 3e-4}})
+    assert larger.startswith("the bias instability (flicker) is larger than modelled")
+    walk = describe("random_walk", {"random_walk": 2e-4}, units,
+                    {"effect": "random_walk", "model_params": {"random_walk": 0.0}})
+    assert walk.startswith("the record has a bias that wanders as a random walk that the "
+                           "model lacks (K = 0.0002 dps/sqrt(s))")

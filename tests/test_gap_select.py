@@ -841,6 +841,8 @@ def test_a_bias_step_on_a_wandering_background_is_kept_beside_the_walk() -> None
     assert kept["random_walk"]["random_walk"] == pytest.approx(4e-4, rel=0.15)
     assert kept["bias_step"]["step_time_s"] == pytest.approx(1104.0, abs=1.0)
     assert kept["bias_step"]["step_size"] == pytest.approx(0.02, abs=0.005)
+    walk = next(k for k in d.to_dict()["kept"] if k["effect"] == "random_walk")
+    assert walk["model_params"] == {"random_walk": 0.0}  # the model lacks it
 
 
 def test_an_excursion_on_a_quiet_background_is_still_not_a_bias_step() -> None:

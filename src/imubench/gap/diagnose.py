@@ -56,7 +56,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -238,6 +238,9 @@ class ChannelDiagnosis:
     """The record's mean temperature (degC; NaN without one)."""
     temp_ref_c: float = float("nan")
     """The model's ``temp_ref`` (degC), where the temperature coefficients are stated."""
+    model_noise: dict[str, float] = field(default_factory=dict)
+    """The model's own value of each noise term a kept effect of the same name raises
+    (:data:`RAISED_TERMS`; JSON ``model_params`` of those kept effects)."""
     temp_spans_c: tuple[float, float, float] | None = None
     """The fit part's, the held-out part's and the record's temperature spans (degC) when
     the split cannot both fit and test a temperature response (:func:`temperature_spans`)."""
@@ -280,7 +283,7 @@ class ChannelDiagnosis:
             "effects": [c.to_dict(self.before) for c in self.candidates],
             "verdict": self.verdict,
             "reason": self.reason,
-            "kept": [_kept_dict(c) for c in self.kept],
+            "kept": [_kept_dict(c, self.model_noise) for c in self.kept],
             "dropped": [{"effect": c.effect, "params": c.params, **c.at_output(),
                          "reason": c.note} for c in self.pruned],
             "not_kept": [{"effect": c.effect, "params": c.params, **c.at_output(),
@@ -386,7 +389,13 @@ class ChannelDiagnosis:
                                                         self.temp_ref_c)
 
 
-def _kept_dict(c: Candidate) -> dict[str, Any]:
+RAISED_TERMS = ("flicker", "random_walk", "quantization")
+"""Kept effects that raise a noise term of the model's (a zero: the model lacks it)."""
+
+
+def _kept_dict(c: Candidate, model_noise: Mapping[str, float]) -> dict[str, Any]:
+    """A kept effect's JSON entry; ``model_params``: the model's own value of the term a
+    :data:`RAISED_TERMS` effect raises."""
     assert c.fit is not None
     d: dict[str, Any] = {"effect": c.effect, "params": c.params, "n_params": c.n_params,
                          "params_se": dict(c.params_se),  # NaN: null in the JSON
@@ -395,6 +404,8 @@ def _kept_dict(c: Candidate) -> dict[str, Any]:
                          "gap_excess_after": c.fit.gap_excess,
                          "evidence_closed": c.evidence_closed, **c.at_output(),
                          **c.fitted_on(), **c.holdout_dict()}
+    if c.effect in model_noise:
+        d["model_params"] = {c.effect: model_noise[c.effect]}
     if c.estimator:
         d["estimator"] = c.estimator
     if c.slow_scale < 1.0:
@@ -1590,6 +1601,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                                          if series.has_temperature and series.temp_c is not None
                                          else math.nan),
                             temp_ref_c=float(cm0.temp_ref), temp_spans_c=realiser.temp_spans,
+                            model_noise={k: float(getattr(cm0, k)) for k in RAISED_TERMS},
                             ramp_temperature=ramp_as_temperature(kept, cm0, series),
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [],

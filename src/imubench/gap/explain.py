@@ -322,6 +322,14 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
                 f"(model-file coefficients at temp_ref: temp_coeff {g('temp_coeff')})"
                 + slow)
 
+    if effect in ("flicker", "random_walk") and (e.get("model_params") or {}).get(effect) == 0:
+        name = {"flicker": "a bias instability (flicker)", "random_walk":
+                "a bias that wanders as a random walk"}[effect]
+        return (f"the record has {name} that the model lacks "
+                f"({'B' if effect == 'flicker' else 'K'} = {g(effect)}); a model fitted "
+                "(imubench fit) on an hour or so of a sensor can leave out a slow term this "
+                "weak, and that fit's notes then say that its model under-predicts the "
+                "longest taus (docs/noise-fit.md)")
     bw = p.get("bandwidth_hz")
     filt = (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
             if bw is not None and bw > 0 else "no output filter")
