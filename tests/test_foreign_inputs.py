@@ -674,6 +674,92 @@ def test_thousands_separators_are_read(tmp_path: Path, style: str) -> None:
     np.testing.assert_allclose(rec.channel("gx"), np.round(y, 3) * 1e-3, atol=1e-9)
 
 
+def test_quoted_decimal_commas_in_a_comma_file_are_read_or_refused(tmp_path: Path) -> None:
+    """A spreadsheet with a German locale told to separate by commas writes
+    ``"0,010","1,480","-0,032"``: read as thousands commas every value was 1000x too large
+    with nothing said (an outside reviewer: white 3.98 for 0.004 dps/sqrt(Hz), a bias of
+    1500 for 1.5). A comma no thousands grouping writes (``0,010``, ``-0,032``) settles
+    the file; where every number reads either way, or both ways occur, it is refused."""
+    rng = np.random.default_rng(8)
+    y = 1.5 + rng.normal(0.0, 0.04, 3000)  # dps
+    path = tmp_path / "de.csv"
+
+    def write(values: np.ndarray, fmt: str = "{:.3f}") -> None:
+        path.write_text("time [s],gx [dps]\n" + "\n".join(
+            '"' + f"{k / 100:.3f}".replace(".", ",") + '","'
+            + fmt.format(v).replace(".", ",") + '"' for k, v in enumerate(values)) + "\n")
+
+    write(y)
+    rec = load_recording(path)
+    assert len(rec) == 3000 and rec.damage is None and rec.rate_hz == pytest.approx(100.0)
+    np.testing.assert_allclose(rec.channel("gx"), np.round(y, 3), atol=1e-9)
+    write(y + 10.0)  # 11,480: only the time column's 0,010 settles it
+    np.testing.assert_allclose(load_recording(path).channel("gx"), np.round(y + 10.0, 3),
+                               atol=1e-9)
+    path.write_text("t,gx [dps]\n" + "\n".join(
+        f'{k / 100:.2f},"1,{480 + k % 100:03d}"' for k in range(3000)) + "\n")
+    with pytest.raises(RecordingError, match=r"de.csv: .*one comma and three digits after it "
+                       r"\(line 2: '1,480'\).*1\.480.*1480"):
+        load_recording(path)
+    path.write_text("t,gx [mdps]\n" + "\n".join(
+        f'{k / 100:.2f},"{"1,480.5" if k % 2 else "0,520"}"' for k in range(3000)) + "\n")
+    with pytest.raises(RecordingError, match="both as a thousands separator"):
+        load_recording(path)
+
+
+@pytest.mark.parametrize(("name", "value"), [("temp_K", 303.15), ("Temperatur [°C]", 30.0),
+                                           ("board_temp_F", 86.0)])
+def test_a_temperature_named_with_its_unit_or_in_german_is_read(tmp_path: Path, name: str,
+                                                                value: float) -> None:
+    """``temp_K`` and ``Temperatur [°C]`` were left out unread (an outside reviewer)."""
+    path = tmp_path / "temp.csv"
+    path.write_text(f"t_s,gx_dps,{name}\n" + "\n".join(f"{k / 100:.2f},0.5,{value}"
+                                                        for k in range(500)) + "\n")
+    rec = load_recording(path)
+    assert rec.temp_c is not None
+    np.testing.assert_allclose(rec.temp_c, 30.0, atol=1e-9)
+
+
+def test_a_units_row_of_raw_counts_is_refused_not_read_as_dps(tmp_path: Path) -> None:
+    """``t,gx`` then ``s,LSB``: skipped as a damaged line, the counts were read as dps
+    (114x, an outside reviewer); now the row is read as units and refused as a header
+    ``gx [LSB]`` is."""
+    path = tmp_path / "lsb.csv"
+    path.write_text("t,gx\ns,LSB\n" + "\n".join(f"{k / 100:.2f},{57 + k % 7}"
+                                                for k in range(2000)) + "\n")
+    with pytest.raises(RecordingError, match=r"column 'gx \[LSB\]' is in 'LSB', not a gyro"):
+        load_recording(path)
+
+
+def test_an_assumed_unit_of_a_plain_series_is_said(tmp_path: Path,
+                                                   caplog: pytest.LogCaptureFixture) -> None:
+    """One column with a rate line (rad/s, no unit): read as dps, a white level 57x low,
+    ARW and all, with the note only at -v; an assumed unit is now a warning."""
+    path = tmp_path / "one.txt"
+    path.write_text("# rate_hz: 100\n" + "\n".join(f"{v:.8f}" for v in
+                                                   np.random.default_rng(3).normal(0, 1e-3, 2000))
+                    + "\n")
+    with caplog.at_level("WARNING", logger="imubench.recording"):
+        rec = load_recording(path)
+    assert rec.metadata["units_assumed"] == ["gx"]
+    assert "assumed for gx: nothing in the file states them" in caplog.text
+
+
+def test_a_file_of_unreadable_lines_names_the_first_and_why(tmp_path: Path) -> None:
+    """"30000 of 30000 data lines cannot be read" named no line, column or reason."""
+    path = tmp_path / "cells.csv"
+    path.write_text("t,gx\n" + "\n".join(f"{k / 100:.2f} s,{0.5:.2f} dps"
+                                          for k in range(300)) + "\n")
+    with pytest.raises(RecordingError, match=r"cannot be read \(first: line 2, 't' holds "
+                       r"'0.00 s', not a number\)"):
+        load_recording(path)
+    path.write_text("t,gx\n" + "\n".join(f"{k / 100:.2f},1,{k % 1000:03d}.5"
+                                          for k in range(300)) + "\n")
+    with pytest.raises(RecordingError, match=r"\(first: line 2, 3 fields where the header "
+                       r"has 2\)"):
+        load_recording(path)
+
+
 @pytest.mark.parametrize(("header", "channel", "factor"), [
     ("t,ax_g", "ax", 1.0), ("t,acc_x_mps2", "ax", 1 / 9.80665),
     ("t,gx_rads", "gx", 180 / np.pi), ("t,gyro_x_dps", "gx", 1.0),

@@ -36,6 +36,9 @@ _VALUE_SUFFIXES = {"_dps": "dps", "_degs": "dps", "_deg_s": "dps", "_mdps": "mdp
                    "_g": "g", "_mg": "mg", "_mps2": "m/s2", "_ms2": "m/s2", "_m_s2": "m/s2"}
 """Unit suffixes of a gyro or accelerometer column's name (``gyro_x_dps``, ``ax_g``,
 ``acc_x_mps2``): the unit, and the name without it."""
+_TEMP_SUFFIXES = {"_k": "K", "_kelvin": "K", "_f": "degF", "_degf": "degF"}
+"""Unit suffixes of a temperature column's name (``temp_K``: left out unread before, an
+outside reviewer's file); ``temp_c`` and ``temp_degc`` are names of their own."""
 
 
 def _aliases() -> dict[str, str]:
@@ -54,7 +57,7 @@ def _aliases() -> dict[str, str]:
     for stem in ("imu", "die", "chip", "sensor", "board", "gyro", "accel"):
         for word in ("temp", "temperature"):
             out[f"{stem}_{word}"] = out[f"{stem}{word}"] = "temp"
-    out.update({"temp": "temp", "temperature": "temp", "temp_c": "temp",
+    out.update({"temp": "temp", "temperature": "temp", "temperatur": "temp", "temp_c": "temp",
                 "temperature_c": "temp", "temp_degc": "temp",
                 "index": "index", "sample": "index", "sample_index": "index"})
     return out
@@ -125,6 +128,10 @@ def normalise(text: str) -> tuple[str, str | None]:
         for suffix, u in _VALUE_SUFFIXES.items():
             stem = s[: -len(suffix)]
             if s.endswith(suffix) and ALIASES.get(stem, "t") not in ("t", "temp", "index"):
+                return stem, u
+        for suffix, u in _TEMP_SUFFIXES.items():
+            stem = s[: -len(suffix)]
+            if s.endswith(suffix) and ALIASES.get(stem) == "temp":
                 return stem, u
     return s, unit
 

@@ -147,12 +147,18 @@ def _split(line: str, delim: str | None) -> list[str]:
             else:
                 fields.append(f.strip('"'))
         return fields
-    parts = next(csv.reader([line], delimiter=delim)) if '"' in line else line.split(delim)
-    fields = [f.strip().strip('"').strip() for f in parts]
+    fields = [f.strip().strip('"').strip() for f in _parts(line, delim)]
     if delim in (";", "\t"):
         return [f.replace(".", "").replace(",", ".") if _THOUSANDS_POINT.match(f)
                 else f.replace(",", ".") for f in fields]
-    return [f.replace(",", "") if _THOUSANDS_COMMA.match(f) else f for f in fields]
+    kinds = [_comma_kind(f) for f in fields]
+    return [f.replace(",", "") if k == "thousands" else f.replace(",", ".") if k else f
+            for f, k in zip(fields, kinds, strict=True)]
+
+
+def _parts(line: str, delim: str) -> list[str]:
+    """The fields of a delimited line as written (quotes read as a CSV reader does)."""
+    return next(csv.reader([line], delimiter=delim)) if '"' in line else line.split(delim)
 
 
 _THOUSANDS_POINT = re.compile(r"^[-+]?\d{1,3}(\.\d{3})+,\d*$")
@@ -160,6 +166,48 @@ _THOUSANDS_POINT = re.compile(r"^[-+]?\d{1,3}(\.\d{3})+,\d*$")
 _THOUSANDS_COMMA = re.compile(r"^[-+]?\d{1,3}(,\d{3})+(\.\d*)?$")
 """``"1,234.5"``: thousands commas in a quoted field of a comma-separated file (read
 split at the comma, the line was damaged: every value of 1000 and over was dropped)."""
+_ONE_COMMA = re.compile(r"^[-+]?(\d+),(\d+)$")
+"""A quoted number with one comma and no point: ``"0,010"``, ``"1,480"``, ``"1,5"``."""
+
+
+def _comma_kind(text: str) -> str | None:
+    """How a comma-separated file's (quoted) field with a comma in a number reads:
+    ``thousands`` (``1,234.5``, ``1,234,567``), ``decimal`` (one comma that no thousands
+    grouping writes: ``0,010``, ``-0,032``, ``1,5``, ``1234,5``), ``ambiguous`` (``1,480``:
+    1.48 with a decimal comma, 1480 with a thousands comma; read as a decimal comma and
+    settled by the rest of the file, :func:`_check_comma_numbers`), or None (no such
+    number). A spreadsheet with a German locale writes ``"1,480","-0,032"`` when told to
+    separate by commas; read as thousands, every value was 1000x too large, unsaid."""
+    if _THOUSANDS_COMMA.match(text) and ("." in text or text.count(",") > 1):
+        return "thousands"
+    m = _ONE_COMMA.match(text)
+    if m is None:
+        return None
+    lead, frac = m.groups()
+    return ("decimal" if len(frac) != 3 or lead.startswith("0") or len(lead) > 3
+            else "ambiguous")
+
+
+def _check_comma_numbers(raw: _Raw, where: str) -> None:
+    """RecordingError when the file's quoted comma numbers (:func:`_comma_kind`) cannot be
+    read one way: thousands commas beside decimal commas, or only numbers that read
+    either way (``1,480`` is 1.48 or 1480)."""
+    seen = raw.comma_numbers
+    fix = ("save it with ';' between fields (a comma in a number is then a decimal point) "
+           "or without thousands separators and with '.' as the decimal mark")
+    if "thousands" in seen and ("decimal" in seen or "ambiguous" in seen):
+        other = seen.get("decimal") or seen["ambiguous"]
+        raise RecordingError(
+            f"{where}: its quoted numbers use the comma both as a thousands separator "
+            f"(line {seen['thousands'][0]}: {seen['thousands'][1]!r}) and as a decimal "
+            f"comma (line {other[0]}: {other[1]!r}); {fix}")
+    if "ambiguous" in seen and "decimal" not in seen:
+        line, text = seen["ambiguous"]
+        raise RecordingError(
+            f"{where}: its quoted numbers have one comma and three digits after it (line "
+            f"{line}: {text!r}), which reads as a decimal comma ({text.replace(',', '.')}) "
+            f"or a thousands separator ({text.replace(',', '')}); nothing in the file "
+            f"tells which: {fix}")
 
 
 def _is_number(text: str) -> bool:
@@ -270,6 +318,10 @@ class _Raw:
     """One of them starts with 0 (``0123``), which no integer column writes."""
     decimal_comma: bool = False
     """The file was read with every comma as a decimal point (one column)."""
+    comma_numbers: dict[str, tuple[int, str]] = field(default_factory=dict)
+    """Per kind of quoted comma number (:func:`_comma_kind`), its first line and text."""
+    first_short: tuple[int, int] | None = None
+    """The first data line whose number of fields is not the header's: (line, fields)."""
     encoding: str = "utf-8-sig"
     comments: list[str] = field(default_factory=list)
     """The first comment lines above the data (named when no rate was found in them)."""
@@ -380,7 +432,14 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
         return
     if len(fields) != raw.width:
         raw.bad_lines.append(lineno)
+        if raw.first_short is None:
+            raw.first_short = (lineno, len(fields))
         return
+    if raw.delim == "," and '"' in line:
+        for f in _parts(line, ","):
+            kind = _comma_kind(f.strip().strip('"').strip())
+            if kind is not None and kind not in raw.comma_numbers:
+                raw.comma_numbers[kind] = (lineno, f.strip())
     if raw.digits_after_comma:
         raw.digits_after_comma = (raw.header is None and raw.delim == "," and raw.width == 2
                                   and bool(DIGITS.match(fields[1])))
@@ -418,6 +477,22 @@ def _unreadable_hint(path: Path, raw: _Raw) -> str:
     return ""
 
 
+def _first_unreadable(path: Path, raw: _Raw) -> str:
+    """Where and why the first unreadable data line is so, for the message."""
+    failed = [(raw.row_lines[i], js) for i, js in raw.row_fail.items()]
+    first_bad = min(failed, default=None)
+    short = raw.first_short
+    if short is not None and (first_bad is None or short[0] < first_bad[0]):
+        return (f"first: line {short[0]}, {short[1]} fields where the "
+                f"{'header' if raw.header is not None else 'first line'} has {raw.width}")
+    if first_bad is None:
+        return "the file ends in damage"
+    lineno, js = first_bad
+    name = (f"{raw.header[js[0]].strip()!r}" if raw.header is not None
+            else f"column {js[0] + 1}")
+    return f"first: line {lineno}, {name} holds {_cell(path, raw, lineno, js[0])!r}, not a number"
+
+
 def _cell(path: Path, raw: _Raw, lineno: int, k: int) -> str:
     """The text of field ``k`` of line ``lineno`` (empty when it cannot be read again)."""
     try:
@@ -447,12 +522,19 @@ def _time_hint(path: Path, raw: _Raw, lineno: int, failed: list[int], t_col: int
             "--rate HZ --columns t=-")
 
 
+RAW_COUNT_UNITS = frozenset({"lsb", "lsbs", "counts", "count", "digits", "raw", "adc"})
+"""Units-row words for raw sensor counts: the row is taken as units, and the column is
+then refused as no gyro or accelerometer unit (``--units``), as a header ``gx [LSB]`` is.
+Skipped as a damaged line, a ``s,LSB,LSB,LSB`` row let counts be read as dps (an outside
+reviewer's file: white 0.458 and a bias of 57 "dps" for 0.004 and 0.5)."""
+
+
 def _is_unit(text: str) -> bool:
-    """Whether a cell of a units row names a unit imubench reads (gyro, accelerometer,
-    time or temperature)."""
+    """Whether a cell of a units row names a unit: one imubench reads (gyro,
+    accelerometer, time or temperature) or raw counts (:data:`RAW_COUNT_UNITS`)."""
     u = unit_word(text.strip().strip("[]()"))
     return (u in GYRO_UNITS_DPS or u in ACCEL_UNITS_G or u in TIME_UNIT_WORDS
-            or u in TEMP_UNITS or u.lower() in _TEMP_WORDS)
+            or u in TEMP_UNITS or u.lower() in _TEMP_WORDS or u.lower() in RAW_COUNT_UNITS)
 
 
 def _pick(cols: list[Column], spec: str, where: str) -> int:
@@ -483,19 +565,27 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if not raw.n_rows:
         what = "no readable data lines" if raw.header is not None or raw.bad_lines else (
             "no data")
-        raise RecordingError(f"{where}: {what}; expected a header such as "
+        raise RecordingError(f"{where}: {what}"
+                             + (f" ({_first_unreadable(path, raw)})" if raw.bad_lines else "")
+                             + "; expected a header such as "
                              "t,gx,gy,gz,ax,ay,az,temp and one sample per line"
                              + _unreadable_hint(path, raw))
+    _check_comma_numbers(raw, where)
     unreadable = len(raw.bad_lines) + whole_bad
     if unreadable > MOSTLY_BAD * n_data and unreadable > 10:
-        raise RecordingError(f"{where}: {unreadable} of {n_data} data lines cannot be read; "
-                             "not a recording" + _unreadable_hint(path, raw))
+        raise RecordingError(f"{where}: {unreadable} of {n_data} data lines cannot be read "
+                             f"({_first_unreadable(path, raw)}); not a recording"
+                             + _unreadable_hint(path, raw))
     table = raw.table()
     notes: list[str] = []
     if raw.encoding != "utf-8-sig":
         notes.append(f"{where}: not UTF-8 text; read as {raw.encoding.upper()}")
     if raw.decimal_comma:
         notes.append(f"{where}: one column with decimal commas (0,0123 is 0.0123)")
+    if "decimal" in raw.comma_numbers:
+        line, text = raw.comma_numbers["decimal"]
+        notes.append(f"{where}: quoted numbers with a decimal comma (line {line}: {text} is "
+                     f"{text.strip(chr(34)).replace(',', '.')})")
     if raw.header is not None:
         cols = map_columns(raw.header)
         fmt = ("ROS sensor_msgs/Imu export" if is_ros_export(raw.header)
@@ -708,9 +798,14 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if overridden:
         notes.append(f"{where}: the options override the header: " + "; ".join(overridden))
     batch = Batch(index=tb.index, t_s=t_s[keep], values=values[keep], temp_c=temp[keep])
+    plain = raw.width == 1 and raw.header is None
     inferred = len(notes) > 1 or not (  # more than "read as": something to know
         (fmt == "imubench CSV" and how in ("--rate", "# odr_hz"))
-        or (raw.width == 1 and raw.header is None))  # allan's plain series
+        or (plain and not (assumed and stated is not None)))
+    # a plain series (Stable32's, allan's: values in no unit, tau in samples) is read
+    # quietly; one whose file states a rate is an IMU's, and its assumed unit is said (a
+    # rad/s series with '# rate_hz: 100' read as dps gave `fit` a white level 57x low,
+    # ARW and all, with nothing on the screen)
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred,
                     rate_stated=options.rate_hz is None and stated is not None
                     and "t" in where_col)
