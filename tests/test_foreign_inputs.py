@@ -743,6 +743,11 @@ def test_an_assumed_unit_of_a_plain_series_is_said(tmp_path: Path,
         rec = load_recording(path)
     assert rec.metadata["units_assumed"] == ["gx"]
     assert "assumed for gx: nothing in the file states them" in caplog.text
+    from imubench import cli
+
+    out = tmp_path / "fit.json"
+    assert cli.main(["fit", str(path), "-o", str(tmp_path / "m.toml"), "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["units_assumed"] == ["gx"]
 
 
 def test_a_file_of_unreadable_lines_names_the_first_and_why(tmp_path: Path) -> None:

@@ -144,6 +144,7 @@ class RecordingFit:
             "holes": self.holes,
             "chip": self.chip,
             "method": self.method,
+            "units_assumed": list(self.units_assumed),
             "channels": {
                 ch: {**f.to_dict(), "datasheet_units": fit_datasheet_units(ch, f),
                      "units": {**param_units(ch), "tau_s": "s",
