@@ -490,7 +490,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                    cur: SimFeatures, sigma_ln_adev: np.ndarray, effects: tuple[str, ...],
                    step_y: np.ndarray | None, temp_record_z: float,
                    temp_whole: RecordTemperature | None = None, *,
-                   slow_of_model: bool = False, step_sims: np.ndarray | None = None
+                   slow_of_model: bool = False, step_means: np.ndarray | None = None
                    ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
@@ -501,9 +501,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     whole-record step test saw it (``whole`` less its own temperature response when the
     temperature test fired, :meth:`imubench.gap.diagnose._Step._for_step`), on which the
     bias step is located, sized and checked for persistence; None when that test did not
-    fire; ``step_sims``: the current realisations seen the same way, whose spread of the
-    persistence (:func:`imubench.gap.evidence.step_persistence_spread`) is the model's
-    own wander;
+    fire; ``step_means``: the block means of the current realisations seen the same way
+    (:func:`imubench.gap.evidence.step_block_means`), whose spread of the persistence
+    (:func:`imubench.gap.evidence.step_persistence_spread`) is the model's own wander;
     ``temp_record_z``: the whole-record temperature z
     (:class:`imubench.gap.parts.RecordTemperature`), which opens the temperature gate as
     the fit part's level test does; ``temp_whole``: that test under the covariance of
@@ -668,8 +668,9 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             ev["bias_step"] = ((np.arange(len(means)) + 0.5) * n_block / whole.rate_hz,
                                means)
             kept_share = evidence.step_persistence(step_y, whole.rate_hz, st)
-            wander = (math.nan if step_sims is None else
-                      evidence.step_persistence_spread(step_sims, whole.rate_hz, st))
+            wander = (math.nan if step_means is None else
+                      evidence.step_persistence_spread(step_means, len(step_y),
+                                                       whole.rate_hz, st))
             if kept_share < evidence.STEP_PERSISTENCE and not (
                     1.0 - kept_share <= evidence.STEP_WANDER_Z * wander):
                 moved = (f"keep {kept_share:.0%} of its size" if kept_share >= 0 else

@@ -479,9 +479,13 @@ class _Step:
         self.step_y = self._for_step(self.residual[None, :])[0]
         """The record as the whole-record step test sees it (:meth:`_for_step`)."""
         self.step_real = evidence.step_statistic(self.step_y)[0]
-        self.step_sims = self._for_step(sims - det_sum)
-        """The realisations as the step test sees them (:meth:`_for_step`)."""
-        sim_steps = np.array([evidence.step_statistic(y)[0] for y in self.step_sims])
+        step_sims = self._for_step(sims - det_sum)
+        self.step_means = np.array([evidence.step_block_means(y) for y in step_sims])
+        """The block means of the realisations as the step test sees them
+        (:meth:`_for_step`): a step's persistence against the model's wander (K x
+        :data:`imubench.gap.evidence.STEP_BLOCKS`; the realisations themselves, K x n,
+        are not kept by the cached steps)."""
+        sim_steps = np.array([evidence.step_statistic(y)[0] for y in step_sims])
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
@@ -779,7 +783,7 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
                                st.step_y if st.step_fired else None, st.temp_z,
                                st.temp if r.temp_spans is not None else None,
                                slow_of_model=all(c.effect == "base_model" for c in kept),
-                               step_sims=st.step_sims)
+                               step_means=st.step_means)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms

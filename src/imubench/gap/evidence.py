@@ -266,7 +266,17 @@ def step_persistence(y: np.ndarray, rate_hz: float, step: StepFit) -> float:
     wandering background returns ~0 on average. NaN when a side holds fewer than three
     blocks (a step at the very edge is kept on its local size)."""
     n_block = max(1, len(y) // STEP_BLOCKS)
-    m = block_means_of(y, n_block)
+    return persistence_of_means(block_means_of(y, n_block), n_block, rate_hz, step)
+
+
+def step_block_means(y: np.ndarray) -> np.ndarray:
+    """The block means (:data:`STEP_BLOCKS` of them) :func:`step_persistence` compares."""
+    return block_means_of(y, max(1, len(y) // STEP_BLOCKS))
+
+
+def persistence_of_means(m: np.ndarray, n_block: int, rate_hz: float, step: StepFit
+                         ) -> float:
+    """:func:`step_persistence` from a record's block means ``m`` of ``n_block`` samples."""
     jb = int(step.step_time_s * rate_hz) // n_block
     before, after = m[: max(0, jb - 1)], m[jb + 2:]
     before, after = before[np.isfinite(before)], after[np.isfinite(after)]
@@ -281,15 +291,18 @@ when the share it keeps lies more than this many standard deviations of the mode
 wander (:func:`step_persistence_spread`) below 1."""
 
 
-def step_persistence_spread(sims: np.ndarray, rate_hz: float, step: StepFit) -> float:
-    """Standard deviation over the model's realisations (``sims``, K x n, seen as the
-    record is) of :func:`step_persistence` at the record's located step: how far the
-    share a true step keeps moves with the model's slow noise alone. A random walk of
+def step_persistence_spread(means: np.ndarray, n: int, rate_hz: float, step: StepFit
+                            ) -> float:
+    """Standard deviation over the model's realisations of :func:`step_persistence` at the
+    record's located step, from their block means (``means``, K x :data:`STEP_BLOCKS`,
+    :func:`step_block_means` of each realisation of ``n`` samples seen as the record is):
+    how far the share a true step keeps moves with the model's slow noise alone. A random walk of
     4e-4 dps/sqrt(s) moves the far medians of an hour by ~K sqrt(1800 s) = 0.017 dps, as
     much as a 0.02 dps step (an outside reviewer's record, whose step kept 37 % of its
     size and was refused while the walk took it, read 53 % high). NaN with fewer than 3
     finite shares."""
-    shares = np.array([step_persistence(y, rate_hz, step) for y in sims])
+    n_block = max(1, n // STEP_BLOCKS)
+    shares = np.array([persistence_of_means(m, n_block, rate_hz, step) for m in means])
     shares = shares[np.isfinite(shares)]
     return float(np.std(shares, ddof=1)) if shares.size >= 3 else float("nan")
 
