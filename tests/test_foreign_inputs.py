@@ -696,15 +696,54 @@ def test_quoted_decimal_commas_in_a_comma_file_are_read_or_refused(tmp_path: Pat
     write(y + 10.0)  # 11,480: only the time column's 0,010 settles it
     np.testing.assert_allclose(load_recording(path).channel("gx"), np.round(y + 10.0, 3),
                                atol=1e-9)
-    path.write_text("t,gx [dps]\n" + "\n".join(
-        f'{k / 100:.2f},"1,{480 + k % 100:03d}"' for k in range(3000)) + "\n")
-    with pytest.raises(RecordingError, match=r"de.csv: .*one comma and three digits after it "
+    path.write_text("t_ms,gx [dps]\n" + "\n".join(
+        f'{10 * k},"1,{480 + k % 100:03d}"' for k in range(3000)) + "\n")
+    with pytest.raises(RecordingError, match=r"de.csv: .*three digits after it "
                        r"\(line 2: '1,480'\).*1\.480.*1480"):
         load_recording(path)
     path.write_text("t,gx [mdps]\n" + "\n".join(
         f'{k / 100:.2f},"{"1,480.5" if k % 2 else "0,520"}"' for k in range(3000)) + "\n")
-    with pytest.raises(RecordingError, match="both as a thousands separator"):
+    with pytest.raises(RecordingError, match=r"use both ',' \(line 2: '0,520'\) and '\.' "
+                       r"\(line 2: '0.00'\) as the decimal mark"):
         load_recording(path)
+
+
+@pytest.mark.parametrize("style", ["de_comma", "de_semicolon", "us_comma", "de_exponent"])
+def test_the_numbers_of_a_file_settle_its_decimal_mark(tmp_path: Path, style: str) -> None:
+    """An outside reviewer's exports: a decimal-comma file whose millisecond stamps are
+    grouped with points (``"1.010"``) was read at 100 kHz with a white level 32x low, in
+    a comma- and in a semicolon-separated file alike; a US file whose only comma numbers
+    are grouped integers (``"1,010"`` ms beside ``12.467``) was refused as ambiguous; a
+    German exponent (``"7,8841E-03"``) was no number. One mark per file, settled by the
+    numbers that read only one way, and the file read again with it."""
+    rng = np.random.default_rng(9)
+    y = 12.5 + rng.normal(0.0, 0.04, 3000)
+    sep = ";" if style == "de_semicolon" else ","
+
+    def de(text: str) -> str:  # German: ',' decimal, '.' thousands
+        return text.replace(",", "_").replace(".", ",").replace("_", ".")
+
+    rows, want = [], []
+    for k, v in enumerate(y):
+        ms, temp = f"{10 * k:,d}", f"{30 + 0.01 * (k % 50):.2f}"  # the temperature settles it
+        if style == "us_comma":
+            rows.append(f'"{ms}",{v:.3f},{temp}')
+            want.append(round(v, 3))
+        elif style == "de_exponent":
+            cell = f"{v / 1000:.4e}".upper()
+            rows.append(f'"{de(ms)}","{de(cell)}","{de(temp)}"')
+            want.append(float(cell))
+        else:
+            cells = (de(ms), de(f"{v:.3f}"), de(temp))
+            rows.append(sep.join(f'"{c}"' if sep == "," else c for c in cells))
+            want.append(round(v, 3))
+    path = tmp_path / "marks.csv"
+    path.write_text(f"time_ms{sep}gyro_x [dps]{sep}temp\n" + "\n".join(rows) + "\n")
+    rec = load_recording(path)
+    assert len(rec) == 3000 and rec.damage is None
+    assert rec.rate_hz == pytest.approx(100.0)
+    np.testing.assert_allclose(rec.channel("gx"), want, rtol=1e-12)
+    assert rec.temp_c is not None and rec.temp_c.max() == pytest.approx(30.49)
 
 
 @pytest.mark.parametrize(("name", "value"), [("temp_K", 303.15), ("Temperatur [°C]", 30.0),
@@ -867,7 +906,8 @@ def test_missing_value_cells_interleaved_sensors_and_unreadable_columns(
     path.write_text("time [s],gyro_x [dps]\n" + "\n".join(
         f"{k / 100:.2f},{'abc' if k % 50 else y[k]}" for k in range(3000)))
     with pytest.raises(RecordingError, match=r"2940 of 3000 data lines hold a value that is "
-                                             r"no number in a column read \(gyro_x \[dps\]\)"):
+                                             r"no number in a column read \(gyro_x \[dps\]; "
+                                             r"first 'gyro_x \[dps\]': 'abc'\)"):
         load_recording(path)
     path.write_text("# fs: 100\ngyro_x [dps],T\n" + "\n".join(
         f"{y[k]:.5f},{25 + rng.normal(0, 0.05):.3f}" for k in range(3000)))

@@ -135,19 +135,26 @@ def _delimiter(line: str) -> str | None:
     return best if counts[best] else None
 
 
-def _split(line: str, delim: str | None) -> list[str]:
+def _split(line: str, delim: str | None, mark: str | None = None) -> list[str]:
     """The fields of a line, each stripped of blanks and of the double quotes a
     spreadsheet puts around it; in a file separated by ``;`` or tabs a comma is a
-    decimal comma (a locale's export)."""
+    decimal comma (a locale's export). ``mark``: the file's decimal mark when its numbers
+    had to settle it (:func:`_decimal_mark`): ``comma`` (points are thousands
+    separators) or ``point`` (commas are)."""
     if delim is None:
-        fields: list[str] = []
+        words: list[str] = []
         for f in line.split():  # 'gyro_x [deg/s]': a unit after a space is its column's
-            if fields and f[:1] in "[(" and not _is_number(f):
-                fields[-1] += " " + f
+            if words and f[:1] in "[(" and not _is_number(f):
+                words[-1] += " " + f
             else:
-                fields.append(f.strip('"'))
-        return fields
+                words.append(f.strip('"'))
+        return words
     fields = [f.strip().strip('"').strip() for f in _parts(line, delim)]
+    if mark == "comma":
+        return [f.replace(".", "").replace(",", ".") if _NUMBER_CHARS.match(f) else f
+                for f in fields]
+    if mark == "point":
+        return [f.replace(",", "") if _NUMBER_CHARS.match(f) else f for f in fields]
     if delim in (";", "\t"):
         return [f.replace(".", "").replace(",", ".") if _THOUSANDS_POINT.match(f)
                 else f.replace(",", ".") for f in fields]
@@ -168,46 +175,89 @@ _THOUSANDS_COMMA = re.compile(r"^[-+]?\d{1,3}(,\d{3})+(\.\d*)?$")
 split at the comma, the line was damaged: every value of 1000 and over was dropped)."""
 _ONE_COMMA = re.compile(r"^[-+]?(\d+),(\d+)$")
 """A quoted number with one comma and no point: ``"0,010"``, ``"1,480"``, ``"1,5"``."""
+_NUMBER_CHARS = re.compile(r"^[-+]?[\d.,]*\d[\d.,]*([eE][-+]?\d+)?$")
+"""A number written with digits, points and commas (and an exponent)."""
 
 
 def _comma_kind(text: str) -> str | None:
-    """How a comma-separated file's (quoted) field with a comma in a number reads:
-    ``thousands`` (``1,234.5``, ``1,234,567``), ``decimal`` (one comma that no thousands
-    grouping writes: ``0,010``, ``-0,032``, ``1,5``, ``1234,5``), ``ambiguous`` (``1,480``:
-    1.48 with a decimal comma, 1480 with a thousands comma; read as a decimal comma and
-    settled by the rest of the file, :func:`_check_comma_numbers`), or None (no such
-    number). A spreadsheet with a German locale writes ``"1,480","-0,032"`` when told to
-    separate by commas; read as thousands, every value was 1000x too large, unsaid."""
+    """How the first pass reads a comma-separated file's (quoted) field with a comma in a
+    number: ``thousands`` (``1,234.5``, ``1,234,567``) or a decimal comma (``decimal``,
+    anything else with one comma: ``0,010``, ``1,480``), or None (no such number); the
+    file's numbers then settle which it is (:func:`_decimal_mark`)."""
     if _THOUSANDS_COMMA.match(text) and ("." in text or text.count(",") > 1):
         return "thousands"
-    m = _ONE_COMMA.match(text)
-    if m is None:
+    return "decimal" if _ONE_COMMA.match(text) else None
+
+
+def mark_evidence(text: str) -> str | None:
+    """What a number says of its file's decimal mark: ``comma`` or ``point`` where only
+    that mark reads it (``0,010``, ``1,5``, ``7,88E-03``, ``1.234,5``, ``1.234.567``; or
+    ``0.010``, ``12.467``, ``1,234.5``, ``1,234,567``), ``either_comma`` / ``either_point``
+    where one separator and three digits after it read both ways (``1,480``: 1.48 or
+    1480; ``1.480``), None where it has no separator."""
+    if not _NUMBER_CHARS.match(text):
         return None
-    lead, frac = m.groups()
-    return ("decimal" if len(frac) != 3 or lead.startswith("0") or len(lead) > 3
-            else "ambiguous")
+    mant = re.split("[eE]", text)[0].lstrip("+-")
+    commas, points = mant.count(","), mant.count(".")
+    if not commas and not points:
+        return None
+    if commas and points:
+        return "comma" if mant.rfind(",") > mant.rfind(".") else "point"
+    if commas > 1 or points > 1:  # grouping repeated: the other is the decimal mark
+        return "point" if commas else "comma"
+    sep = "," if commas else "."
+    lead, frac = mant.split(sep)
+    exponent = len(mant) < len(text.lstrip("+-"))
+    decisive = (exponent or len(frac) != 3 or not lead or lead.startswith("0")
+                or len(lead) > 3)
+    name = "comma" if sep == "," else "point"
+    return name if decisive else f"either_{name}"
 
 
-def _check_comma_numbers(raw: _Raw, where: str) -> None:
-    """RecordingError when the file's quoted comma numbers (:func:`_comma_kind`) cannot be
-    read one way: thousands commas beside decimal commas, or only numbers that read
-    either way (``1,480`` is 1.48 or 1480)."""
-    seen = raw.comma_numbers
-    fix = ("save it with ';' between fields (a comma in a number is then a decimal point) "
-           "or without thousands separators and with '.' as the decimal mark")
-    if "thousands" in seen and ("decimal" in seen or "ambiguous" in seen):
-        other = seen.get("decimal") or seen["ambiguous"]
+MARK_FIX = {"comma": "save it with ';' between fields and ',' as the decimal mark only",
+            "point": "save it with '.' as the decimal mark and without thousands separators"}
+"""The fix a refused mixture of decimal marks is given."""
+
+
+def _decimal_mark(raw: _Raw, where: str) -> str | None:
+    """The decimal mark the file's numbers settle (:func:`mark_evidence`, first line of
+    each kind in :attr:`_Raw.marks`): ``comma`` or ``point``, or None where they say
+    nothing beyond the first pass's reading. RecordingError where they contradict each
+    other (both marks decisive, or only ``1,480``-like numbers with a comma, which read
+    either way). A German spreadsheet told to separate by commas writes ``"0,010","1,480"``
+    (read as thousands: 1000x too large); a decimal-comma file with thousands points
+    (``"1.010"`` ms) was read at 100 kHz; a US file's ``"1,000"`` beside ``12.467`` is a
+    thousands comma (outside reviewers' files)."""
+    ev = raw.marks
+    if "comma" in ev and "point" in ev:
+        (lc, tc), (lp, tp) = ev["comma"], ev["point"]
         raise RecordingError(
-            f"{where}: its quoted numbers use the comma both as a thousands separator "
-            f"(line {seen['thousands'][0]}: {seen['thousands'][1]!r}) and as a decimal "
-            f"comma (line {other[0]}: {other[1]!r}); {fix}")
-    if "ambiguous" in seen and "decimal" not in seen:
-        line, text = seen["ambiguous"]
+            f"{where}: its numbers use both ',' (line {lc}: {tc!r}) and '.' (line {lp}: "
+            f"{tp!r}) as the decimal mark; {MARK_FIX['point']}")
+    if "comma" in ev:
+        return "comma"
+    if "point" in ev:
+        return "point"
+    if "either_comma" in ev:
+        line, text = ev["either_comma"]
+        both = (f" and {ev['either_point'][1]!r} (line {ev['either_point'][0]})"
+                if "either_point" in ev else "")
         raise RecordingError(
-            f"{where}: its quoted numbers have one comma and three digits after it (line "
-            f"{line}: {text!r}), which reads as a decimal comma ({text.replace(',', '.')}) "
-            f"or a thousands separator ({text.replace(',', '')}); nothing in the file "
-            f"tells which: {fix}")
+            f"{where}: its numbers with a separator have three digits after it (line "
+            f"{line}: {text!r}{both}), which reads as a decimal comma "
+            f"({text.replace(',', '.')}) or a thousands separator ({text.replace(',', '')}); "
+            f"nothing in the file tells which: {MARK_FIX['point']}")
+    return None
+
+
+def _rescan_mark(raw: _Raw, mark: str | None) -> bool:
+    """Whether the first pass read some number otherwise than ``mark`` says (the file is
+    then read again with it)."""
+    if mark == "comma":
+        return "either_point" in raw.marks or raw.delim == ","
+    if mark == "point":
+        return "either_comma" in raw.marks or raw.delim in (";", "\t")
+    return False
 
 
 def _is_number(text: str) -> bool:
@@ -318,8 +368,12 @@ class _Raw:
     """One of them starts with 0 (``0123``), which no integer column writes."""
     decimal_comma: bool = False
     """The file was read with every comma as a decimal point (one column)."""
-    comma_numbers: dict[str, tuple[int, str]] = field(default_factory=dict)
-    """Per kind of quoted comma number (:func:`_comma_kind`), its first line and text."""
+    marks: dict[str, tuple[int, str]] = field(default_factory=dict)
+    """Per kind of decimal-mark evidence (:func:`mark_evidence`), its first line and
+    text."""
+    mark: str | None = None
+    """The decimal mark the file is read with (:func:`_decimal_mark`; None: the first
+    pass's reading)."""
     first_short: tuple[int, int] | None = None
     """The first data line whose number of fields is not the header's: (line, fields)."""
     encoding: str = "utf-8-sig"
@@ -345,8 +399,8 @@ class _Raw:
         return self.blocks[0] if self.blocks else np.zeros((0, self.width))
 
 
-def _scan(path: Path, decimal_comma: bool = False) -> _Raw:
-    raw = _Raw(decimal_comma=decimal_comma)
+def _scan(path: Path, decimal_comma: bool = False, mark: str | None = None) -> _Raw:
+    raw = _Raw(decimal_comma=decimal_comma, mark=mark)
     try:
         raw.encoding = file_encoding(path)
         fh = open_text(path, raw.encoding)
@@ -417,7 +471,7 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
             raw.header, raw.header_line, raw.width = fields, lineno, len(fields)
             return
         raw.width = len(fields)
-    fields = _split(line, raw.delim)
+    fields = _split(line, raw.delim, raw.mark)
     if len(fields) == raw.width + 1 and fields[-1] == "" and raw.header is not None:
         fields.pop()  # a trailing separator on the data lines only
     if (raw.header is not None and not raw.n_rows and not raw.bad_lines
@@ -435,11 +489,18 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
         if raw.first_short is None:
             raw.first_short = (lineno, len(fields))
         return
-    if raw.delim == "," and '"' in line:
-        for f in _parts(line, ","):
-            kind = _comma_kind(f.strip().strip('"').strip())
-            if kind is not None and kind not in raw.comma_numbers:
-                raw.comma_numbers[kind] = (lineno, f.strip())
+    if raw.mark is None and (raw.delim in (";", "\t") or (raw.delim == "," and '"' in line)):
+        # once a mark is settled only the other separator can add (a contradiction, or
+        # a number that then reads otherwise): lines without it are skipped (a 500 000
+        # line semicolon export read 2.5x slower when every field was looked at)
+        chars = "." if "comma" in raw.marks else "," if "point" in raw.marks else ".,"
+        if any(c in line for c in chars):
+            for f in _parts(line, raw.delim):
+                text = f.strip().strip('"').strip()
+                if any(c in text for c in chars):
+                    kind = mark_evidence(text)
+                    if kind is not None and kind not in raw.marks:
+                        raw.marks[kind] = (lineno, text)
     if raw.digits_after_comma:
         raw.digits_after_comma = (raw.header is None and raw.delim == "," and raw.width == 2
                                   and bool(DIGITS.match(fields[1])))
@@ -560,6 +621,10 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     raw = _scan(path)
     if _decimal_commas(raw):
         raw = _scan(path, decimal_comma=True)
+    mark = _decimal_mark(raw, where)
+    evidence = raw.marks
+    if _rescan_mark(raw, mark):
+        raw = _scan(path, mark=mark)
     n_data = raw.n_rows + len([b for b in raw.bad_lines if b > 0])
     whole_bad = sum(1 for js in raw.row_fail.values() if len(js) == raw.width)
     if not raw.n_rows:
@@ -570,7 +635,6 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                              + "; expected a header such as "
                              "t,gx,gy,gz,ax,ay,az,temp and one sample per line"
                              + _unreadable_hint(path, raw))
-    _check_comma_numbers(raw, where)
     unreadable = len(raw.bad_lines) + whole_bad
     if unreadable > MOSTLY_BAD * n_data and unreadable > 10:
         raise RecordingError(f"{where}: {unreadable} of {n_data} data lines cannot be read "
@@ -582,10 +646,13 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         notes.append(f"{where}: not UTF-8 text; read as {raw.encoding.upper()}")
     if raw.decimal_comma:
         notes.append(f"{where}: one column with decimal commas (0,0123 is 0.0123)")
-    if "decimal" in raw.comma_numbers:
-        line, text = raw.comma_numbers["decimal"]
-        notes.append(f"{where}: quoted numbers with a decimal comma (line {line}: {text} is "
-                     f"{text.strip(chr(34)).replace(',', '.')})")
+    if raw.mark is not None:
+        line, text = evidence[raw.mark]
+        shown = (text.replace(".", "").replace(",", ".") if raw.mark == "comma"
+                 else text.replace(",", ""))
+        other = "points" if raw.mark == "comma" else "commas"
+        notes.append(f"{where}: numbers read with a decimal {raw.mark} ({other} in them "
+                     f"are thousands separators; line {line}: {text} is {shown})")
     if raw.header is not None:
         cols = map_columns(raw.header)
         fmt = ("ROS sensor_msgs/Imu export" if is_ros_export(raw.header)
@@ -627,9 +694,11 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         first = raw.row_lines[failed[0]]
         bad_cols = sorted({cols[j].text.strip() for i in failed[:50]
                            for j in raw.row_fail[i] if j in used})
+        j0 = next(j for j in raw.row_fail[failed[0]] if j in used)
         raise RecordingError(
             f"{where}:{first}: {len(failed)} of {len(table)} data lines hold a value that "
-            f"is no number in a column read ({', '.join(bad_cols)}); not a recording"
+            f"is no number in a column read ({', '.join(bad_cols)}; first "
+            f"{cols[j0].text.strip()!r}: {_cell(path, raw, first, j0)!r}); not a recording"
             + _time_hint(path, raw, first, raw.row_fail[failed[0]], where_col.get("t")))
     if failed:
         good = np.ones(len(table), dtype=bool)
