@@ -746,6 +746,29 @@ def test_the_numbers_of_a_file_settle_its_decimal_mark(tmp_path: Path, style: st
     assert rec.temp_c is not None and rec.temp_c.max() == pytest.approx(30.49)
 
 
+def test_decimal_commas_without_a_header_or_with_spaces_and_ambiguous_exports(
+        tmp_path: Path) -> None:
+    """A third reviewer's files: a headerless ``0,00;0,45;30,13`` table was split at its
+    commas and refused; a one-column ``gx`` of ``0,0114`` was no number; a US semicolon
+    export with ``1,010`` ms beside ``473.928`` dps (nothing deciding) was read as 1.01
+    ms and 473928 dps. The first two are read, the last refused."""
+    rng = np.random.default_rng(4)
+    y = 0.5 + rng.normal(0.0, 0.04, 1000)
+    path = tmp_path / "n.csv"
+    path.write_text("\n".join(f"{k / 100:.2f};{v:.5f};30,13".replace(".", ",")
+                              for k, v in enumerate(y)) + "\n")
+    rec = load_recording(path, InputOptions(columns={"t": "1", "gx": "2", "temp": "3"}))
+    np.testing.assert_allclose(rec.channel("gx"), np.round(y, 5), atol=1e-12)
+    path.write_text("gx\n" + "\n".join(f"{v:.4f}".replace(".", ",") for v in y) + "\n")
+    rec = load_recording(path, InputOptions(rate_hz=100.0))
+    np.testing.assert_allclose(rec.channel("gx"), np.round(y, 4), atol=1e-12)
+    path.write_text("t_ms;gyro_x [dps]\n" + "\n".join(
+        f"{10 * k:,d};{1000 * v:.3f}" for k, v in enumerate(y)) + "\n")
+    with pytest.raises(RecordingError,
+                       match=r"three digits after it \(line 102: '1,000' and '\d+\.\d{3}'"):
+        load_recording(path)
+
+
 @pytest.mark.parametrize(("name", "value"), [("temp_K", 303.15), ("Temperatur [°C]", 30.0),
                                            ("board_temp_F", 86.0)])
 def test_a_temperature_named_with_its_unit_or_in_german_is_read(tmp_path: Path, name: str,

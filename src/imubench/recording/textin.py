@@ -129,8 +129,14 @@ def open_text(path: Path, encoding: str) -> IO[str]:
 
 
 def _delimiter(line: str) -> str | None:
-    """``,``, ``;``, tab, or None (whitespace)."""
+    """``,``, ``;``, tab, or None (whitespace). A ``;`` or tab between numbers with
+    decimal commas is the delimiter however many commas there are (``0,00;0,50;30,00``
+    was split at its commas, a headerless export refused)."""
     counts = {d: line.count(d) for d in (";", "\t", ",")}
+    for d in (";", "\t"):
+        if counts[d] and all(_is_number(f.strip().strip('"').replace(",", "."))
+                             for f in line.split(d)):
+            return d
     best = max(counts, key=lambda d: counts[d])
     return best if counts[best] else None
 
@@ -148,13 +154,16 @@ def _split(line: str, delim: str | None, mark: str | None = None) -> list[str]:
                 words[-1] += " " + f
             else:
                 words.append(f.strip('"'))
-        return words
-    fields = [f.strip().strip('"').strip() for f in _parts(line, delim)]
+        fields = words
+    else:
+        fields = [f.strip().strip('"').strip() for f in _parts(line, delim)]
     if mark == "comma":
         return [f.replace(".", "").replace(",", ".") if _NUMBER_CHARS.match(f) else f
                 for f in fields]
     if mark == "point":
         return [f.replace(",", "") if _NUMBER_CHARS.match(f) else f for f in fields]
+    if delim is None:
+        return fields
     if delim in (";", "\t"):
         return [f.replace(".", "").replace(",", ".") if _THOUSANDS_POINT.match(f)
                 else f.replace(",", ".") for f in fields]
@@ -192,7 +201,7 @@ def _comma_kind(text: str) -> str | None:
 def mark_evidence(text: str) -> str | None:
     """What a number says of its file's decimal mark: ``comma`` or ``point`` where only
     that mark reads it (``0,010``, ``1,5``, ``7,88E-03``, ``1.234,5``, ``1.234.567``; or
-    ``0.010``, ``12.467``, ``1,234.5``, ``1,234,567``), ``either_comma`` / ``either_point``
+    ``0.010``, ``12.46``, ``1,234.5``, ``1,234,567``), ``either_comma`` / ``either_point``
     where one separator and three digits after it read both ways (``1,480``: 1.48 or
     1480; ``1.480``), None where it has no separator."""
     if not _NUMBER_CHARS.match(text):
@@ -201,10 +210,13 @@ def mark_evidence(text: str) -> str | None:
     commas, points = mant.count(","), mant.count(".")
     if not commas and not points:
         return None
-    if commas and points:
-        return "comma" if mant.rfind(",") > mant.rfind(".") else "point"
+    if commas and points:  # the last one is the decimal mark, the other groups by 3
+        mark, group = ("comma", ".") if mant.rfind(",") > mant.rfind(".") else ("point", ",")
+        whole = mant.rsplit("," if mark == "comma" else ".", 1)[0]
+        return mark if _GROUPED[group].match(whole) else None
     if commas > 1 or points > 1:  # grouping repeated: the other is the decimal mark
-        return "point" if commas else "comma"
+        group = "," if commas else "."
+        return ("point" if commas else "comma") if _GROUPED[group].match(mant) else None
     sep = "," if commas else "."
     lead, frac = mant.split(sep)
     exponent = len(mant) < len(text.lstrip("+-"))
@@ -214,8 +226,10 @@ def mark_evidence(text: str) -> str | None:
     return name if decisive else f"either_{name}"
 
 
-MARK_FIX = {"comma": "save it with ';' between fields and ',' as the decimal mark only",
-            "point": "save it with '.' as the decimal mark and without thousands separators"}
+_GROUPED = {sep: re.compile(rf"^\d{{1,3}}(\{sep}\d{{3}})*$") for sep in ",."}
+"""Digits grouped by three with ``,`` or ``.`` (``1,234,567``; not a date ``01.05.2024``, a
+version ``1.2.3`` or an address ``192.168.1.10``, which say nothing of the mark)."""
+MARK_FIX = "save it with '.' as the decimal mark and without thousands separators"
 """The fix a refused mixture of decimal marks is given."""
 
 
@@ -223,21 +237,26 @@ def _decimal_mark(raw: _Raw, where: str) -> str | None:
     """The decimal mark the file's numbers settle (:func:`mark_evidence`, first line of
     each kind in :attr:`_Raw.marks`): ``comma`` or ``point``, or None where they say
     nothing beyond the first pass's reading. RecordingError where they contradict each
-    other (both marks decisive, or only ``1,480``-like numbers with a comma, which read
-    either way). A German spreadsheet told to separate by commas writes ``"0,010","1,480"``
-    (read as thousands: 1000x too large); a decimal-comma file with thousands points
-    (``"1.010"`` ms) was read at 100 kHz; a US file's ``"1,000"`` beside ``12.467`` is a
-    thousands comma (outside reviewers' files)."""
+    other (both marks decisive; ``1,480``-like numbers with a comma, which read either
+    way, and none that decides, except in a ``;`` or tab export without ``1.480``-like
+    numbers, where such a comma is the locale's decimal comma: a US ``;`` export's
+    ``1,010`` ms beside ``1.480`` was read as 1.01 ms and 1480 dps). A German spreadsheet
+    told to separate by commas writes ``"0,010","1,480"`` (read as thousands: 1000x too
+    large); a decimal-comma
+    file with thousands points (``"1.010"`` ms) was read at 100 kHz; a US file's
+    ``"1,000"`` beside ``12.46`` is a thousands comma (outside reviewers' files)."""
     ev = raw.marks
     if "comma" in ev and "point" in ev:
         (lc, tc), (lp, tp) = ev["comma"], ev["point"]
         raise RecordingError(
             f"{where}: its numbers use both ',' (line {lc}: {tc!r}) and '.' (line {lp}: "
-            f"{tp!r}) as the decimal mark; {MARK_FIX['point']}")
+            f"{tp!r}) as the decimal mark; {MARK_FIX}")
     if "comma" in ev:
         return "comma"
     if "point" in ev:
         return "point"
+    if "either_comma" in ev and "either_point" not in ev and raw.delim in (";", "\t"):
+        return "comma"  # a comma in a ';' or tab export is a locale's decimal comma
     if "either_comma" in ev:
         line, text = ev["either_comma"]
         both = (f" and {ev['either_point'][1]!r} (line {ev['either_point'][0]})"
@@ -246,18 +265,22 @@ def _decimal_mark(raw: _Raw, where: str) -> str | None:
             f"{where}: its numbers with a separator have three digits after it (line "
             f"{line}: {text!r}{both}), which reads as a decimal comma "
             f"({text.replace(',', '.')}) or a thousands separator ({text.replace(',', '')}); "
-            f"nothing in the file tells which: {MARK_FIX['point']}")
+            f"nothing in the file tells which: {MARK_FIX}")
     return None
 
 
 def _rescan_mark(raw: _Raw, mark: str | None) -> bool:
     """Whether the first pass read some number otherwise than ``mark`` says (the file is
     then read again with it)."""
-    if mark == "comma":
-        return "either_point" in raw.marks or raw.delim == ","
-    if mark == "point":
-        return "either_comma" in raw.marks or raw.delim in (";", "\t")
-    return False
+    if mark is None:
+        return False
+    commas = any("," in text for _, text in raw.marks.values())
+    if raw.delim is None:  # the first pass reads no comma in a whitespace-separated file
+        return mark == "comma" or commas
+    if raw.delim == ",":  # quoted: one comma was read as decimal, ``1.234,5`` as no number
+        return mark == "comma" or "either_comma" in raw.marks
+    # ';' or tab: every comma was read as decimal, every point too but in ``1.234,5``
+    return "either_point" in raw.marks if mark == "comma" else commas
 
 
 def _is_number(text: str) -> bool:
@@ -489,13 +512,13 @@ def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
         if raw.first_short is None:
             raw.first_short = (lineno, len(fields))
         return
-    if raw.mark is None and (raw.delim in (";", "\t") or (raw.delim == "," and '"' in line)):
+    if raw.mark is None and (raw.delim != "," or '"' in line):
         # once a mark is settled only the other separator can add (a contradiction, or
         # a number that then reads otherwise): lines without it are skipped (a 500 000
         # line semicolon export read 2.5x slower when every field was looked at)
         chars = "." if "comma" in raw.marks else "," if "point" in raw.marks else ".,"
         if any(c in line for c in chars):
-            for f in _parts(line, raw.delim):
+            for f in (line.split() if raw.delim is None else _parts(line, raw.delim)):
                 text = f.strip().strip('"').strip()
                 if any(c in text for c in chars):
                     kind = mark_evidence(text)
@@ -647,7 +670,7 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if raw.decimal_comma:
         notes.append(f"{where}: one column with decimal commas (0,0123 is 0.0123)")
     if raw.mark is not None:
-        line, text = evidence[raw.mark]
+        line, text = evidence.get(raw.mark) or evidence[f"either_{raw.mark}"]
         shown = (text.replace(".", "").replace(",", ".") if raw.mark == "comma"
                  else text.replace(",", ""))
         other = "points" if raw.mark == "comma" else "commas"
