@@ -141,6 +141,9 @@ class Candidate:
     temp_record_z: float = float("nan")
     """Whole-record temperature z against these realisations
     (:class:`imubench.gap.parts.RecordTemperature`)."""
+    across_z: float = float("nan")
+    """The held-out line test's z with the line this effect explains left out
+    (:meth:`imubench.gap.diagnose._Step.across_without`)."""
     shape_z: float = float("nan")
     """Two-level log-likelihood ratio of the whole real record against this candidate's
     realisations (:func:`imubench.gap.two_level.two_level_llr`, telegraph against Markov),
@@ -490,7 +493,8 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                    cur: SimFeatures, sigma_ln_adev: np.ndarray, effects: tuple[str, ...],
                    step_y: np.ndarray | None, temp_record_z: float,
                    temp_whole: RecordTemperature | None = None, *,
-                   slow_of_model: bool = False, step_means: np.ndarray | None = None
+                   slow_of_model: bool = False, step_means: np.ndarray | None = None,
+                   line_hint_hz: float | None = None
                    ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
@@ -518,7 +522,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     (:meth:`imubench.gap.parts.PartSetup.less`), so the realisations' mean AVAR is the
     model's noise (the Markov candidate's share, :func:`markov_share`);
     ``sigma_ln_adev``: the one-sigma band (ln ADEV per tau) of ``fit`` against ``cur``,
-    which weighs the Allan-curve fits (:attr:`imubench.gap.diagnose._Step.noise_sigma`).
+    which weighs the Allan-curve fits (:attr:`imubench.gap.diagnose._Step.noise_sigma`);
+    ``line_hint_hz``: the fit part's peak at which the held-out part found a line
+    (:mod:`imubench.gap.line_across`; None when it did not), where the sine is fitted when
+    the fit part's own line test is below its gate.
     """
     s = fit.series
     cands: list[Candidate] = []
@@ -566,9 +573,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             cands.append(Candidate(eff, {"telegraph_step": 2.0 * markov[0],
                                          "telegraph_dwell_s": 2.0 * markov[1]}, 2))
         elif eff == "sine":
-            if before.line_z > Z_LINE_CANDIDATE:
+            guess = before.line_f_hz if before.line_z > Z_LINE_CANDIDATE else line_hint_hz
+            if guess is not None:
                 bin_hz = s.rate_hz / line_segment(len(s.y))
-                sf = evidence.fit_sine(s.y, s.rate_hz, before.line_f_hz, bin_hz)
+                sf = evidence.fit_sine(s.y, s.rate_hz, guess, bin_hz)
                 g2 = filter_power_gain(sf.sine_freq, cm, s.rate_hz)
                 cands.append(Candidate(eff, {"sine_amplitude": sf.sine_amplitude / math.sqrt(g2),
                                              "sine_freq": sf.sine_freq}, 2, output_gain2=g2))
@@ -776,7 +784,8 @@ def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
         return why
     if effect == "sine":
         return (f"no spectral line (line z {before.line_z:.1f}, needs "
-                f"{Z_LINE_CANDIDATE:g})")
+                f"{Z_LINE_CANDIDATE:g}; nor, with a held-out part, one found there again "
+                "at the fit part's highest peaks)")
     if effect == "resonance":
         return (f"no narrowband peak at least {RESONANCE_MIN_RATIO:g}x the model's spectrum "
                 f"(line z {before.line_z:.1f})")

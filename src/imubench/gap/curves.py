@@ -902,9 +902,29 @@ def line_peaks(psd: np.ndarray) -> tuple[tuple[int, float], tuple[int, float]]:
     realisations' largest peaks rose): blind set, a 0.0018 dps sine at 5 Hz went from
     line z 7.7 to 3.1 and was missed."""
     b = LINE_CONTINUUM_BINS
+    r = line_ratios(psd)
+    if r is None:
+        return (0, 0.0), (0, 0.0)
+
+    def peak(lo: int, hi: int) -> tuple[int, float]:
+        part = r[lo:hi]
+        if not np.isfinite(part).any():
+            return 0, 0.0
+        i = int(np.nanargmax(part))
+        return lo + i, float(part[i])
+
+    return peak(0, b), peak(b, len(r))
+
+
+def line_ratios(psd: np.ndarray) -> np.ndarray | None:
+    """ln(psd / continuum) of each bin of a periodogram, the continuum as
+    :func:`line_peaks` describes it (NaN below LINE_FIRST_BIN and where the continuum is
+    0; the bins beyond the last whole block of LINE_CONTINUUM_BINS left out); None when
+    the periodogram holds fewer than two blocks."""
+    b = LINE_CONTINUUM_BINS
     nb = len(psd) // b
     if nb < 2:
-        return (0, 0.0), (0, 0.0)
+        return None
     blocks = psd[: nb * b].reshape(nb, b)
     centre = np.arange(nb) * b + 0.5 * (b - 1)
     ln_med = np.log(np.maximum(np.median(blocks, axis=1), 1e-300) / math.log(2.0))
@@ -925,15 +945,7 @@ def line_peaks(psd: np.ndarray) -> tuple[tuple[int, float], tuple[int, float]]:
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.log(np.where(cont > 0, psd[: nb * b] / cont, np.nan))
     r[:LINE_FIRST_BIN] = np.nan
-
-    def peak(lo: int, hi: int) -> tuple[int, float]:
-        part = r[lo:hi]
-        if not np.isfinite(part).any():
-            return 0, 0.0
-        i = int(np.nanargmax(part))
-        return lo + i, float(part[i])
-
-    return peak(0, b), peak(b, nb * b)
+    return r
 
 
 FISHER_SD_FLOOR = 0.5 / math.sqrt(N_BLOCKS - 4)

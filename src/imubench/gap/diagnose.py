@@ -82,10 +82,12 @@ from imubench.gap.curves import (
     Comparison,
     block_means,
     line_bands,
+    line_z_cap,
     stat_fired,
     z_against,
 )
 from imubench.gap.errors import GapError
+from imubench.gap.line_across import Z_ACROSS, explained_by, line_across
 from imubench.gap.parts import PartSetup, RecordTemperature, Series, seeds_of, simulate_channel
 from imubench.gap.two_level import two_level_llr as llr
 from imubench.gap.uncertainty import Refit, standard_errors
@@ -216,6 +218,14 @@ class ChannelDiagnosis:
     """Whole-record temperature z (:class:`imubench.gap.parts.RecordTemperature`)."""
     temp_fired: bool = False
     """The whole-record temperature test fired at the first step."""
+    across_z: float = float("nan")
+    """The held-out line test's z at the first step (:mod:`imubench.gap.line_across`)."""
+    across_f_hz: float = float("nan")
+    """Its held-out bin's frequency (Hz)."""
+    across_f_fit_hz: float = float("nan")
+    """The fit part's peak that chose that bin (Hz)."""
+    across_fired: bool = False
+    """The held-out line test fired at the first step."""
     temp_note: str = ""
     """Why the temperature test could not be made (:attr:`RecordTemperature.note`)."""
     held_samples: tuple[float, float] | None = None
@@ -278,7 +288,8 @@ class ChannelDiagnosis:
             "significant": (self.before.significant or self.step_fired or self.drift_fired
                             or self.temp_fired),
             "whole_record": {"step_fired": self.step_fired, "drift_fired": self.drift_fired,
-                             "temperature_fired": self.temp_fired},
+                             "temperature_fired": self.temp_fired,
+                             "line_across_fired": self.across_fired},
             "regions": [r.to_dict() for r in self.before.regions],
             "effects": [c.to_dict(self.before) for c in self.candidates],
             "verdict": self.verdict,
@@ -306,6 +317,8 @@ class ChannelDiagnosis:
             "bias_step_z": self.step_z,
             "drift_t": self.drift_t,
             "temperature_record_z": self.temp_record_z,
+            "line_across": {"z": self.across_z, "f_hz": self.across_f_hz,
+                            "f_fit_hz": self.across_f_fit_hz, "threshold": Z_ACROSS},
             "statistics_after": {key: getattr(ff, key) for key, _, _ in STAT_TESTS},
             "whole_record_after": self._whole_record_after(),
             "global_after": ff.global_dict(),
@@ -370,13 +383,14 @@ class ChannelDiagnosis:
 
     def _whole_record_after(self) -> dict[str, float]:
         """The whole-record statistics against the model with all kept effects
-        (``bias_step_z``, ``drift_t``, ``temperature_record_z``; the first step's without
-        a kept effect)."""
+        (``bias_step_z``, ``drift_t``, ``temperature_record_z``, ``line_across_z``; the
+        first step's without a kept effect)."""
         last = self.kept[-1] if self.kept else None
         return {"bias_step_z": self.step_z if last is None else last.step_z,
                 "drift_t": self.drift_t if last is None else last.drift_t,
                 "temperature_record_z": (self.temp_record_z if last is None
-                                         else last.temp_record_z)}
+                                         else last.temp_record_z),
+                "line_across_z": self.across_z if last is None else last.across_z}
 
     def _slope_at_mean(self, entry: dict[str, Any]) -> None:
         """Adds to a temperature effect's ``entry`` its response's slope at the record's
@@ -426,12 +440,15 @@ class _Step:
     (:func:`imubench.gap.evidence.drift_statistic` of the record minus the deterministic
     parts of the kept effects, self-normalised Student t) and the temperature response
     (:class:`imubench.gap.parts.RecordTemperature`, z against the realisations, fired
-    beyond Z_SLOPE).
+    beyond Z_SLOPE). With a held-out part, a fourth: a line at one of the fit part's
+    highest peaks found again on the held-out part (:mod:`imubench.gap.line_across`;
+    lines a kept sine explains, ``explained``, left out).
     """
 
     def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
                  series: Series, temp: RecordTemperature, det_sum: np.ndarray | float,
-                 noise: ChannelModel) -> None:
+                 noise: ChannelModel, explained: tuple[tuple[float, float], ...] = ()
+                 ) -> None:
         n_fit = len(fit.series.y)
         rate = series.rate_hz
         self.det_sum = det_sum
@@ -489,6 +506,16 @@ class _Step:
         self.step_z = z_against(self.step_real, sim_steps)
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
+        self.explained = explained
+        """Frequency intervals (Hz) of the lines the kept effects explain."""
+        self.across = (None if hold is None else line_across(
+            self.residual[:n_fit], self.residual[n_fit:],
+            (sims - det_sum)[:, n_fit:], rate, explained))
+        """The held-out part's test at the fit part's highest peaks (None without a
+        held-out part or where it is too short)."""
+        self.across_z, self.across_f_hz, self.across_f_fit_hz = (
+            (math.nan,) * 3 if self.across is None else self.across.z(explained))
+        self.across_fired = self.across is not None and self.across.fired(explained)
 
     @functools.cached_property
     def noise_sigma(self) -> np.ndarray:
@@ -535,6 +562,25 @@ class _Step:
             out[k] = self.temp.less_response(ys[k:k + 1], step_at=at)[0]
         return out
 
+    def explains_across(self, c: Candidate) -> bool:
+        """The held-out line test fired at this step at a frequency whose line ``c``
+        explains (a sine there)."""
+        hold = self.series_parts[1]
+        if not self.across_fired or hold is None:
+            return False
+        span = explained_by(c.effect, c.params, len(hold.y), self.rate_hz)
+        return span is not None and span[0] <= self.across_f_hz <= span[1]
+
+    def across_without(self, c: Candidate) -> float:
+        """The held-out line test's z with the line ``c`` explains left out as well (its
+        z at this step for an effect that explains none)."""
+        if self.across is None:
+            return math.nan
+        hold = self.series_parts[1]
+        assert hold is not None
+        more = explained_by(c.effect, c.params, len(hold.y), self.rate_hz)
+        return self.across_z if more is None else self.across.z((*self.explained, more))[0]
+
     def step_stats(self, sims: np.ndarray) -> np.ndarray:
         """The step statistic of each realisation, seen as the record is (:meth:`_for_step`)."""
         ys = self._for_step(sims - self.det_sum)
@@ -542,15 +588,19 @@ class _Step:
 
     @property
     def record_fired(self) -> bool:
-        """A whole-record test fired (bias step, drift or temperature)."""
-        return self.step_fired or self.drift_fired or self.temp_fired
+        """A whole-record test fired (bias step, drift, temperature or the held-out
+        line)."""
+        return self.step_fired or self.drift_fired or self.temp_fired or self.across_fired
 
     @property
     def significant(self) -> bool:
         return self.before.significant or self.record_fired
 
-    def _record_excess(self, step_z: float, drift_t: float, temp_z: float) -> float:
+    def _record_excess(self, step_z: float, drift_t: float, temp_z: float,
+                       across_z: float) -> float:
         e = 0.0
+        if self.across_fired and math.isfinite(across_z):
+            e += max(min(across_z, self.across_cap) ** 2 - 1.0, 0.0)
         if self.step_fired and math.isfinite(step_z):
             e += max(max(step_z, 0.0) ** 2 - 1.0, 0.0)
         if self.drift_fired and math.isfinite(drift_t):
@@ -566,12 +616,21 @@ class _Step:
         za = c.fit._fired_z(self.before)
         e0 = float(np.sum(np.maximum(zb * zb - 1.0, 0.0)))
         e1 = float(np.sum(np.maximum(za * za - 1.0, 0.0)))
-        e0 += self._record_excess(self.step_z, self.drift_t, self.temp_z)
-        e1 += self._record_excess(c.step_z, c.drift_t, c.temp_record_z)
+        e0 += self._record_excess(self.step_z, self.drift_t, self.temp_z, self.across_z)
+        e1 += self._record_excess(c.step_z, c.drift_t, c.temp_record_z, c.across_z)
         return 1.0 - e1 / e0 if e0 > 0 else float("nan")
 
+    @property
+    def across_cap(self) -> float:
+        """The largest held-out line z the chi-squared counts: the comparisons' line cap
+        (:func:`imubench.gap.curves.line_z_cap`), so that a sine gains no more from a line
+        seen on both parts than from one seen on the fit part."""
+        return line_z_cap(self.before.realisations)
+
     def chi2(self) -> float:
-        return self.before.chi2 + _record_chi2(self.step_z, self.drift_t, self.temp_z)
+        return self.before.chi2 + _record_chi2(self.step_z, self.drift_t, self.temp_z,
+                                               self.across_z if self.across_fired
+                                               else math.nan, self.across_cap)
 
 
 def removes(share: float | None) -> str:
@@ -582,15 +641,22 @@ def removes(share: float | None) -> str:
     return f"removes {share:.0%} of" if share >= 0 else f"removes none (adds {-share:.0%} to)"
 
 
-def _record_chi2(step_z: float, drift_t: float, temp_z: float) -> float:
+def _record_chi2(step_z: float, drift_t: float, temp_z: float, across_z: float,
+                 across_cap: float) -> float:
+    """The whole-record tests' chi-squared (``across_z`` NaN where the held-out line test
+    did not fire at the step)."""
     return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
             + (drift_t**2 if math.isfinite(drift_t) else 0.0)
-            + (temp_z**2 if math.isfinite(temp_z) else 0.0))
+            + (temp_z**2 if math.isfinite(temp_z) else 0.0)
+            + (min(max(across_z, 0.0), across_cap) ** 2 if math.isfinite(across_z) else 0.0))
 
 
-def _cand_chi2(c: Candidate) -> float:
+def _cand_chi2(c: Candidate, st: _Step) -> float:
+    """``c``'s chi-squared at step ``st``: its fit part's and the whole-record tests'."""
     assert c.fit is not None
-    return c.fit.chi2 + _record_chi2(c.step_z, c.drift_t, c.temp_record_z)
+    return c.fit.chi2 + _record_chi2(c.step_z, c.drift_t, c.temp_record_z,
+                                     c.across_z if st.across_fired else math.nan,
+                                     st.across_cap)
 
 
 def _shape_scores(cands: list[Candidate]) -> None:
@@ -652,7 +718,7 @@ def _explains_own_test(c: Candidate, st: _Step) -> bool:
         return not stat_fired(c.temp_record_z, Z_SLOPE, False, POOLED_DOF)
     if c.effect == "ramp" and st.drift_fired:
         return not stat_fired(c.drift_t, Z_DRIFT, False, st.drift_dof)
-    return False
+    return st.explains_across(c)
 
 
 HOLDOUT_TEMP_SPAN = 0.25
@@ -716,7 +782,7 @@ def _acceptable(c: Candidate, st: _Step) -> str:
     assert c.fit is not None
     if c.refusal:
         return c.refusal
-    drop = st.chi2() - _cand_chi2(c)
+    drop = st.chi2() - _cand_chi2(c, st)
     if drop <= 0:
         return "raises the total chi-squared"
     need_fit = float(chi2_dist.isf(FIT_ALPHA, c.n_params))
@@ -738,7 +804,10 @@ def _acceptable(c: Candidate, st: _Step) -> str:
         return ""
     if c.holdout is not None and st.hold is not None and not c.on_record:
         need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))
-        if not c.holdout_dchi2 > need:
+        # a sine at the line the held-out part confirmed at the fit part's peak: that
+        # test is the held-out check (it must not make the held-out part depart more)
+        confirmed = st.explains_across(c) and c.holdout_dchi2 > -need
+        if not c.holdout_dchi2 > need and not confirmed:
             parts = ", ".join(f"{k} {v:.1f}" for k, v in c.holdout_dparts.items())
             return (f"does not reduce the held-out chi-squared beyond its scatter (drop "
                     f"{c.holdout_dchi2:.1f}: {parts}; needs {need:.1f})")
@@ -783,7 +852,8 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
                                st.step_y if st.step_fired else None, st.temp_z,
                                st.temp if r.temp_spans is not None else None,
                                slow_of_model=all(c.effect == "base_model" for c in kept),
-                               step_means=st.step_means)
+                               step_means=st.step_means,
+                               line_hint_hz=st.across_f_fit_hz if st.across_fired else None)
     local_sum = variant.local_sum(n, rate, seeds) if variant.local else 0.0
     penalty = math.log(st.before.n_terms)
     excess0 = st.before.chi2 - st.before.n_terms
@@ -811,10 +881,11 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
         c.drift_t = (evidence.drift_statistic(st.residual - det, rate)[0]
                      if det is not None else st.drift_t)
         c.temp_record_z = st.temp.for_model(c.noise).z(st.residual, cs, st.det_sum)
+        c.across_z = st.across_without(c)
         if c.effect in ("markov", "telegraph") and two_level is not None:
             c.shape_z = z_against(shape_real, np.array(
                 [llr(s, rate, *two_level) for s in cs - st.det_sum]))
-        c.score = _cand_chi2(c) + penalty * c.n_params
+        c.score = _cand_chi2(c, st) + penalty * c.n_params
         c.closure = c.fit.excess_closed(st.before) if excess0 > 1e-9 else 0.0
         c.evidence_closed = st.evidence_closed(c)
         if c.refusal:  # never examined (_choose)
@@ -950,6 +1021,15 @@ class _Realiser:
             variant = variant.add(self.channel, c)
         return variant, cms, dets
 
+    def explained(self, kept: list[Candidate]) -> tuple[tuple[float, float], ...]:
+        """The frequency intervals (Hz) of the lines ``kept`` explain
+        (:func:`imubench.gap.line_across.explained_by`)."""
+        if self.hold is None:
+            return ()
+        n_hold = len(self.hold.series.y)
+        spans = (explained_by(c.effect, c.params, n_hold, self.series.rate_hz) for c in kept)
+        return tuple(x for x in spans if x is not None)
+
     def variant(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray | float]:
         """The model with ``kept`` added in order, and the sum of their deterministic
         parts."""
@@ -970,7 +1050,7 @@ class _Realiser:
         if key not in self._steps:
             variant, det = self.variant(kept)
             self._steps[key] = _Step(self.fit, self.hold, sims, self.series, self.temp,
-                                     det, variant.noise(self.channel))
+                                     det, variant.noise(self.channel), self.explained(kept))
         return self._steps[key]
 
     def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, _Step]:
@@ -1060,7 +1140,7 @@ class _Realiser:
         """Recompute ``c``'s comparisons as the effect kept after ``before``."""
         st, after = self.step(before), self.step([*before, c])
         c.fit, c.step_z, c.drift_t = after.before, after.step_z, after.drift_t
-        c.temp_record_z = after.temp_z
+        c.temp_record_z, c.across_z = after.temp_z, after.across_z
         c.evidence_closed = st.evidence_closed(c)
         if self.hold is not None and st.hold is not None and after.hold is not None:
             c.holdout = after.hold
@@ -1600,7 +1680,10 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             kept=kept, reason=reason, step_z=first.step_z, drift_t=first.drift_t,
                             step_fired=first.step_fired, drift_fired=first.drift_fired,
                             temp_record_z=first.temp_z, temp_fired=first.temp_fired,
-                            temp_note=rtemp.note, held_samples=held_runs(series.y),
+                            across_z=first.across_z, across_f_hz=first.across_f_hz,
+                            across_f_fit_hz=first.across_f_fit_hz,
+                            across_fired=first.across_fired, temp_note=rtemp.note,
+                            held_samples=held_runs(series.y),
                             temp_mean_c=(float(np.nanmean(series.temp_c))
                                          if series.has_temperature and series.temp_c is not None
                                          else math.nan),

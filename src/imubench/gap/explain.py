@@ -201,6 +201,11 @@ def _whole_record(c: dict[str, Any]) -> list[str]:
     if whole.get("temperature_fired"):
         out.append(f"a temperature response (z {c['temperature_record_z']:.1f} against "
                    f"{t_threshold(Z_SLOPE, POOLED_DOF):.1f})")
+    a = c.get("line_across") or {}
+    if whole.get("line_across_fired"):
+        out.append(f"a spectral line at {_f(a['f_fit_hz'], 4)} Hz on the fit part found "
+                   f"again at {_f(a['f_hz'], 4)} Hz on the held-out part (z {a['z']:.1f} "
+                   f"against {a['threshold']:.1f})")
     return out
 
 
@@ -240,6 +245,11 @@ def _after_kept(c: dict[str, Any], dof: int) -> str:
         if whole.get(fired) and c.get(key) is not None:
             a = whole_after.get(key)
             out.append(f"{name} {c[key]:.1f} -> " + ("-" if a is None else f"{a:.1f}"))
+    if whole.get("line_across_fired"):
+        a = whole_after.get("line_across_z")
+        out.append(f"the held-out part's line z {c['line_across']['z']:.1f} -> "
+                   + ("- (no other peak to test)" if a is None or not math.isfinite(a)
+                      else f"{a:.1f}"))
     return ("After the kept effects, the tests that fired read: " + "; ".join(out)
             + ".") if out else ""
 
