@@ -406,6 +406,11 @@ def test_a_response_that_silences_its_own_record_test_passes_the_first_rule() ->
     assert not diagnose._explains_own_test(ramp, quiet)  # no test fired: rule 1 as before
     flick = Candidate("flicker", {"flicker": 0.002}, 1, temp_record_z=0.0, drift_t=0.0)
     assert not diagnose._explains_own_test(flick, st)
+    # a sine at the line the held-out part found at the fit part's peak
+    sine = Candidate("sine", {"sine_amplitude": 0.001, "sine_freq": 4.1}, 2)
+    assert not diagnose._explains_own_test(sine, quiet)
+    sine.held_out_line_z = 5.2
+    assert diagnose._explains_own_test(sine, quiet)
 
 
 def test_bias_step_at_the_split_point_is_named() -> None:

@@ -144,6 +144,10 @@ class Candidate:
     across_z: float = float("nan")
     """The held-out line test's z with the line this effect explains left out
     (:meth:`imubench.gap.diagnose._Step.across_without`)."""
+    held_out_line_z: float = float("nan")
+    """The held-out line test's z where it fired at the line this effect explains (a sine
+    there), for which it is the held-out check
+    (:meth:`imubench.gap.diagnose._Step.explains_across`); NaN otherwise."""
     shape_z: float = float("nan")
     """Two-level log-likelihood ratio of the whole real record against this candidate's
     realisations (:func:`imubench.gap.two_level.two_level_llr`, telegraph against Markov),
@@ -277,11 +281,14 @@ class Candidate:
         (:attr:`on_record`), whose chi-squared drop is shown but decides nothing."""
         if self.holdout is None:
             return {}
-        return {"holdout_gap_after": self.holdout.gap,
-                "holdout_gap_excess_after": self.holdout.gap_excess,
-                "holdout_chi2_drop": self.holdout_dchi2,
-                "holdout_chi2_drop_parts": self.holdout_dparts,
-                "holdout_check_applied": not self.on_record}
+        out = {"holdout_gap_after": self.holdout.gap,
+               "holdout_gap_excess_after": self.holdout.gap_excess,
+               "holdout_chi2_drop": self.holdout_dchi2,
+               "holdout_chi2_drop_parts": self.holdout_dparts,
+               "holdout_check_applied": not self.on_record}
+        if math.isfinite(self.held_out_line_z):
+            out["held_out_line_z"] = self.held_out_line_z
+        return out
 
 
 def additive(cm: ChannelModel, effect: str, params: Mapping[str, float]) -> bool:

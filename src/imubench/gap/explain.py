@@ -41,6 +41,7 @@ from imubench.gap.diagnose import (
     removes,
     spans_text,
 )
+from imubench.gap.line_across import Z_ACROSS
 
 
 def _f(v: float | None, digits: int = 3) -> str:
@@ -552,10 +553,16 @@ def _check_lines(kept: list[dict[str, Any]], h: dict[str, Any],
                        "on the whole record and tested there, by the whole-record "
                        "temperature test).")
             continue
-        need = (f"; needs more than {chi2_dist.isf(HOLDOUT_ALPHA, k['n_params']):.1f} "
-                f"for {k['n_params']} parameter{'s' * (k['n_params'] > 1)}"
-                if "n_params" in k else "")
-        txt = (f"Held-out check of {k['effect']}: chi-squared fell by {drop:.1f}"
+        limit = (f"{chi2_dist.isf(HOLDOUT_ALPHA, k['n_params']):.1f} for {k['n_params']} "
+                 f"parameter{'s' * (k['n_params'] > 1)}" if "n_params" in k else "")
+        line_z = k.get("held_out_line_z")
+        need = ("" if not limit else f"; must not rise by more than {limit}"
+                if line_z is not None else f"; needs more than {limit}")
+        txt = (f"Held-out check of {k['effect']}: "
+               + (f"the held-out part's spectrum at the fit part's peak (a line on both "
+                  f"parts, z {line_z:.1f} against {Z_ACROSS:.1f}); the held-out "
+                  if line_z is not None else "")
+               + f"chi-squared fell by {drop:.1f}"
                + (" (" + ", ".join(f"{PART_NAMES.get(n, n)} {v:.1f}"
                                    for n, v in parts.items()) + f"{need})" if parts else ""))
         if (parts and prev is not None and after is not None and drop > 0
