@@ -658,6 +658,25 @@ def test_a_bias_steps_held_out_closure_is_not_called_independent() -> None:
     text = explain_channel(_entry("bias_step", effects=[step], kept=[step]), 10)
     assert ("step_time_s = 2943 +- 1229; its size is within two standard errors of zero: "
             "the record does not fix it): fit-part gap") in "\n".join(text), text
+    # any kept effect's size, also where it is kept beside the verdict's (an outside
+    # reviewer: 0.00077 +- 0.00078 dps/degC beside a random walk, no response in the record)
+    walk = {"effect": "random_walk", "params": {"random_walk": 2.4e-4}, "gap_after": 0.1,
+            "n_params": 1, "score": 20.0, "evidence_closed": 0.9, "chi2_closed": 0.8,
+            "params_se": {"random_walk": 3e-5}}
+    temp = {"effect": "temperature", "params": {"temp_coeff": 0.00077, "temp_coeff2": 0.0},
+            "gap_after": 0.09, "n_params": 1, "score": 18.0, "evidence_closed": 0.95,
+            "chi2_closed": 0.85, "params_se": {"temp_coeff": 0.00078}}
+    text = "\n".join(explain_channel(_entry("random_walk", effects=[walk, temp],
+                                             kept=[walk, temp]), 10))
+    assert ("Also kept: the rate drifts with temperature, 0.00077 +- 0.00078; its size is "
+            "within two standard errors of zero") in text, text
+    assert ("2. temperature (temp_coeff = 0.00077 +- 0.00078, temp_coeff2 = 0 (the model's, "
+            "not fitted); its size is within two standard errors of zero") in text, text
+    assert text.count("within two standard errors of zero") == 2  # not the walk's
+    temp["params_se"] = {"temp_coeff": 0.0003}
+    text = "\n".join(explain_channel(_entry("random_walk", effects=[walk, temp],
+                                             kept=[walk, temp]), 10))
+    assert "within two standard errors of zero" not in text
 
 
 def test_a_held_out_departure_at_a_line_is_not_blamed_on_a_slow_process() -> None:

@@ -538,6 +538,37 @@ def test_detection_limit_is_not_below_a_response_the_record_holds_unseen() -> No
     assert [injection_sign(i) for i in range(3)] == [1.0, -1.0, 1.0]
 
 
+def test_limits_say_what_they_are_and_skip_a_temperature_that_only_drifts() -> None:
+    """A temperature that drifts at a constant rate cannot show a response: its limit is
+    not searched, with the reason (an outside reviewer: 9 injections spent, then "not
+    identified up to 0.0144"). The text gives each limit with its unit, says "at most"
+    where the smallest size tried was identified, and how coarse the limits are."""
+    n = int(600 * RATE)
+    temp = 25.0 + np.arange(n) / RATE / 3600.0
+    s = Series(white(np.random.default_rng(2), n), temp, RATE, "drift")
+    lim = detection_limits(MODEL, "gx", s, GapOptions(seed=0), ("temperature",))
+    e = lim["effects"]["temperature"]
+    assert e["smallest_identified"] is None and e["tried"] == []
+    assert "only drifts" in e["not_searched"]
+    lim["effects"]["sine"] = {"key": "sine_amplitude", "smallest_identified": 0.002,
+                              "smallest_tried_identified": True,
+                              "tried": [{"size": 0.004, "identified": 3, "of": 3},
+                                        {"size": 0.002, "identified": 3, "of": 3}]}
+    lim["effects"]["ramp"] = {"key": "ramp", "smallest_identified": 2e-5,
+                              "smallest_tried_identified": False,
+                              "tried": [{"size": 4e-5, "identified": 3, "of": 3},
+                                        {"size": 2e-5, "identified": 3, "of": 3},
+                                        {"size": 1e-5, "identified": 1, "of": 3}]}
+    entry = diagnose_channel(MODEL, "gx", s, GapOptions(seed=0)).to_dict()
+    entry["limits"] = lim
+    text = " ".join(explain_channel(entry, 10, {"sine_amplitude": "dps",
+                                                "ramp": "dps/s"}))
+    assert "temperature not searched (the temperature only drifts" in text
+    assert "sine sine_amplitude at most 0.002 dps" in text
+    assert "ramp ramp 2e-05 dps/s" in text
+    assert "a limit may be off by a factor of 2 either way" in text
+
+
 def test_each_fired_band_run_is_read_again_after_the_kept_effects() -> None:
     """JSON ``bands[].z_max_after``: the largest |z| of a band run that fired, over the
     same bands, against the model with the kept effects (a random walk here)."""

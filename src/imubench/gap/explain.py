@@ -499,7 +499,7 @@ def headline(c: dict[str, Any], realisations: int,
     text = text[0].upper() + text[1:] + alone + "."
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units, k)
-                                           for k in others)
+                                           + _unfixed(k) for k in others)
         together = _closed(c.get("holdout"), None)
         if together.startswith("; modelling it closes "):
             text += (" (all kept effects together close "
@@ -605,6 +605,28 @@ def _fewer_refits(kept: list[dict[str, Any]], k: int) -> str:
     return (" Fewer refits gave an estimate for: " + ", ".join(few) + ".") if few else ""
 
 
+SIZE_KEYS = {"bias_step": "step_size", "temperature": "temp_coeff", "ramp": "ramp",
+             "sine": "sine_amplitude"}
+"""The size of a kept effect that is zero without it (a noise term's value is the model's
+total with it, not an increment)."""
+
+
+def _unfixed(k: Mapping[str, Any]) -> str:
+    """'; its size is within two standard errors of zero: ...' for a kept effect whose
+    size (:data:`SIZE_KEYS`; a curved temperature response's linear coefficient says
+    nothing alone) is that small, else empty. Outside reviewers: a bias step of -0.0040
+    +- 0.0026 dps kept beside a ramp where the record held none; a temperature response
+    of 0.00077 +- 0.00078 dps/degC kept beside a random walk with no response in the
+    record."""
+    key = SIZE_KEYS.get(k["effect"])
+    if key is None or (k["params"].get("temp_coeff2") or 0.0) != 0.0:
+        return ""
+    size, se = k["params"].get(key), (k.get("params_se") or {}).get(key)
+    if size is None or se is None or not math.isfinite(se) or abs(size) >= 2.0 * se:
+        return ""
+    return "; its size is within two standard errors of zero: the record does not fix it"
+
+
 def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> list[str]:
     kept = c.get("kept", [])
     if not kept:
@@ -616,12 +638,7 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     for i, k in enumerate(kept, 1):
         how = (f"; by {ESTIMATOR_WORDS[k['estimator']]}" if k.get("estimator") in
                ESTIMATOR_WORDS else "")
-        size, se = k["params"].get("step_size"), (k.get("params_se") or {}).get("step_size")
-        unfixed = ("; its size is within two standard errors of zero: the record does not "
-                   "fix it" if k["effect"] == "bias_step" and size is not None
-                   and se is not None and math.isfinite(se) and abs(size) < 2.0 * se
-                   else "")
-        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units, k)}{how}{unfixed}): "
+        txt = (f"{i}. {k['effect']} ({params_text(k['params'], units, k)}{how}{_unfixed(k)}): "
                f"fit-part gap {_f(k['gap_after'])}")
         if k.get("holdout_gap_after") is not None:
             txt += f", held-out gap {_f(k['holdout_gap_after'])}"
@@ -963,12 +980,18 @@ def explain_channel(c: dict[str, Any], realisations: int,
         parts = []
         for eff, e in lim["effects"].items():
             v = e.get("smallest_identified")
-            top = max(t["size"] for t in e["tried"])
-            parts.append(f"{eff} {e['key']} {_f(v)}" if v is not None
-                         else f"{eff} not identified up to {_f(top)}")
+            unit = f" {units[e['key']]}" if units and units.get(e["key"]) else ""
+            if e.get("not_searched"):
+                parts.append(f"{eff} not searched ({e['not_searched']})")
+            elif v is None:
+                top = max(t["size"] for t in e["tried"])
+                parts.append(f"{eff} not identified up to {_f(top)}{unit}")
+            else:
+                bound = ("at most " if e.get("smallest_tried_identified") else "")
+                parts.append(f"{eff} {e['key']} {bound}{_f(v)}{unit}")
         lines.append("Detection limits on this recording (smallest size identified in "
                      f"{lim['rate_required']:.0%} of {lim['injections_per_size']} injections): "
-                     + "; ".join(parts) + ".")
+                     + "; ".join(parts) + f" ({lim['note']}).")
     if verdict in ("none", "unexplained") and any(r.get("significant") for r in reps):
         lines.append("Replicates depart from the model beyond their scatter"
                      + (" although this recording does not" if verdict == "none" else "")
