@@ -53,7 +53,7 @@ def test_a_line_below_the_fit_parts_own_test_is_found_on_the_held_out_part() -> 
     d = diagnose_channel(MODEL, "gx", s, GapOptions(seed=2))
     out = d.to_dict()
     assert out["line"]["z"] < t_threshold(Z_LINE_FAMILY, 9)
-    assert out["whole_record"]["line_across_fired"]
+    assert out["whole_record"]["line_across_fired"] and out["significant"]
     assert out["line_across"]["z"] > Z_ACROSS
     assert d.verdict == "sine", out["reasons"] if "reasons" in out else out["effects"]
     sine = d.kept[0].params

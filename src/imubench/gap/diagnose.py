@@ -286,7 +286,7 @@ class ChannelDiagnosis:
         out: dict[str, Any] = {
             "gap_before": self.before.gap,
             "significant": (self.before.significant or self.step_fired or self.drift_fired
-                            or self.temp_fired),
+                            or self.temp_fired or self.across_fired),
             "whole_record": {"step_fired": self.step_fired, "drift_fired": self.drift_fired,
                              "temperature_fired": self.temp_fired,
                              "line_across_fired": self.across_fired},
