@@ -201,6 +201,24 @@ def test_a_bug_exits_70_with_its_traceback(monkeypatch: pytest.MonkeyPatch,
     assert "Traceback" in err and "ZeroDivisionError: a bug" in err and "please report" in err
 
 
+def test_a_signal_stops_the_daemon_with_status_0_also_in_its_first_moments(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Before the daemon's own handlers are in place (imports, parsing) SIGTERM reached
+    the commands' path and gave 143, a failure to a service manager; ``run`` is stopped
+    by a signal: 0, as docs/service.md says. Other commands keep 143 and 130."""
+    cli._received[:] = [signal.SIGTERM]
+    try:
+        assert cli._signalled("imubench run", daemon=True) == 0
+        assert "imubench run: stopped (SIGTERM)" in capsys.readouterr().err
+        assert cli._signalled("imubench acquire") == cli.EXIT_SIGTERM == 143
+        cli._received[:] = [signal.SIGINT]
+        assert cli._signalled("imubench run", daemon=True) == 0
+        assert "stopped (Ctrl-C)" in capsys.readouterr().err
+        assert cli._signalled("imubench acquire") == 130
+    finally:
+        cli._received.clear()
+
+
 def test_signal_handlers_are_restored(tmp_path: Path) -> None:
     before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
     assert cli.main(["allan", str(one_column(tmp_path, 200)), "--stat", "adev"]) == 0

@@ -210,6 +210,10 @@ def test_cold_numba_cache_online_before_the_kernels_and_sigint_while_compiling(
         assert time.monotonic() - t1 < 10.0
         assert b"stopped before the acquisition started" in out
         assert b"Traceback" not in out
+        assert proc.returncode == 0
+        rec = tmp_path / "rec" / "bench1_imu0.imbr"
+        if rec.exists():  # opened before the kernels compile: closed, with its end record
+            assert load_recording(rec).complete
     finally:
         if proc.poll() is None:
             proc.kill()

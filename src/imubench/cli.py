@@ -148,8 +148,15 @@ def _error_lines(exc: BaseException) -> list[str]:
     return str(exc).splitlines() or [type(exc).__name__]
 
 
-def _signalled(who: str, note: str = "") -> int:
-    """The one-line message and exit status of the signal received (SIGINT or SIGTERM)."""
+def _signalled(who: str, note: str = "", *, daemon: bool = False) -> int:
+    """The one-line message and exit status of the signal received (SIGINT or SIGTERM);
+    0 for the daemon (``daemon``), which a signal stops, also in its first moments,
+    before its own handlers are in place (an outside reviewer: a SIGTERM 0.6 s after the
+    start gave 143, which a service manager reads as a failure)."""
+    if daemon:
+        name = "SIGTERM" if _received and _received[0] == signal.SIGTERM else "Ctrl-C"
+        print(f"{who}: stopped ({name})", file=sys.stderr, flush=True)
+        return 0
     if _received and _received[0] == signal.SIGTERM:
         print(f"{who}: terminated (SIGTERM){note}", file=sys.stderr, flush=True)
         return EXIT_SIGTERM
@@ -166,6 +173,10 @@ def _run_command(func: Callable[[argparse.Namespace], Any], args: argparse.Names
     def say(line: str) -> None:
         print(f"imubench {command}: {line}", file=sys.stderr, flush=True)
 
+    def signalled() -> int:
+        return _signalled(f"imubench {command}", "; output written so far is kept",
+                          daemon=command == "run")
+
     try:
         with _signals():
             status = int(func(args) or 0)
@@ -174,16 +185,16 @@ def _run_command(func: Callable[[argparse.Namespace], Any], args: argparse.Names
     except BrokenPipeError:
         return _stdout_gone()
     except KeyboardInterrupt:
-        return _signalled(f"imubench {command}", "; output written so far is kept")
+        return signalled()
     except input_errors as exc:
         if _received:  # an error the signal caused (an interrupted file operation)
-            return _signalled(f"imubench {command}", "; output written so far is kept")
+            return signalled()
         for line in _error_lines(exc):
             say(f"error: {line}")
         return EXIT_USAGE
     except Exception:
         if _received:  # e.g. an import interrupted inside C code surfaces as ImportError
-            return _signalled(f"imubench {command}", "; output written so far is kept")
+            return signalled()
         import traceback
 
         traceback.print_exc()
@@ -212,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _main(argv)
     except KeyboardInterrupt:  # between Python's own handler and ours
-        return _signalled("imubench")
+        args_in = sys.argv[1:] if argv is None else argv
+        return _signalled("imubench", daemon=_command_of(args_in) == "run")
 
 
 def _main(argv: list[str] | None) -> int:
@@ -220,7 +232,7 @@ def _main(argv: list[str] | None) -> int:
     with _signals(defer=True):  # the command's module and its libraries are imported
         args = build_parser(_command_of(args_in)).parse_args(args_in)
     if _received:
-        return _signalled("imubench")
+        return _signalled("imubench", daemon=args.command == "run")
     from imubench import progress
     from imubench.logs import remove_logging, setup_logging
 

@@ -19,7 +19,11 @@
 Accounting: for every consumer that reads from the start, when the pipeline has
 finished, ``delivered + lost == produced`` where ``produced`` is the samples written into
 the ring plus the samples the source declared lost (:attr:`Pipeline.produced`). Tests
-check it under stalls, faults and slow consumers.
+check it under stalls, faults and slow consumers. While it runs, :meth:`Pipeline.view`
+gives ``delivered + lost + lag == produced`` at one instant, ``lag`` being what the
+consumer has yet to read: samples, and samples declared lost in gaps it has not reached
+(the live health; before 2026-12-06 its parts were read at different moments, and a
+consumer caught between taking a batch and counting it read thousands short under load).
 
 ``duration_s`` ends the stream after ``round(duration_s * odr_hz)`` sample periods from
 its first index (a gap across that end is cut there). :meth:`Pipeline.stop` ends it at
@@ -32,6 +36,8 @@ counted lost, ``not processed before the stop: <name>``, and it finishes.
 from __future__ import annotations
 
 import abc
+import contextlib
+import copy
 import dataclasses
 import logging
 import threading
@@ -126,27 +132,23 @@ class _Runner(threading.Thread):
         self.error: BaseException | None = None
         self.cut = threading.Event()
         """Set by :meth:`Pipeline.cut_short`: count the rest as lost instead of consuming."""
+        self.lock = threading.Lock()
+        """Held from taking a batch off the ring to counting it in :attr:`account`, so that
+        :meth:`Pipeline.view` never sees it in neither."""
 
     def run(self) -> None:
         try:
             while True:
-                res = self.reader.read(self.max_chunk)
-                if res.batch is None:
+                with self.lock:
+                    batch = self._take()
+                if batch is None:
                     if self.reader.finished:
                         return
                     if not self.reader.wait(0.05):
                         self.consumer.idle()
                     continue
-                batch = res.batch
-                gaps = tuple(explain_holes(batch, self.account.last_index))
-                if gaps != batch.gaps:
-                    batch = dataclasses.replace(batch, gaps=gaps)
-                if self.cut.is_set():
-                    self.account.add_unprocessed(
-                        batch, f"{NOT_PROCESSED}: {self.consumer.name}")
-                    continue
-                self.account.add(batch)
-                self.consumer.consume(batch)
+                if len(batch) or batch.gaps:
+                    self.consumer.consume(batch)
         except BaseException as exc:  # reported by the pipeline, never swallowed
             self.error = exc
             log.exception("consumer %s failed", self.consumer.name)
@@ -157,6 +159,22 @@ class _Runner(threading.Thread):
             except BaseException as exc:
                 self.error = self.error or exc
                 log.exception("consumer %s failed to finish", self.consumer.name)
+
+    def _take(self) -> Batch | None:
+        """The next batch, its holes explained and counted (None when the ring has none
+        now; an empty batch when it was counted lost, the pipeline cutting it short)."""
+        res = self.reader.read(self.max_chunk)
+        if res.batch is None:
+            return None
+        batch = res.batch
+        gaps = tuple(explain_holes(batch, self.account.last_index))
+        if gaps != batch.gaps:
+            batch = dataclasses.replace(batch, gaps=gaps)
+        if self.cut.is_set():
+            self.account.add_unprocessed(batch, f"{NOT_PROCESSED}: {self.consumer.name}")
+            return Batch.empty(with_raw=batch.raw is not None)
+        self.account.add(batch)
+        return batch
 
 
 class Pipeline:
@@ -191,7 +209,9 @@ class Pipeline:
         self.ring: RingBuffer | None = None
         self._runners: list[_Runner] = []
         self._thread: threading.Thread | None = None
-        self._lost_written = 0
+        self._prepared: list[Consumer] = []
+        self.prepared = False
+        """:meth:`prepare` has run to its end."""
         self.started_at: float | None = None
 
     # -- life cycle -------------------------------------------------------------------
@@ -205,6 +225,23 @@ class Pipeline:
         self.source.prepare()
         for c in self.consumers:
             c.prepare(self.source.info)
+            self._prepared.append(c)
+        self.prepared = True
+
+    def close_unstarted(self) -> None:
+        """A pipeline that will not start (stopped while it was set up): each consumer
+        :meth:`prepare` reached finishes, closing what it opened (a recording gets its
+        end record; an outside reviewer's daemon stopped 1.2 s after its start said
+        "recording closed" over a file without one). Nothing once started: the consumer
+        threads finish them."""
+        if self._runners:
+            return
+        for c in list(self._prepared):  # (a set-up thread may still append to it)
+            try:
+                c.finish()
+            except Exception as exc:  # the others are closed all the same
+                log.error("consumer %s failed to finish: %s", c.name, exc)
+        self._prepared = []
 
     def start(self) -> None:
         """Open the source and start the acquisition and consumer threads (call
@@ -265,18 +302,33 @@ class Pipeline:
     @property
     def produced(self) -> int:
         """Samples written into the ring plus samples the source declared lost."""
-        return (self.ring.head if self.ring is not None else 0) + self._lost_written
+        return 0 if self.ring is None else self.ring.head + self.ring.declared_lost
 
     def accounts(self) -> dict[str, Account]:
         """Each consumer's account (a live view while running)."""
         return {r.consumer.name: r.account for r in self._runners}
 
+    def view(self) -> tuple[int, dict[str, tuple[Account, int]]]:
+        """(produced, each consumer's account and lag) at one instant: every consumer's
+        ``delivered + lost + lag == produced``, ``lag`` being the samples it has yet to
+        read and those declared lost in the gaps it has not reached. The consumers'
+        take-and-count steps and the ring's writes wait while it is read (microseconds;
+        the accounts are copied)."""
+        if self.ring is None:
+            return 0, {}
+        ring = self.ring
+        with contextlib.ExitStack() as held:
+            for r in self._runners:
+                held.enter_context(r.lock)
+            with ring.locked():
+                produced = ring.head + ring.declared_lost
+                return produced, {
+                    r.consumer.name: (copy.deepcopy(r.account),
+                                      ring.head - r.reader.position + ring.unread_lost(r.reader))
+                    for r in self._runners}
+
     def consumer_errors(self) -> dict[str, BaseException]:
         return {r.consumer.name: r.error for r in self._runners if r.error is not None}
-
-    def lag(self) -> dict[str, int]:
-        """Samples each consumer has yet to read."""
-        return {r.consumer.name: r.reader.lag for r in self._runners}
 
     # -- the acquisition thread -----------------------------------------------------------
     def _acquire(self) -> None:
@@ -312,16 +364,9 @@ class Pipeline:
             ring.close()
 
     def _write(self, ring: RingBuffer, batch: Batch) -> bool:
-        before = ring.head
-        ok = ring.write(batch, self.stop_event)
-        if ok:
-            self._lost_written += batch.lost
-        else:  # stopped while a blocking ring waited: count only what went in
-            last = int(batch.index[ring.head - before - 1]) if ring.head > before else None
-            self._lost_written += sum(
-                g.lost for g in batch.gaps if last is not None and g.at <= last
-            )
-        return ok
+        """``batch`` into the ring; False when a stop ended a blocking ring's wait (what
+        went in is counted produced: its samples and the gaps before them)."""
+        return ring.write(batch, self.stop_event)
 
 
 def _cut(batch: Batch, end: int) -> tuple[list[Batch], bool]:

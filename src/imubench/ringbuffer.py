@@ -68,6 +68,7 @@ class RingBuffer:
         self._has_raw = np.zeros(capacity, bool)
         self._gaps: deque[tuple[int, int, Gap]] = deque(maxlen=max_gaps)  # (seq, pos, gap)
         self._gap_seq = 0
+        self._declared_lost = 0  # samples lost in the gaps written
         self._head = 0  # absolute count of samples written
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
@@ -83,6 +84,21 @@ class RingBuffer:
     @property
     def closed(self) -> bool:
         return self._closed
+
+    @property
+    def declared_lost(self) -> int:
+        """Samples lost in the gaps written so far (their holes' sizes)."""
+        return self._declared_lost
+
+    def unread_lost(self, reader: RingReader) -> int:
+        """Samples lost in the gaps ``reader`` has yet to read (call with the ring's lock
+        held, :meth:`locked`, for a value consistent with :attr:`head`)."""
+        return sum(gap.lost for seq, _, gap in self._gaps if seq >= reader.gap_seq)
+
+    def locked(self) -> threading.Lock:
+        """The lock under which the writer publishes and readers copy: hold it to read
+        :attr:`head`, :attr:`declared_lost` and the readers' positions at one instant."""
+        return self._lock
 
     def reader(self, name: str, *, from_start: bool = False) -> RingReader:
         """A new reader positioned at the current head (or at the oldest sample held)."""
@@ -156,6 +172,7 @@ class RingBuffer:
                 pos = self._head + (k - start)
             self._gaps.append((self._gap_seq, pos, gap))
             self._gap_seq += 1
+            self._declared_lost += gap.lost
 
     def _store(self, batch: Batch, start: int, n: int) -> None:
         self._add_gaps(batch, start, start + n)

@@ -279,14 +279,13 @@ class SensorRun:
         if p is None:
             return {}
         tel = p.source.telemetry()
+        produced, view = p.view()  # one instant: delivered + lost + lag == produced
         out: dict[str, Any] = {
             "phase": self.phase,
-            "produced": p.produced,
+            "produced": produced,
             "source": dict(tel.as_dict()),
-            "consumers": {
-                name: self._account(name, a) for name, a in p.accounts().items()
-            },
-            "lag": p.lag(),
+            "consumers": {name: self._account(name, a) for name, (a, _) in view.items()},
+            "lag": {name: lag for name, (_, lag) in view.items()},
             "temperature_c": (None if self.engine_consumer is None
                               else self.engine_consumer.temperature_c),
             "snapshots_skipped": self.skipped_slots,
