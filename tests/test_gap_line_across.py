@@ -61,14 +61,16 @@ def test_a_line_below_the_fit_parts_own_test_is_found_on_the_held_out_part() -> 
     assert abs(sine["sine_amplitude"] - 0.0012) < 0.3 * 0.0012
 
 
-def test_a_line_the_model_carries_does_not_fire() -> None:
-    """The same record against a model that has the sine: its realisations show the line
-    at the same bins, and the test does not fire."""
+def test_a_line_the_model_carries_is_not_tested() -> None:
+    """The same record against a model that has the sine: that line is left out of the
+    test, as a kept sine's is (compared with the largest of 10 realisations that carry
+    it, the record's passed one time in eleven: an outside reviewer, 3 of 28 records
+    drawn from such a model named `sine`)."""
     s = _record(0.0012, 7.3, seed=4)
     model = NoiseModel.single_term("gx", white=WHITE, sine_amplitude=0.0012,
                                    sine_freq=7.3)
     d = diagnose_channel(model, "gx", s, GapOptions(seed=2))
     out = d.to_dict()
-    assert out["line_across"]["z"] > Z_ACROSS
+    assert abs(out["line_across"]["f_hz"] - 7.3) > 3 * RATE / (len(s.y) / 2)
     assert not out["whole_record"]["line_across_fired"]
     assert d.verdict == "none"

@@ -580,7 +580,12 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
             cands.append(Candidate(eff, {"telegraph_step": 2.0 * markov[0],
                                          "telegraph_dwell_s": 2.0 * markov[1]}, 2))
         elif eff == "sine":
-            guess = before.line_f_hz if before.line_z > Z_LINE_CANDIDATE else line_hint_hz
+            # the line the held-out part confirmed, unless the fit part's own line test
+            # fired: its gate (line z 3) alone is weaker evidence (an outside reviewer's
+            # drifting 12 Hz line, confirmed at z 5.1, was fitted at a 0.05 Hz peak of
+            # line z > 3 in the flicker's range, and refused)
+            guess = (line_hint_hz if line_hint_hz is not None and "line_z" not in before.fired
+                     else before.line_f_hz if before.line_z > Z_LINE_CANDIDATE else None)
             if guess is not None:
                 bin_hz = s.rate_hz / line_segment(len(s.y))
                 sf = evidence.fit_sine(s.y, s.rate_hz, guess, bin_hz)
