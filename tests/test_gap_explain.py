@@ -559,8 +559,8 @@ def test_headline_gives_the_held_out_gap_beside_the_fit_part_s() -> None:
     c["holdout"]["gap_before"], c["holdout"]["gap_after"] = 0.52, 0.02
     c["holdout"]["gap_excess_before"], c["holdout"]["gap_excess_after"] = 0.5, 0.0
     assert headline("gx", c) == ("gx: verdict bias_step, gap 0.179 -> 0.179 on the fit part; "
-                                 "held out 0.520 -> 0.020 (beyond its scatter 0.500 -> "
-                                 "0.000)")
+                                 "held out 0.520 -> 0.020 (systematic part beyond the "
+                                 "scatter 0.500 -> 0.000)")
     c["holdout"] = None
     assert headline("gx", c) == "gx: verdict bias_step, gap 0.179 -> 0.179 on the fit part"
 

@@ -30,12 +30,14 @@ from imubench.recording.options import add_input_arguments, input_options
 
 
 def headline(channel: str, c: dict[str, Any]) -> str:
-    """'gx: verdict V, gap A -> B on the fit part; held out C -> D (beyond its scatter E
-    -> F)': the held-out part's gap beside the fit part's, since an effect seen there only
+    """'gx: verdict V, gap A -> B on the fit part; held out C -> D (systematic part beyond
+    the scatter E -> F)': the held-out part's gap beside the fit part's, since an effect
+    seen there only
     (a bias step in the held-out half) leaves the fit part's gap where it was, and its
     systematic part (``gap_excess_*``), which a better model can close: the gap itself
     keeps the scatter of the taus no effect touches (an outside reviewer read a raw gap
-    closed by 36-59 % where the part beyond the scatter closed by all of it)."""
+    closed by 36-59 % where the part beyond the scatter closed by all of it; another
+    read "beyond its scatter 0.000 -> 0.000" as a scatter of zero)."""
     text = (f"{channel}: verdict {c['verdict']}, gap {c['gap_before']:.3f} -> "
             f"{c['gap_after']:.3f} on the fit part")
     h = c.get("holdout") or {}
@@ -43,7 +45,7 @@ def headline(channel: str, c: dict[str, Any]) -> str:
         text += f"; held out {h['gap_before']:.3f} -> {h['gap_after']:.3f}"
         eb, ea = h.get("gap_excess_before"), h.get("gap_excess_after")
         if eb is not None and ea is not None:
-            text += f" (beyond its scatter {eb:.3f} -> {ea:.3f})"
+            text += f" (systematic part beyond the scatter {eb:.3f} -> {ea:.3f})"
     return text
 
 
