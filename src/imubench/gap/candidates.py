@@ -795,12 +795,15 @@ def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
                     f"noise at 3 tau_c, better than a random walk or flicker by {descent:.1f}")
         return why
     if effect == "sine":
-        return (f"no spectral line (line z {before.line_z:.1f}, needs "
-                f"{Z_LINE_CANDIDATE:g}; nor, with a held-out part, one found there again "
-                "at the fit part's highest peaks)")
+        # the line statistic is a t against the realisations: the text's "line t",
+        # whose detection threshold it prints beside (an outside reviewer found "line z
+        # 1.2, needs 3" here and "t 1.2 against 5.9" there, for one statistic)
+        return (f"no spectral line (line t {before.line_z:.1f}; a sine is fitted from t "
+                f"{Z_LINE_CANDIDATE:g} on; nor, with a held-out part, one found there "
+                "again at the fit part's highest peaks)")
     if effect == "resonance":
         return (f"no narrowband peak at least {RESONANCE_MIN_RATIO:g}x the model's spectrum "
-                f"(line z {before.line_z:.1f})")
+                f"(line t {before.line_z:.1f})")
     if effect == "temperature":
         if not s.has_temperature:
             return "the record has no temperature column"
