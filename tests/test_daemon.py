@@ -206,3 +206,18 @@ def test_faults_reach_the_log(tmp_path: Path) -> None:
              if "WARNING imubench.daemon: imu0: since the last report: source lost (chip "
                 "reset) +" in ln]
     assert len(lines) == 1, proc.stdout + proc.stderr  # once a minute at most
+
+
+def test_snapshots_take_at_most_their_share_of_the_engine_thread() -> None:
+    """A snapshot is computed in the engine's thread: one that costs 0.48 s at a 0.2 s
+    publish interval (6660 Hz, eight exact statistics) left the engine little else, and
+    it lost two samples in three to its own overrun. The ticks after it are skipped
+    (counted) until SNAPSHOT_DUTY of the time has passed; a cheap one skips none."""
+    from imubench.daemon import SNAPSHOT_DUTY, next_tick
+
+    assert next_tick(10.0, 1.0, 0.25, 9.75, 0.01) == (11.0, 0)
+    interval, lead = 0.2, 0.05
+    t, skipped = next_tick(10.0, interval, lead, 9.95, 0.48)
+    assert skipped == 9 and t == pytest.approx(12.0)
+    assert 0.48 / (t - lead - 9.95) <= SNAPSHOT_DUTY  # its share of the time to the next
+    assert 0.48 / (t - interval - lead - 9.95) > SNAPSHOT_DUTY  # one tick fewer: above
