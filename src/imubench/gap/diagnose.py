@@ -442,7 +442,7 @@ class _Step:
     (:class:`imubench.gap.parts.RecordTemperature`, z against the realisations, fired
     beyond Z_SLOPE). With a held-out part, a fourth: a line at one of the fit part's
     highest peaks found again on the held-out part (:mod:`imubench.gap.line_across`;
-    lines a kept sine explains, ``explained``, left out).
+    the lines of ``explained`` left out).
     """
 
     def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
@@ -496,7 +496,8 @@ class _Step:
         self.step_y = self._for_step(self.residual[None, :])[0]
         """The record as the whole-record step test sees it (:meth:`_for_step`)."""
         self.step_real = evidence.step_statistic(self.step_y)[0]
-        step_sims = self._for_step(sims - det_sum)
+        noise_sims = sims - det_sum  # as the record is in :attr:`residual` (one copy)
+        step_sims = self._for_step(noise_sims)
         self.step_means = np.array([evidence.step_block_means(y) for y in step_sims])
         """The block means of the realisations as the step test sees them
         (:meth:`_for_step`): a step's persistence against the model's wander (K x
@@ -507,10 +508,11 @@ class _Step:
         self.step_fired = bool(self.step_real > STEP_SIGMAS
                                and self.step_real > float(np.max(sim_steps)))
         self.explained = explained
-        """Frequency intervals (Hz) of the lines the kept effects explain."""
+        """Frequency intervals (Hz) of the lines the model's own sine and the kept effects
+        explain (:meth:`_Realiser.explained`)."""
         self.across = (None if hold is None else line_across(
-            self.residual[:n_fit], self.residual[n_fit:],
-            (sims - det_sum)[:, n_fit:], rate, explained))
+            self.residual[:n_fit], self.residual[n_fit:], noise_sims[:, n_fit:], rate,
+            explained))
         """The held-out part's test at the fit part's highest peaks (None without a
         held-out part or where it is too short)."""
         self.across_z, self.across_f_hz, self.across_f_fit_hz = (
@@ -627,10 +629,20 @@ class _Step:
         seen on both parts than from one seen on the fit part."""
         return line_z_cap(self.before.realisations)
 
+    def record_chi2(self, step_z: float, drift_t: float, temp_z: float,
+                    across_z: float) -> float:
+        """The whole-record tests' chi-squared at these values (this step's, or a
+        candidate's); the held-out line counts where it fired at this step, capped
+        (:attr:`across_cap`)."""
+        across = (min(max(across_z, 0.0), self.across_cap) ** 2
+                  if self.across_fired and math.isfinite(across_z) else 0.0)
+        return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
+                + (drift_t**2 if math.isfinite(drift_t) else 0.0)
+                + (temp_z**2 if math.isfinite(temp_z) else 0.0) + across)
+
     def chi2(self) -> float:
-        return self.before.chi2 + _record_chi2(self.step_z, self.drift_t, self.temp_z,
-                                               self.across_z if self.across_fired
-                                               else math.nan, self.across_cap)
+        return self.before.chi2 + self.record_chi2(self.step_z, self.drift_t, self.temp_z,
+                                                   self.across_z)
 
 
 def removes(share: float | None) -> str:
@@ -641,22 +653,10 @@ def removes(share: float | None) -> str:
     return f"removes {share:.0%} of" if share >= 0 else f"removes none (adds {-share:.0%} to)"
 
 
-def _record_chi2(step_z: float, drift_t: float, temp_z: float, across_z: float,
-                 across_cap: float) -> float:
-    """The whole-record tests' chi-squared (``across_z`` NaN where the held-out line test
-    did not fire at the step)."""
-    return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
-            + (drift_t**2 if math.isfinite(drift_t) else 0.0)
-            + (temp_z**2 if math.isfinite(temp_z) else 0.0)
-            + (min(max(across_z, 0.0), across_cap) ** 2 if math.isfinite(across_z) else 0.0))
-
-
 def _cand_chi2(c: Candidate, st: _Step) -> float:
     """``c``'s chi-squared at step ``st``: its fit part's and the whole-record tests'."""
     assert c.fit is not None
-    return c.fit.chi2 + _record_chi2(c.step_z, c.drift_t, c.temp_record_z,
-                                     c.across_z if st.across_fired else math.nan,
-                                     st.across_cap)
+    return c.fit.chi2 + st.record_chi2(c.step_z, c.drift_t, c.temp_record_z, c.across_z)
 
 
 def _shape_scores(cands: list[Candidate]) -> None:

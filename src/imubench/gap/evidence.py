@@ -188,8 +188,7 @@ def step_statistic(y: np.ndarray) -> tuple[float, int]:
 
 def _step_scan(y: np.ndarray) -> tuple[float, int, int]:
     """:func:`step_statistic` and the window width (blocks) at which it was found."""
-    n_block = max(1, len(y) // STEP_BLOCKS)
-    m = block_means_of(y, n_block)
+    m = step_block_means(y)
     best, where, width = 0.0, 0, 1
     for w in STEP_SCALES:
         if len(m) < 2 * w + 5:
@@ -235,7 +234,7 @@ def fit_bias_step(y: np.ndarray, rate_hz: float) -> StepFit:
     skipping the block the step falls in (a local estimate: a slow wander of the
     background does not bias it the way whole-record means would).
     """
-    n_block = max(1, len(y) // STEP_BLOCKS)
+    n_block = _step_block(len(y))
     _, jb, width = _step_scan(y)
     lo = max(0, (jb - width) * n_block)
     hi = min(len(y), (jb + width + 1) * n_block)
@@ -265,13 +264,17 @@ def step_persistence(y: np.ndarray, rate_hz: float, step: StepFit) -> float:
     for ten minutes, then back) gives a local size but no lasting shift, and a
     wandering background returns ~0 on average. NaN when a side holds fewer than three
     blocks (a step at the very edge is kept on its local size)."""
-    n_block = max(1, len(y) // STEP_BLOCKS)
-    return persistence_of_means(block_means_of(y, n_block), n_block, rate_hz, step)
+    return persistence_of_means(step_block_means(y), _step_block(len(y)), rate_hz, step)
+
+
+def _step_block(n: int) -> int:
+    """Samples per block of the :data:`STEP_BLOCKS` block means of ``n`` samples."""
+    return max(1, n // STEP_BLOCKS)
 
 
 def step_block_means(y: np.ndarray) -> np.ndarray:
     """The block means (:data:`STEP_BLOCKS` of them) :func:`step_persistence` compares."""
-    return block_means_of(y, max(1, len(y) // STEP_BLOCKS))
+    return block_means_of(y, _step_block(len(y)))
 
 
 def persistence_of_means(m: np.ndarray, n_block: int, rate_hz: float, step: StepFit
@@ -301,8 +304,8 @@ def step_persistence_spread(means: np.ndarray, n: int, rate_hz: float, step: Ste
     much as a 0.02 dps step (an outside reviewer's record, whose step kept 37 % of its
     size and was refused while the walk took it, read 53 % high). NaN with fewer than 3
     finite shares."""
-    n_block = max(1, n // STEP_BLOCKS)
-    shares = np.array([persistence_of_means(m, n_block, rate_hz, step) for m in means])
+    shares = np.array([persistence_of_means(m, _step_block(n), rate_hz, step)
+                       for m in means])
     shares = shares[np.isfinite(shares)]
     return float(np.std(shares, ddof=1)) if shares.size >= 3 else float("nan")
 

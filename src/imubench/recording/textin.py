@@ -141,9 +141,10 @@ def _delimiter(line: str) -> str | None:
     return best if counts[best] else None
 
 
-def _split(line: str, delim: str | None, mark: str | None = None) -> list[str]:
-    """The fields of a line as numbers are read (:func:`_texts`, :func:`_numbers_of`)."""
-    return _numbers_of(_texts(line, delim), delim, mark)
+def _split(line: str, delim: str | None) -> list[str]:
+    """The fields of a line as the first pass reads numbers (:func:`_texts`,
+    :func:`_numbers_of` without a settled decimal mark)."""
+    return _numbers_of(_texts(line, delim), delim, None)
 
 
 def _texts(line: str, delim: str | None) -> list[str]:
