@@ -21,6 +21,10 @@ Sections, all printed in one run (machine and date first):
     next to Greenhall's EDF for the strided estimator.
 (f) ``--exact-1e9``: 1e9 int16 samples, snapshot vs an independent exact integer reference
     (terms from int64 cumulative sums in blocks, squares summed in Python integers).
+(g) cost of gaps: 6 float channels at 6660 Hz, all eight statistics, 100 taus per decade up
+    to 3600 s, exact memory (a daemon configuration that overran): CPU time per chunk of
+    65536 rows before any gap, for a chunk of gap rows (what an overrun consumer feeds
+    for the samples it lost), and for real chunks after a gap, as ratios to the first.
 
 CPU time (``time.process_time``) is reported next to wall time: the machine is shared.
 """
@@ -293,6 +297,39 @@ def bench_exact_1e9(total: int) -> None:
     print(f"    worst relative difference {worst:.1e} (goal <= 1e-12)")
 
 
+# -- (g) ---------------------------------------------------------------------------------
+GAP_STATS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "stdev", "ostdev")
+
+
+def bench_gaps(quick: bool) -> None:
+    rate, chunk = 6660.0, 1 << 16
+    eng = StreamingAllan(rate, taus=100, stats=GAP_STATS, max_tau_s=3600.0, memory="exact")
+    rng = np.random.default_rng(6)
+    gap = np.full((chunk, 6), np.nan)
+
+    def cpu(y: np.ndarray) -> float:
+        c0 = time.process_time()
+        eng.update(y)
+        return time.process_time() - c0
+
+    for _ in range(6):  # warm-up: the kernels, the history buffers (grown to hold 3 m)
+        cpu(rng.normal(size=(chunk, 6)))
+    reps = 2 if quick else 5
+    before = float(np.median([cpu(rng.normal(size=(chunk, 6))) for _ in range(reps)]))
+    first_gap = cpu(gap)
+    first_after = cpu(rng.normal(size=(chunk, 6)))
+    gaps = float(np.median([cpu(gap) for _ in range(reps)]))
+    cpu(rng.normal(size=(chunk, 6)))  # the chunk right after a gap (its edge)
+    after = float(np.median([cpu(rng.normal(size=(chunk, 6))) for _ in range(reps)]))
+    print(f"(g) gaps: 6 ch float, {len(GAP_STATS)} statistics, {len(eng.ms)} averaging "
+          f"factors (100/decade to 3600 s), exact, {rate:g} Hz; CPU s per {chunk}-row chunk "
+          f"({chunk / rate:.1f} s of data): before any gap {before:.2f}; first gap chunk "
+          f"{first_gap:.2f} ({first_gap / before:.1f}x, starts the gap history); the "
+          f"chunk after it {first_after:.2f} ({first_after / before:.1f}x); gap chunks "
+          f"{gaps:.2f} ({gaps / before:.2f}x); real chunks later {after:.2f} "
+          f"({after / before:.2f}x)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="shorter runs (a: 1e5, c: 1e7)")
@@ -302,7 +339,7 @@ def main() -> None:
     ap.add_argument("--overlaps", default="64",
                     help="bounded-mode overlap factors for (e), comma separated")
     ap.add_argument("--exact-1e9", action="store_true", help="run (f) (minutes)")
-    ap.add_argument("--only", default="abcdef", help="sections to run, e.g. 'bd'")
+    ap.add_argument("--only", default="abcdefg", help="sections to run, e.g. 'bd'")
     ap.add_argument("--malloc", choices=("default", "pad", "trim"), default="default",
                     help="glibc allocator setting to run under: 'pad' keeps freed heap "
                     "memory (M_TOP_PAD 256 MB, M_TRIM_THRESHOLD 512 MB); 'trim' is the worst "
@@ -333,6 +370,8 @@ def main() -> None:
     if "e" in args.only:
         for overlap in (int(v) for v in args.overlaps.split(",")):
             bench_edf_loss(args.edf_seeds, overlap)
+    if "g" in args.only:
+        bench_gaps(args.quick)
     if "f" in args.only and args.exact_1e9:
         bench_exact_1e9(1_000_000_000)
 

@@ -122,6 +122,65 @@ def test_gaps_are_skipped_and_counted_never_bridged() -> None:
             assert skipped > 0
 
 
+def _direct_with_gaps(y: np.ndarray, m: int, stat: str) -> tuple[float, int, int]:
+    """:func:`sp1065_with_gaps` vectorised (SP 1065 eqs. 11, 14, 17 on the phase X of
+    ``y``; a window holding a NaN is skipped), for records too long for its loops."""
+    x = np.concatenate([[0.0], np.cumsum(np.nan_to_num(y))])
+    bad = np.concatenate([[0], np.cumsum(np.isnan(y))])
+    k = np.arange(len(x) - 2 * m)
+    d = x[k + 2 * m] - 2 * x[k + m] + x[k]
+    if stat == "oadev":
+        ok = bad[k + 2 * m] == bad[k]
+        return float(np.sum(d[ok] ** 2)) / (2 * m * m * ok.sum()), int(ok.sum()), int((~ok).sum())
+    if stat == "ohdev":
+        k = np.arange(len(x) - 3 * m)
+        h = x[k + 3 * m] - 3 * x[k + 2 * m] + 3 * x[k + m] - x[k]
+        ok = bad[k + 3 * m] == bad[k]
+        return float(np.sum(h[ok] ** 2)) / (6 * m * m * ok.sum()), int(ok.sum()), int((~ok).sum())
+    c = np.concatenate([[0.0], np.cumsum(d)])
+    j = np.arange(len(x) - 3 * m + 1)
+    e = c[j + m] - c[j]  # sum of d over j .. j+m-1
+    ok = bad[j + 3 * m - 1] == bad[j]
+    var = float(np.sum(e[ok] ** 2)) / (2.0 * float(m) ** 4 * ok.sum())
+    return var, int(ok.sum()), int((~ok).sum())
+
+
+def test_long_gaps_fed_whole_are_skipped_and_counted() -> None:
+    """Gap stretches fed as whole chunks (an overrun consumer's gap rows), gaps in every
+    window of a call (a long tau after a gap, in calls of 65536 rows and, flushed by
+    snapshots, of 1000 whose running MDEV sum must move on), and short gaps inside
+    chunks: the kernels' O(1) shortcuts for terms that all or none hold a gap give the
+    direct sums."""
+    rng = np.random.default_rng(13)
+    chunk = 1 << 16
+    y = rng.normal(size=10 * chunk)
+    y[chunk:2 * chunk] = np.nan  # one chunk of gap rows
+    y[200_000:200_050] = np.nan
+    y[4 * chunk + 100:4 * chunk + 110] = np.nan  # after m = 32768 formed terms
+    taus = [1, 3, 16, 64, 1024, 32_768]  # 3 m > a call at the longest
+    eng = StreamingAllan(1.0, taus=taus, stats=("oadev", "mdev", "ohdev", "ostdev"),
+                         max_tau_s=32_768)
+    for lo in range(0, 5 * chunk, chunk):
+        eng.update(y[lo:lo + chunk])
+    for lo in range(5 * chunk, 5 * chunk + 110_000, 1000):
+        eng.update(y[lo:lo + 1000])
+        eng.snapshot()  # processes the 1000 rows gathered
+    feed(eng, y[5 * chunk + 110_000:], rng, 5000)
+    snap = eng.snapshot()
+    for stat in ("oadev", "mdev", "ohdev"):
+        r = snap[stat]  # type: ignore[index]
+        assert list(r.m) == taus, stat
+        for i, m in enumerate(r.m):
+            var, n, skipped = _direct_with_gaps(y, int(m), stat)
+            assert r.n[i] == n and r.gaps[i] == skipped, (stat, m)
+            assert r.var[i] == pytest.approx(var, rel=1e-9), (stat, m)
+    r = snap["ostdev"]  # type: ignore[index]
+    bad = np.concatenate([[0], np.cumsum(np.isnan(y))])
+    for i, m in enumerate(r.m):  # terms X_i - X_{i-m}, i = m .. n
+        ok = bad[m:] == bad[:-m]
+        assert r.n[i] == ok.sum() and r.gaps[i] == (~ok).sum(), m
+
+
 def test_integer_gap_mask_matches_float_nan() -> None:
     rng = np.random.default_rng(5)
     counts = rng.integers(-500, 500, size=(4000, 2)).astype(np.int16)

@@ -699,7 +699,7 @@ class StreamingAllan:
         if i_new > i_old and lv.rows.max(initial=-1) >= 0:
             g, g0 = (lv.g_at.buf, lv.g_at.start) if self._gaps_seen else (self._no_g, 0)
             level_sums(lv.x_at.buf, lv.x_at.start, g, g0, i_old, i_new, lv.qs, lv.rows,
-                       tab.sum2, tab.comp, tab.cnt, tab.skip)
+                       tab.sum2, tab.comp, tab.cnt, tab.skip, s)
         for m in lv.ms:
             for stat in self._std_stats:
                 self._update_std(lv, stat, m, i_old, i_new)
@@ -718,12 +718,19 @@ class StreamingAllan:
         step = 1 if overlapping else q
         n_t = (i_new - 1 - idx0) // step + 1
         hi = idx0 + (n_t - 1) * step + 1
-        xa = lv.x_at
-        v = xa.view(idx0, hi)[::step] - xa.view(idx0 - q, hi - q)[::step]
+        acc = self.acc[(stat, m)]
         valid = None
-        if self._gaps_seen:
-            valid = lv.g_at.view(idx0, hi)[::step] == lv.g_at.view(idx0 - q, hi - q)[::step]
-        self.acc[(stat, m)].add_moments(v, valid)
+        if self._gaps_seen:  # G never decreases: two O(1) tests, as in _stream_kernels
+            g = lv.g_at
+            g_last = g.view(hi - 1, hi)[0]
+            if ((g.view(idx0, idx0 + 1)[0] > g.view(hi - 1 - q, hi - q)[0])
+                    | (g_last - g.view(idx0 - 1, idx0)[0] == lv.stride * (hi - idx0))).all():
+                acc.skipped += n_t  # a gap in every term's window, or at every term's end
+                return
+            if (g_last != g.view(idx0 - q, idx0 - q + 1)[0]).any():
+                valid = g.view(idx0, hi)[::step] == g.view(idx0 - q, hi - q)[::step]
+        xa = lv.x_at
+        acc.add_moments(xa.view(idx0, hi)[::step] - xa.view(idx0 - q, hi - q)[::step], valid)
 
     def _update_mvar(self, lv: _Level, m: int, b_old: int, b_new: int) -> None:
         """Add the new MVAR terms of m (blocks b_old..b_new-1 of the level)."""
@@ -740,7 +747,7 @@ class StreamingAllan:
         mvar_sums(lv.bs.buf, lv.bs.start, ga, ga0, ge, ge0, b_old, b_new, q, s == 1, rows,
                   noise_row, tab.sum2, tab.comp, tab.cnt, tab.skip,
                   self._scratch(b_new - b_old), lv.mv_e[m], lv.mv_age[m],
-                  -1 if self._int else _MVAR_REANCHOR * q)
+                  -1 if self._int else _MVAR_REANCHOR * q, s)
 
     # -- results --------------------------------------------------------------------
     def _variance(self, stat: str, m: int) -> tuple[np.ndarray, np.ndarray]:
