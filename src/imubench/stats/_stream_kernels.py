@@ -27,7 +27,9 @@ Tables (rows = (statistic, m) accumulators, columns = channels): ``sum2``/``comp
 
 Gaps: ``g`` is the level's cumulative gap count G at the same indices as X (an array of
 zero rows when no gap was ever seen); a term spanning indices i - span .. i is used only
-when ``G_i == G_{i-span}``.
+when ``G_i == G_{i-span}``. G never decreases, so runs of terms that all hold a gap, or
+none, are found by O(1) tests or a bisection; only the terms near a gap's edges are
+tested one by one.
 """
 
 from __future__ import annotations
@@ -249,9 +251,9 @@ def mvar_sums(bs: np.ndarray, bs0: int, ga: np.ndarray, ga0: int, ge: np.ndarray
     G never decreases, so (as in ``_block_sumsq_g``) O(1) tests find a call whose terms
     all hold a gap in every channel (:func:`_no_term_used`): their squares are not formed,
     and E is only moved along, or summed afresh by the next call (``age[0]`` = -1) where
-    that is due anyway or costs fewer than the ``total`` moves; and a channel without a
-    gap from the first term's window to the last block moves E as a record without gaps
-    does.
+    that is due anyway or costs fewer than the ``total`` moves; and from the first term
+    whose window holds no gap up to the last block (:func:`_clean_from`), a channel moves
+    E as a record without gaps does: only the terms near a gap's edge are tested.
     """
     lo = max(b_old, 3 * q - 1)
     if lo >= b_new:
@@ -280,8 +282,8 @@ def mvar_sums(bs: np.ndarray, bs0: int, ga: np.ndarray, ga0: int, ge: np.ndarray
             e_prev[ch] = e
         age[0] += total
         return
-    # the window start a term's gap rule compares G_end with, at the first term
-    w0 = lo - 3 * q if unit_stride and noise_row >= 0 else lo - 3 * q + 1
+    # a term's gap rule compares G_end[b] with G_start[b - 3q + woff]
+    woff = 0 if unit_stride and noise_row >= 0 else 1
     k0 = 1 if anchor else 0  # terms already formed before the moving loop
     for ch in range(nch):
         c = bs[:, ch]
@@ -298,33 +300,54 @@ def mvar_sums(bs: np.ndarray, bs0: int, ga: np.ndarray, ga0: int, ge: np.ndarray
         # views at lags 0, q, 2q, 3q: non-negative indices (no wrap-around tests)
         x0, x1 = c[i:i + n], c[i - q:i - q + n]
         x2, x3 = c[i - 2 * q:i - 2 * q + n], c[i - 3 * q:i - 3 * q + n]
-        if ga.shape[0] == 0 or ge[b_new - 1 - ge0, ch] == (ga[w0 - ga0, ch] if w0 >= 0
-                                                            else 0):
+        # terms lo..clean-1 are tested one by one, clean..b_new-1 hold no gap
+        clean = lo if ga.shape[0] == 0 else _clean_from(ga, ga0, ge, ge0, lo, b_new, q, woff,
+                                                         ch)
+        n_tested = max(0, clean - lo - k0)  # moved terms among those tested
+        for k in range(n_tested):
+            # d_b and d_{b-q} evaluated as when they entered E (module docstring)
+            e += (x0[k] - 2 * x1[k] + x2[k]) - (x1[k] - 2 * x2[k] + x3[k])
+            scratch[k0 + k] = float(e)
+        if clean > lo:
+            _add_mvar_terms(scratch, lo, clean - lo, q, unit_stride, ga, ga0, ge, ge0,
+                            all_rows, ch, sum2, comp, cnt, skip)
+        if clean < b_new:
             # no gap: squares summed as E moves (no term array)
-            first = float(e) * float(e) if anchor else 0.0
-            a = 0
-            while a < n or a == 0:
+            first = float(e) * float(e) if anchor and clean == lo else 0.0
+            a = n_tested
+            while True:
                 b = min(a + BLOCK, n)
                 e, s = _move_sumsq(x0, x1, x2, x3, e, a, b)
                 for row in all_rows:
                     if row >= 0:
-                        _neumaier_add(sum2, comp, int(row), ch, s + first if a == 0 else s)
-                if b == n:
+                        _neumaier_add(sum2, comp, int(row), ch,
+                                      s + first if a == n_tested else s)
+                if b >= n:
                     break
                 a = b
             for row in all_rows:
                 if row >= 0:
-                    cnt[row, ch] += total
-            e_prev[ch] = e
-            continue
-        for k in range(n):
-            # d_b and d_{b-q} evaluated as when they entered E (module docstring)
-            e += (x0[k] - 2 * x1[k] + x2[k]) - (x1[k] - 2 * x2[k] + x3[k])
-            scratch[k0 + k] = float(e)
+                    cnt[row, ch] += b_new - clean
         e_prev[ch] = e
-        _add_mvar_terms(scratch, lo, total, q, unit_stride, ga, ga0, ge, ge0, all_rows, ch,
-                        sum2, comp, cnt, skip)
     age[0] = total - 1 if anchor else age[0] + total
+
+
+@njit(cache=True, nogil=True)
+def _clean_from(ga: np.ndarray, ga0: int, ge: np.ndarray, ge0: int, lo: int, b_new: int,
+                q: int, woff: int, ch: int) -> int:
+    """The first term b in lo..b_new-1 from which no term of channel ch holds a gap, by
+    bisection (G never decreases): ``G_start[b - 3q + woff] == G_end[b_new - 1]``, with
+    G_start = 0 before the record; b_new when the last term holds one."""
+    g_last = ge[b_new - 1 - ge0, ch]
+    a, b = lo, b_new
+    while a < b:
+        mid = (a + b) // 2
+        j = mid - 3 * q + woff
+        if (ga[j - ga0, ch] if j >= 0 else 0) == g_last:
+            b = mid
+        else:
+            a = mid + 1
+    return a
 
 
 @njit(cache=True, nogil=True)

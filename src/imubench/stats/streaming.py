@@ -719,18 +719,25 @@ class StreamingAllan:
         n_t = (i_new - 1 - idx0) // step + 1
         hi = idx0 + (n_t - 1) * step + 1
         acc = self.acc[(stat, m)]
-        valid = None
-        if self._gaps_seen:  # G never decreases: two O(1) tests, as in _stream_kernels
-            g = lv.g_at
+        clean = 0  # terms 0..clean-1 are tested for gaps (``tested``), the rest hold none
+        tested = None
+        if self._gaps_seen:  # G never decreases: O(1) tests and a bisection, as in
+            g = lv.g_at  # _stream_kernels
             g_last = g.view(hi - 1, hi)[0]
             if ((g.view(idx0, idx0 + 1)[0] > g.view(hi - 1 - q, hi - q)[0])
                     | (g_last - g.view(idx0 - 1, idx0)[0] == lv.stride * (hi - idx0))).all():
                 acc.skipped += n_t  # a gap in every term's window, or at every term's end
                 return
-            if (g_last != g.view(idx0 - q, idx0 - q + 1)[0]).any():
-                valid = g.view(idx0, hi)[::step] == g.view(idx0 - q, hi - q)[::step]
+            g_start = g.view(idx0 - q, hi - q)[::step]  # G at each term's window start
+            clean = max(int(np.searchsorted(g_start[:, ch], g_last[ch]))
+                        for ch in range(g_start.shape[1]))
+            tested = g.view(idx0, hi)[::step][:clean] == g_start[:clean]
         xa = lv.x_at
-        acc.add_moments(xa.view(idx0, hi)[::step] - xa.view(idx0 - q, hi - q)[::step], valid)
+        v = xa.view(idx0, hi)[::step] - xa.view(idx0 - q, hi - q)[::step]
+        if clean:
+            acc.add_moments(v[:clean], tested)
+        if clean < n_t:
+            acc.add_moments(v[clean:], None)
 
     def _update_mvar(self, lv: _Level, m: int, b_old: int, b_new: int) -> None:
         """Add the new MVAR terms of m (blocks b_old..b_new-1 of the level)."""
