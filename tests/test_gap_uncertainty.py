@@ -22,6 +22,7 @@ from imubench.gap import ChannelDiagnosis, GapOptions, Series, diagnose_channel
 from imubench.gap.curves import TAIL_SIGMAS, highpass_residual, robust_sigma
 from imubench.gap.evidence import fit_outliers
 from imubench.gap.explain import explain_channel
+from imubench.gap.uncertainty import step_time_floor
 
 RATE = 104.0
 WHITE = 0.004
@@ -296,3 +297,25 @@ def test_a_noise_process_refitted_in_place_has_its_errors_refitted_the_same_way(
     rw = kept["random_walk"]
     assert rw.backfitted and abs(rw.params["random_walk"] / 2.37e-4 - 1.0) < 0.02
     assert abs(rw.params_bias["random_walk"]) < 0.5 * rw.params_se["random_walk"]
+
+
+@pytest.mark.parametrize(("delta", "low", "high"), [(0.4, 0.75, 1.05), (0.6, 0.8, 1.1),
+                                                    (1.0, 0.8, 1.1)])
+def test_step_time_floor_is_the_change_point_scatter(delta: float, low: float,
+                                                     high: float) -> None:
+    """The floor of a bias step's time error against the scatter of the least-squares
+    change point (argmax of the absolute cumulative sum of the mean-removed samples,
+    Hinkley 1970), computed here by brute force on 600 white-noise records of unit
+    sigma with a step of ``delta`` in the middle: the limit law's standard deviation
+    sqrt(26) / delta^2 samples, which finite records stay a little below (measured
+    0.87-0.96 of it)."""
+    rng = np.random.default_rng(4)
+    n, at = 4000, 2000
+    errors = []
+    for _ in range(600):
+        y = rng.standard_normal(n)
+        y[at:] += delta
+        errors.append(int(np.argmax(np.abs(np.cumsum(y - y.mean())))) + 1 - at)
+    floor = step_time_floor(delta, rng.standard_normal((10, n)), 1.0)
+    assert floor == pytest.approx(math.sqrt(26.0) / delta**2, rel=0.05)
+    assert low < float(np.std(errors)) / floor < high
