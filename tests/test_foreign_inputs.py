@@ -645,6 +645,13 @@ def test_slashed_dates_and_matlab_date_numbers_are_refused_with_the_fix(tmp_path
                                   for k in range(300)])
     assert "slashed.csv:2:" in msg and "'05/01/2024 12:00:00.000'" in msg
     assert "ISO 8601" in msg and "01.05.2024" in msg and "--columns t=-" in msg
+    # a ';' export's decimal comma is quoted as written, in both places the value is named
+    path = tmp_path / "slashed_semicolon.csv"
+    path.write_text("time;gyro_x [dps]\n" + "\n".join(
+        f"05/01/2024 12:00:{k // 100:02d},{k % 100:02d}0;{k % 5},5" for k in range(300)) + "\n")
+    with pytest.raises(RecordingError) as e:
+        load_recording(path)
+    assert str(e.value).count("'05/01/2024 12:00:00,000'") == 2, str(e.value)
     msg = refusal("datenum.csv", [f"{739008.5 + k / 100 / 86400:.15g}" for k in range(300)])
     assert "MATLAB date numbers" in msg and "719529" in msg
     # 15 significant digits stamp to 86 us: the median step reads 99.8 Hz

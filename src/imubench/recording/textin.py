@@ -600,12 +600,13 @@ def _first_unreadable(path: Path, raw: _Raw) -> str:
 
 
 def _cell(path: Path, raw: _Raw, lineno: int, k: int) -> str:
-    """The text of field ``k`` of line ``lineno`` (empty when it cannot be read again)."""
+    """The text of field ``k`` of line ``lineno`` as written (:func:`_texts`: a ``;``
+    file's decimal comma stays a comma), empty when it cannot be read again."""
     try:
         with open_text(path, raw.encoding) as fh:
             for i, line in enumerate(fh, 1):
                 if i == lineno:
-                    fields = _split(line.strip(), raw.delim)
+                    fields = _texts(line.strip(), raw.delim)
                     return fields[k].strip() if k < len(fields) else ""
     except (OSError, EOFError, gzip.BadGzipFile, zlib.error):
         pass
