@@ -1561,8 +1561,8 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
     for c in main.kept:
         c.accepted = False
     for c in gone:  # an effect both kept is not said to be replaced (by itself)
-        c.note = (f"{REPLACED} {names}, kept with the effects whose own whole-record tests "
-                  f"fired examined first: score {s_alt:.1f} against {s_main:.1f} on the fit "
+        c.note = (f"{REPLACED} {names}, the set kept when the effects whose own whole-record "
+                  f"tests fired are tried first: score {s_alt:.1f} against {s_main:.1f} on the fit "
                   f"part, held-out gap's excess over its scatter {h_alt:.3f} against "
                   f"{h_main:.3f} (scatter {scatter:.3f})")
     alt.ranked0, alt.ev0 = main.ranked0, main.ev0

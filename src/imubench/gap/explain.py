@@ -929,7 +929,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
                     f"{r['n_params']})")
             why = str(r.get("rejected_because") or "")
             if why.startswith(REPLACED):
-                txt += f", kept first but then {why}"
+                txt += f", was kept first, then {why}"
             elif why:
                 txt += f" but was refused: {why}"
             elif "score" in w and r["score"] < w["score"]:
