@@ -7,6 +7,9 @@ window holds a NaN) for data with gaps.
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import allantools
 import numpy as np
 import pytest
@@ -336,3 +339,42 @@ def test_no_large_temporaries_per_chunk(memory: str) -> None:
         tracemalloc.stop()
     one_copy = chunk * 6 * 8
     assert peak < one_copy // 4, f"{peak} bytes allocated at peak (one copy: {one_copy})"
+
+
+def test_warm_up_compiles_the_gap_kernels_too() -> None:
+    """After :func:`warm_up`, an engine fed gaps (a gap inside a chunk, a chunk of gap
+    rows) compiles no new kernel variant: a daemon compiled them at its first gap, and
+    an outside reviewer's engine at 6660 Hz lost 20 % of a run meanwhile. In a fresh
+    interpreter, so that no other test has compiled them first."""
+    script = """
+import numpy as np
+from numba.core.registry import CPUDispatcher
+from imubench.stats import _stream_kernels
+from imubench.stats.streaming import STREAM_STATS, StreamingAllan, warm_up
+warm_up()
+kernels = {n: k for n, k in vars(_stream_kernels).items() if isinstance(k, CPUDispatcher)}
+before = {n: len(k.signatures) for n, k in kernels.items()}
+rng = np.random.default_rng(1)
+for memory in ("bounded", "exact"):
+    for integer in (True, False):
+        eng = StreamingAllan(100.0, taus=10, stats=list(STREAM_STATS), max_tau_s=300.0,
+                             memory=memory)
+        y = rng.normal(size=(70_000, 2))
+        mask = np.zeros(y.shape, bool)
+        mask[30_000:30_100] = True
+        if integer:
+            counts = (y * 100).astype(np.int64)
+            eng.update(counts, gaps=mask)
+            eng.update(counts, gaps=np.ones(y.shape, bool))
+            eng.update(counts)
+        else:
+            eng.update(np.where(mask, np.nan, y))
+            eng.update(np.full(y.shape, np.nan))
+            eng.update(y)
+        eng.snapshot()
+print({n: len(k.signatures) - before[n] for n, k in kernels.items()
+       if len(k.signatures) != before[n]})
+"""
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, timeout=600)
+    assert out.stdout.strip() == "{}", f"compiled after warm_up: {out.stdout}"
