@@ -75,6 +75,10 @@ def test_quickstart_daemon_end_to_end(tmp_path: Path) -> None:
                 assert ch["units"] in ("dps", "g")
                 n_tau = len(ch["tau_s"])
                 assert len(ch["ci_low"]) == len(ch["ci_high"]) == len(ch["alpha"]) == n_tau
+                assert len(ch["m"]) == len(ch["gaps"]) == n_tau
+                assert ch["gaps"] == [0] * n_tau  # no sample lost: no term skipped
+                for tau, m in zip(ch["tau_s"], ch["m"], strict=True):
+                    assert tau * s["odr_hz"] == pytest.approx(m, rel=0.1)  # the chip's clock
             assert set(s["statistics"]) == {"oadev", "mdev", "ohdev"}  # the shipped quick start
             assert s["statistics"]["oadev"] == s["channels"]
             for name, per_ch in s["statistics"].items():

@@ -324,7 +324,8 @@ class SensorRun:
                 for s in stats:
                     r = res[s]
                     per_stat[s][ch] = {
-                        "tau_s": r.tau_s, "dev": r.dev, "n": r.n, "ci_low": r.ci_low,
+                        "tau_s": r.tau_s, "m": r.m, "dev": r.dev, "n": r.n,
+                        "gaps": r.gaps, "ci_low": r.ci_low,
                         "ci_high": r.ci_high, "alpha": r.alpha, "edf": r.edf,
                         "units": dev_unit(UNITS[ch], s),
                     }
