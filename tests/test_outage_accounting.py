@@ -81,14 +81,29 @@ def test_a_failing_bus_during_a_resets_recovery_is_retried() -> None:
 
 def test_a_stop_during_an_outage_counts_the_samples_made_since_the_last_read() -> None:
     """A stuck bus, then a stop: the summary said 0 lost for the seconds it lasted."""
-    src = open_source("sim://lsm6dsl?odr_hz=104&clock=wall&stuck_bus_at_s=0.5"
+    src = open_source("sim://lsm6dsl?odr_hz=104&clock=wall&stuck_bus_at_s=1.5"
                       "&stuck_bus_for_s=1000&counting=1")
     index, gaps, stop_s = drain(src, stop_after_s=3.0)
     assert stop_s < 2.0
     assert gaps and gaps[-1].reason == NO_ANSWER
     produced = gaps[-1].at
     accounted(index, gaps, produced)
-    assert produced == pytest.approx((3.0 + stop_s) * 104, abs=30)  # until the stop
+    assert produced == pytest.approx(3.0 * 104, abs=30)  # until the stop
+
+
+def test_a_stop_during_a_bus_stall_counts_until_the_stop_not_until_the_read_returns(
+) -> None:
+    """A read blocked by a 5 s stall (longer than the FIFO holds at 104 Hz) returns
+    seconds after the stop, with no sample: the samples the chip made after the stop are
+    not this run's (an outside reviewer's 11 s stall counted the 4.3 s after its stop as
+    lost; here the old count ran to ~6 s)."""
+    src = open_source("sim://lsm6dsl?odr_hz=104&clock=wall&stall_every_s=1&stall_s=5"
+                      "&counting=1")
+    index, gaps, stop_s = drain(src, stop_after_s=2.0)
+    assert stop_s > 1.5  # the read was blocked past the stop
+    produced = gaps[-1].at
+    accounted(index, gaps, produced)
+    assert produced == pytest.approx(2.0 * 104, abs=40)  # until the stop
 
 
 def test_a_hole_of_several_reasons_is_cut_whole_at_the_end_of_a_run() -> None:

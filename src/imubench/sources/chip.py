@@ -204,6 +204,8 @@ class ChipSource(Source):
         """Index of the newest sample delivered (-1 before the first)."""
         self._last_sample_t: float | None = None
         """Host time of that sample (the stream's start before the first), s."""
+        self._stop_t: float | None = None
+        """Host time a paced source was asked to stop (:meth:`interrupt`), s."""
         config = {
             "watermark_s": watermark_s,
             "bus_hz": bus_hz,
@@ -222,6 +224,14 @@ class ChipSource(Source):
             accel_sensitivity_g=cfg.accel_sensitivity_g,
             config=config,
         )
+
+    def interrupt(self) -> None:
+        """As :meth:`Source.interrupt`, noting when (paced sources): a stop during an
+        outage counts the samples made until then (:meth:`_outage_tail`), not until a
+        blocked read returns."""
+        if self._paced and self._stop_t is None:
+            self._stop_t = self.dev.monotonic()
+        super().interrupt()
 
     # -- helpers -------------------------------------------------------------------
     def _sleep(self, dt_s: float) -> None:
@@ -335,11 +345,15 @@ class ChipSource(Source):
           any more;
         * at a stop (``stopping``) during an outage (the device not answering, a chip
           reset recovered and no sample since, or no sample for twice the poll interval
-          and at least a second), every sample made until now is lost. Outside an outage
-          a stop ends with the newest sample read, as before.
+          and at least a second), every sample made until the stop was asked for is
+          lost (a read blocked by the outage may return seconds later: an outside
+          reviewer's stop during an 11 s bus stall counted the 4.3 s after it). Outside an
+          outage a stop ends with the newest sample read, as before.
         """
         assert self._last_sample_t is not None
         now = self.dev.monotonic()
+        if stopping and self._stop_t is not None:
+            now = max(min(now, self._stop_t), self._last_sample_t)
         odr = self.measured_odr_hz or self.info.odr_hz
         made = self._last_index + math.floor((now - self._last_sample_t) * odr)
         if stopping:
