@@ -210,8 +210,6 @@ class Pipeline:
         self._runners: list[_Runner] = []
         self._thread: threading.Thread | None = None
         self._prepared: list[Consumer] = []
-        self.prepared = False
-        """:meth:`prepare` has run to its end."""
         self.started_at: float | None = None
 
     # -- life cycle -------------------------------------------------------------------
@@ -226,7 +224,6 @@ class Pipeline:
         for c in self.consumers:
             c.prepare(self.source.info)
             self._prepared.append(c)
-        self.prepared = True
 
     def close_unstarted(self) -> None:
         """A pipeline that will not start (stopped while it was set up): each consumer
@@ -351,7 +348,9 @@ class Pipeline:
                                   else hole_start(batch.gaps))
                         end = origin + round(self.duration_s * self.source.info.odr_hz)
                     parts, finished = _cut(batch, end)
-                if not all(self._write(ring, part) for part in parts) or finished:
+                # False: a stop ended a blocking ring's wait (what went in is counted
+                # produced: its samples and the gaps before them)
+                if not all(ring.write(part, self.stop_event) for part in parts) or finished:
                     break
         except BaseException as exc:  # reported by the owner, never swallowed
             self.error = exc
@@ -362,11 +361,6 @@ class Pipeline:
             except Exception as exc:  # closing a broken device: the first error counts
                 log.warning("closing %s: %s", self.source.info.uri, exc)
             ring.close()
-
-    def _write(self, ring: RingBuffer, batch: Batch) -> bool:
-        """``batch`` into the ring; False when a stop ended a blocking ring's wait (what
-        went in is counted produced: its samples and the gaps before them)."""
-        return ring.write(batch, self.stop_event)
 
 
 def _cut(batch: Batch, end: int) -> tuple[list[Batch], bool]:

@@ -1090,6 +1090,7 @@ class _Realiser:
             return drawn[0]
 
         def raw_less_others(j: int) -> Callable[[], np.ndarray]:
+            @functools.cache  # one K x n array per effect, however often it is asked for
             def raw() -> np.ndarray:
                 others = sum((d for i, d in enumerate(dets) if i != j), start=0.0)
                 return sims() - others

@@ -304,8 +304,8 @@ def step_persistence_spread(means: np.ndarray, n: int, rate_hz: float, step: Ste
     much as a 0.02 dps step (an outside reviewer's record, whose step kept 37 % of its
     size and was refused while the walk took it, read 53 % high). NaN with fewer than 3
     finite shares."""
-    shares = np.array([persistence_of_means(m, _step_block(n), rate_hz, step)
-                       for m in means])
+    n_block = _step_block(n)
+    shares = np.array([persistence_of_means(m, n_block, rate_hz, step) for m in means])
     shares = shares[np.isfinite(shares)]
     return float(np.std(shares, ddof=1)) if shares.size >= 3 else float("nan")
 

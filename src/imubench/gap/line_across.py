@@ -32,7 +32,8 @@ line t 2.8 against 5.9).
 
 The test is fired when z exceeds :data:`Z_ACROSS` and the same statistic of every
 realisation of the model over the held-out part at the same bins (a line the model
-carries shows in them). The lines of kept sines are left out (``explained``).
+carries shows in them). The lines of the model's own sine and of kept sines are left
+out (``explained``).
 """
 from __future__ import annotations
 
