@@ -669,7 +669,7 @@ def test_block_increment_covariance_matches_closed_forms() -> None:
     """Increments of m-sample block means: white noise (variance s^2 per sample) has
     variance 2 s^2 / m, lag-1 covariance -s^2 / m and nothing beyond; a random walk of
     density K has K^2 m tau0 (2/3, 1/6, 0) (the continuous-time block averages); lag 0
-    is twice the model's AVAR at m for any model."""
+    is twice the model's AVAR at m for any model (a resonance's included)."""
     from lsm6ds_sim.model import ChannelModel
 
     from imubench.noisefit.model_avar import block_increment_acv, model_avar_m
@@ -683,7 +683,8 @@ def test_block_increment_covariance_matches_closed_forms() -> None:
     np.testing.assert_allclose(rw, [2 * q / 3, q / 6, 0.0, 0.0], rtol=1e-5, atol=1e-9 * q)
     full = ChannelModel().replace(white=0.004, flicker=0.0008, random_walk=1e-4,
                                   markov_sigma=0.002, markov_tau=5.0, output_white=2e-4,
-                                  bandwidth_hz=20.0, filter_order=2)
+                                  bandwidth_hz=20.0, filter_order=2, resonance_height=3e-4,
+                                  resonance_freq_hz=5.0, resonance_width_hz=1.0)
     lag0 = block_increment_acv(full, m, 3, fs)[0]
     np.testing.assert_allclose(lag0, 2 * model_avar_m(full, np.array([m]), fs)[0], rtol=1e-6)
     with pytest.raises(FitError, match="n_lags 0"):

@@ -90,8 +90,32 @@ def test_generator_centre_width_and_height_by_welch() -> None:
     assert top == pytest.approx(RES["resonance_height"], rel=0.05)
     above = f[smooth >= top / 2]
     assert above.max() - above.min() == pytest.approx(1.8, rel=0.05)
-    # the variance is the height times the band-pass's noise bandwidth, ~ pi/2 width
+    # the variance is the height times a Lorentzian line's noise bandwidth, pi/2 width
     assert np.var(y) == pytest.approx(4e-4 * math.pi / 2 * 1.8, rel=0.08)
+
+
+def test_generator_wings_are_lorentzian() -> None:
+    """Away from the centre the line keeps the Lorentzian's wings H / (1 + (2 (f - f0) /
+    w)^2), the shape the gap tool fits (docs/gap.md), and a floor at 0 Hz: Welch PSD
+    averaged over +-0.25 Hz at 2-8 widths from f0 = 19.7 Hz and below 1 Hz, against the
+    Lorentzian at +-f0 and their aliases (a sampled damped cosine; the aliases add 6-8 %
+    at 8 widths; each estimate the mean of ~1000 chi2_2 bins: 3 %). A second-order
+    band-pass of the same width (the generator until 2026-12-06) has 0.16x this 8 widths
+    below the centre, 0.65x 4 widths below, 0.60x 8 widths above and nothing at 0 Hz."""
+    h, f0, w = RES["resonance_height"], RES["resonance_freq_hz"], RES["resonance_width_hz"]
+    y = simulate(NoiseModel.single_term("gz", **RES), 1 << 21, FS, 5, channels=["gz"])["gz"]
+    f, p = welch(y, fs=FS, nperseg=8192)
+
+    def lorentz(x: np.ndarray) -> np.ndarray:
+        alias = FS * np.arange(-200, 201)[:, None]
+        return np.sum(h / (1 + (2 * (x - f0 - alias) / w) ** 2)
+                      + h / (1 + (2 * (x + f0 - alias) / w) ** 2), axis=0)
+
+    for centre in (f0 - 8 * w, f0 - 4 * w, f0 - 2 * w, f0 + 2 * w, f0 + 4 * w, f0 + 8 * w,
+                   0.5):
+        near = np.abs(f - centre) <= 0.25 if centre > 0.5 else (f > 0) & (f <= 1.0)
+        assert float(np.mean(p[near] / lorentz(f[near]))) == pytest.approx(1.0, abs=0.1), \
+            centre
 
 
 def test_gap_increment_is_the_simulator_generator() -> None:
@@ -118,16 +142,19 @@ def test_stationary_from_the_first_sample() -> None:
                                                         (19.7, 1.8, 15.0)])
 def test_avar_column_matches_oadev_of_simulated_records(f0: float, width: float,
                                                         bandwidth: float) -> None:
-    """The column (frequency-domain integral) against the overlapping ADEV of 6 h of the
-    generator's output (through the output low-pass when given): within 3 % in AVAR up to
-    tau = 0.64 s, where the estimates have EDF > 1e4."""
+    """The column (closed form at the complex pole) against the overlapping ADEV of 6 h of
+    the generator's output (through the output low-pass when given): within 3 % in AVAR
+    up to tau = 0.64 s, where the estimates have EDF > 1e4, and within 12 % at 1.28-5.12 s
+    (EDF > 600), where the lines' floor near 0 Hz makes the AVAR fall as 1/tau (a
+    frequency-domain integral that averaged the kernel there was 2x low at 2.56 s)."""
     model = NoiseModel.single_term("gz", resonance_freq_hz=f0, resonance_width_hz=width,
                                    resonance_height=1e-3, bandwidth_hz=bandwidth)
     y = simulate(model, 1 << 21, FS, 7, channels=["gz"])["gz"]
-    m = 2 ** np.arange(0, 7)
+    m = 2 ** np.arange(0, 10)
     meas = oadev(y, FS, "freq", list(m / FS)).var
     col = 1e-3 * resonance_avar(m, FS, f0, width, bandwidth, 1)
-    np.testing.assert_allclose(meas, col, rtol=0.03)
+    np.testing.assert_allclose(meas[:7], col[:7], rtol=0.03)
+    np.testing.assert_allclose(meas[7:], col[7:], rtol=0.12)
 
 
 def test_model_edf_and_correlation_with_a_resonance_match_monte_carlo() -> None:

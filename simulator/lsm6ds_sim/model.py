@@ -17,7 +17,7 @@ and the sim-to-real diagnosis (which copies a model, changes a term, and re-simu
     markov_tau = 0.0         # s, its correlation time
     sine_amplitude = 0.0     # unit, peak
     sine_freq = 0.0          # Hz
-    resonance_freq_hz = 0.0  # Hz, centre of a narrowband resonance (noise band-pass)
+    resonance_freq_hz = 0.0  # Hz, centre of a narrowband resonance (Lorentzian line)
     resonance_width_hz = 0.0 # Hz, its -3 dB width
     resonance_height = 0.0   # unit^2/Hz, its peak one-sided PSD above the continuum
     outlier_rate = 0.0       # impulses per second
@@ -106,7 +106,7 @@ class ChannelModel:
     """Centre (Hz) of the narrowband resonance; below the output's Nyquist frequency
     (checked when simulating)."""
     resonance_width_hz: float = 0.0
-    """-3 dB width (Hz) of the resonance's band-pass (lsm6ds_sim.noise.resonance_filter)."""
+    """-3 dB width (Hz) of the resonance's Lorentzian line (lsm6ds_sim.noise.resonance_pole)."""
     resonance_height: float = 0.0
     """Peak one-sided PSD (unit^2/Hz) the resonance adds at its centre; 0 = no resonance."""
     outlier_rate: float = 0.0

@@ -28,7 +28,7 @@ Gauss-Markov        sigma, tau_c                 (q tau_c)^2/tau [1 - tau_c/(2 t
                                                  q = sigma sqrt(2 / tau_c)
 sinusoid            A (peak), f0                 A^2 sin^4(pi f0 tau) / (pi f0 tau)^2
 resonance           height h, f0, width w        2 int S(f) sin^4(pi f tau)/(pi f tau)^2 df,
-                                                 S = h |H_bp(f)|^2 (no closed form; see
+                                                 S = h x resonance_shape (no closed form; see
                                                  imubench.noisefit.kernels.resonance_avar)
 outliers            rate lambda, std s           impulses: white-like, lambda s^2 tau0 / tau
 ==================  ===========================  =========================================
@@ -45,7 +45,6 @@ import threading
 
 import numpy as np
 import scipy.fft
-from scipy.linalg import solve_discrete_lyapunov
 from scipy.signal import lfilter
 
 from .errors import ModelError
@@ -326,17 +325,14 @@ class Sinusoid(TermGenerator):
         return self.amplitude * np.sin(2.0 * math.pi * cycles + self.phase0)
 
 
-def resonance_filter(f0_hz: float, width_hz: float, rate_hz: float
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """(b, a) of the resonance's second-order digital band-pass, peak gain 1 at f0_hz.
+def resonance_pole(f0_hz: float, width_hz: float, rate_hz: float) -> complex:
+    """Pole ``p = r exp(i w0)`` of the resonance's complex AR(1), ``w0 = 2 pi f0/fs``.
 
-    ``H(z) = (1 - beta)/2 (1 - z^-2) / (1 - cos(w0) (1 + beta) z^-1 + beta z^-2)`` with
-    ``w0 = 2 pi f0/fs`` and ``beta = (1 - tan(Bw/2)) / (1 + tan(Bw/2))``, ``Bw = 2 pi
-    width/fs``: |H| = 1 at w0 and its -3 dB points are exactly Bw apart (S. K. Mitra,
-    Digital Signal Processing: A Computer-Based Approach, section "Simple IIR digital
-    filters", second-order band-pass; the RBJ audio-EQ cookbook band-pass with
-    ``alpha = tan(Bw/2)`` in place of its ``sin(w0)/(2Q)``, which sets the width only
-    approximately).
+    The line ``1 / |1 - p e^{-i w}|^2 = 1 / (1 - 2 r cos(w - w0) + r^2)`` is a Lorentzian
+    near ``w0`` (its discrete, periodic form). Its half-power points lie at ``cos(dw) =
+    1 - (1 - r)^2 / (2 r)``; with ``dw = pi width / fs`` (points ``width_hz`` apart) that is
+    ``r^2 - 2 (2 - cos dw) r + 1 = 0``, so ``r = c - sqrt(c^2 - 1)``, ``c = 2 - cos dw``
+    (the root below 1).
 
     Raises:
         ModelError: f0_hz not in (0, fs/2), or width_hz not in (0, fs/2) (the Nyquist
@@ -349,23 +345,63 @@ def resonance_filter(f0_hz: float, width_hz: float, rate_hz: float
     if not 0.0 < width_hz < nyquist:
         raise ModelError(f"resonance_width_hz = {width_hz:g} Hz must lie between 0 and the "
                          f"Nyquist frequency {nyquist:g} Hz of the {rate_hz:g} Hz output")
-    t = math.tan(math.pi * width_hz / rate_hz)
-    beta = (1.0 - t) / (1.0 + t)
-    b = 0.5 * (1.0 - beta) * np.array([1.0, 0.0, -1.0])
-    a = np.array([1.0, -math.cos(2.0 * math.pi * f0_hz / rate_hz) * (1.0 + beta), beta])
-    return b, a
+    c = 2.0 - math.cos(math.pi * width_hz / rate_hz)
+    r = c - math.sqrt(c * c - 1.0)
+    return complex(r * math.cos(2.0 * math.pi * f0_hz / rate_hz),
+                   r * math.sin(2.0 * math.pi * f0_hz / rate_hz))
+
+
+def _line_pair(f_hz: np.ndarray, pole: complex, rate_hz: float) -> np.ndarray:
+    """``1/|1 - p e^{-iw}|^2 + 1/|1 - conj(p) e^{-iw}|^2`` at ``w = 2 pi f/fs``."""
+    r, w0 = abs(pole), float(np.angle(pole))
+    w = 2.0 * np.pi * np.asarray(f_hz, dtype=float) / rate_hz
+    return (1.0 / (1.0 - 2.0 * r * np.cos(w - w0) + r * r)
+            + 1.0 / (1.0 - 2.0 * r * np.cos(w + w0) + r * r))
+
+
+def resonance_shape(f_hz: np.ndarray, f0_hz: float, width_hz: float, rate_hz: float
+                    ) -> np.ndarray:
+    """One-sided PSD of the resonance of unit height at ``f_hz``: exactly 1 at f0_hz.
+
+    The PSD of :class:`Resonance`'s output is the line of :func:`resonance_pole` at +f0
+    plus its mirror at -f0 (the real part of a complex process), normalised here to 1 at
+    the centre; the mirror adds ``(1 - r)^2 / (1 - 2 r cos 2 w0 + r^2)`` there (< 1 % for
+    a width under a fifth of the centre frequency).
+    """
+    pole = resonance_pole(f0_hz, width_hz, rate_hz)
+    return _line_pair(f_hz, pole, rate_hz) / float(_line_pair(np.array([f0_hz]), pole,
+                                                              rate_hz)[0])
+
+
+def resonance_drive(f0_hz: float, width_hz: float, rate_hz: float) -> tuple[complex, float]:
+    """(pole p, s^2) of :class:`Resonance` at unit height (1 unit^2/Hz at f0_hz).
+
+    ``s^2`` is the variance of each part of the complex drive: the one-sided PSD of the
+    real part is ``s^2 / fs`` times the line pair of :func:`resonance_shape`, so ``s^2 =
+    fs / pair(f0)``; the output's variance is ``s^2 / (1 - |p|^2)``.
+    """
+    pole = resonance_pole(f0_hz, width_hz, rate_hz)
+    return pole, rate_hz / float(_line_pair(np.array([f0_hz]), pole, rate_hz)[0])
 
 
 class Resonance(TermGenerator):
-    """Narrowband noise: white noise through :func:`resonance_filter`.
+    """Narrowband noise of autocovariance ``var r^|k| cos(w0 k)``: a damped cosine.
 
-    The input's std is ``sqrt(h fs / 2)`` so that its one-sided PSD ``2 var / fs`` times
-    the peak gain 1 is the peak one-sided PSD ``h`` = ``resonance_height`` (unit^2/Hz) at
-    ``resonance_freq_hz``; the variance is ``h`` times the band-pass's noise bandwidth
-    (about ``pi/2 x resonance_width_hz``, a Lorentzian line). The filter state starts in
-    its stationary distribution (drawn from the solution of the discrete Lyapunov equation
-    of lfilter's transposed direct-form state), so the first samples are not a transient;
-    a change of the sample interval redesigns the filter and draws a new stationary state.
+    The real part of the complex AR(1) ``z_k = p z_{k-1} + e_k`` with the pole ``p = r
+    e^{i w0}`` of :func:`resonance_pole` and ``e_k`` circular complex white noise (real
+    and imaginary parts independent, each of variance ``s^2``): the classical random-phase
+    oscillator whose coherence decays as ``exp(-pi width t)``. Its autocovariance is
+    ``s^2 r^|k| cos(w0 k) / (1 - r^2)`` and its spectrum a pair of Lorentzian lines at
+    +-f0 of full width at half maximum ``resonance_width_hz`` (Papoulis & Pillai,
+    Probability, Random Variables and Stochastic Processes, 4th ed.: the spectrum of
+    ``exp(-a|tau|) cos(w0 tau)``; here in discrete time, :func:`resonance_shape`).
+
+    ``s^2`` is set so that the one-sided PSD at ``resonance_freq_hz`` is the height ``h``
+    = ``resonance_height`` (unit^2/Hz): the one-sided PSD is ``s^2 / fs`` times the line
+    pair of :func:`resonance_shape`. The variance is about ``h pi/2 width`` (a Lorentzian
+    line's area). The state starts in its stationary distribution (each part of ``z``
+    N(0, s^2 / (1 - r^2))), so the first samples are not a transient; a change of the
+    sample interval recomputes the pole and draws a new stationary state.
     """
 
     def __init__(self, height: float, f0_hz: float, width_hz: float,
@@ -375,27 +411,24 @@ class Resonance(TermGenerator):
         self.width_hz = float(width_hz)
         self.rng = rng
         self.dt_s: float | None = None
-        self.ba: tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.ones(3))
+        self.pole = 0j
         self.std = 0.0
-        self.state = np.zeros(2)
+        self.z = 0j
 
     def _design(self, dt_s: float) -> None:
-        b, a = resonance_filter(self.f0_hz, self.width_hz, 1.0 / dt_s)
-        self.dt_s, self.ba = dt_s, (b, a)
-        self.std = math.sqrt(self.height / (2.0 * dt_s))
-        # lfilter's state z (a0 = 1, b0 = b[0]): z' = A z + B x with
-        # A = [[-a1, 1], [-a2, 0]], B = [b1 - a1 b0, b2 - a2 b0]
-        trans = np.array([[-a[1], 1.0], [-a[2], 0.0]])
-        gain = np.array([b[1] - a[1] * b[0], b[2] - a[2] * b[0]]) * self.std
-        cov = solve_discrete_lyapunov(trans, np.outer(gain, gain))
-        self.state = np.linalg.cholesky(cov) @ self.rng.standard_normal(2)
+        self.pole, s2 = resonance_drive(self.f0_hz, self.width_hz, 1.0 / dt_s)
+        self.dt_s, self.std = dt_s, math.sqrt(self.height * s2)
+        re, im = self.rng.standard_normal(2) * (self.std / math.sqrt(1.0 - abs(self.pole) ** 2))
+        self.z = complex(re, im)
 
     def generate(self, n: int, dt_s: float, t_s: np.ndarray) -> np.ndarray:
         if dt_s != self.dt_s:
             self._design(dt_s)
-        x = self.rng.standard_normal(n) * self.std
-        y, self.state = lfilter(self.ba[0], self.ba[1], x, zi=self.state)
-        return np.asarray(y)
+        e = self.rng.standard_normal(2 * n).view(np.complex128) * self.std
+        z, _ = lfilter([1.0], [1.0, -self.pole], e, zi=[self.pole * self.z])
+        if n:
+            self.z = complex(z[-1])
+        return np.ascontiguousarray(z.real)
 
 
 class Outliers(TermGenerator):
@@ -522,6 +555,8 @@ __all__ = [
     "avar_sine_sampled",
     "avar_white",
     "markov_adev_peak",
-    "resonance_filter",
+    "resonance_drive",
+    "resonance_pole",
+    "resonance_shape",
     "term_rng",
 ]

@@ -19,12 +19,13 @@ current realisations plus the increment (common random numbers).
   ``sigma = step / 2`` and ``tau_c = dwell / 2`` (IEEE Std 952-1997 C.6); only the
   amplitude distribution (two levels, excess kurtosis -2) tells it apart.
 * ``resonance``: the simulator's resonance term (:class:`lsm6ds_sim.noise.Resonance`,
-  model keys of the same names): white noise through a second-order band-pass of centre
-  ``resonance_freq_hz`` and -3 dB width ``resonance_width_hz`` with peak gain 1, the
-  input scaled so that its peak PSD above the continuum is ``resonance_height``
-  (unit^2/Hz, one-sided); the variance is about ``height * pi/2 * width`` (a Lorentzian
-  line). Realised here, as an increment, so that a model that already carries a
-  resonance keeps it when a candidate adds another.
+  model keys of the same names): a damped cosine (the real part of a complex AR(1))
+  whose spectrum is a Lorentzian line of centre ``resonance_freq_hz`` and full width at
+  half maximum ``resonance_width_hz`` (plus its mirror at -f0), of one-sided PSD
+  ``resonance_height`` (unit^2/Hz) at the centre: the shape the evidence's Lorentzian
+  fit measures; the variance is about ``height * pi/2 * width``. Realised here, as an
+  increment, so that a model that already carries a resonance keeps it when a candidate
+  adds another.
 * ``outliers``: Bernoulli-Gaussian impulses, probability ``outlier_rate / rate_hz`` per
   sample, amplitude ``N(0, outlier_amplitude^2)``, added AFTER the output filter (where
   a bus glitch or an SPI read error appears in the record; the simulator's outlier term
@@ -99,7 +100,7 @@ def resonance_noise(rng: np.random.Generator, n: int, rate_hz: float, f0_hz: flo
                     width_hz: float, height: float) -> np.ndarray:
     """Narrowband noise of peak one-sided PSD ``height``: the simulator's resonance term
     (:class:`lsm6ds_sim.noise.Resonance`, the one generator of it). A centre the Welch
-    excess put at or above 0.49 fs is moved to 0.49 fs (the band-pass needs f0 < fs/2)."""
+    excess put at or above 0.49 fs is moved to 0.49 fs (the pole needs f0 < fs/2)."""
     f0 = min(f0_hz, 0.49 * rate_hz)
     width = min(width_hz, 0.49 * rate_hz)
     return Resonance(height, f0, width, rng).generate(n, 1.0 / rate_hz, np.arange(n) / rate_hz)

@@ -20,7 +20,7 @@ sample time s tau0, so the pair (m1, m2) is evaluated at (m1/s, m2/s) with rate/
 output filter is dropped there: it only acts on the shortest taus). Deterministic terms
 (ramp, sine) are left out of the covariance (documented limitation). The resonance
 (``amp2["resonance"]`` = its PSD height, centre and width in ``resonance``) enters with
-its band-pass spectrum at the original sampling only: block means of s >= 2 samples
+its line-pair spectrum at the original sampling only: block means of s >= 2 samples
 average a resonance near the Nyquist frequency away, so the rescaled pairs leave it out,
 as they leave out the output filter.
 """

@@ -35,9 +35,10 @@ sample is the interval mean of a Wiener rate, Var(ybar_{i+k} - ybar_i) = K^2 tau
 ``output_white`` (model key) is white noise added after the output filter: N^2/tau.
 
 Resonance (model keys ``resonance_freq_hz``, ``resonance_width_hz``, ``resonance_height``):
-narrowband noise of one-sided PSD ``h |H_bp(f)|^2`` (the simulator's band-pass,
-:func:`lsm6ds_sim.noise.resonance_filter`); its AVAR is linear in the height h itself
-(:data:`HEIGHT_TERMS`) and computed in the frequency domain (:func:`resonance_avar`).
+narrowband noise of one-sided PSD ``h L(f)``, a pair of Lorentzian lines at +-f0 of value 1
+at f0 (the simulator's damped-cosine process, :func:`lsm6ds_sim.noise.resonance_shape`);
+its AVAR is linear in the height h itself (:data:`HEIGHT_TERMS`) and computed in the
+frequency domain (:func:`resonance_avar`).
 
 Output filter (model keys ``bandwidth_hz``, ``filter_order``): the Butterworth low-pass of
 the simulator (scipy.signal.butter, bilinear with prewarping) with impulse response h and
@@ -58,8 +59,8 @@ from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
-from lsm6ds_sim.noise import resonance_filter
-from scipy.signal import butter, fftconvolve, freqz, lfilter
+from lsm6ds_sim.noise import resonance_drive, resonance_shape
+from scipy.signal import butter, fftconvolve, lfilter
 
 LINEAR_TERMS: tuple[str, ...] = (
     "white", "flicker", "random_walk", "ramp", "quantization", "markov", "sine",
@@ -321,18 +322,43 @@ def _avar_short(d: np.ndarray, m: np.ndarray) -> np.ndarray:
     return (s1 - s2) / mf**2
 
 
-RESONANCE_GRID_PER_WIDTH: int = 40
-"""Frequency-grid points per resonance width in :func:`resonance_avar`."""
-RESONANCE_FAST_PERIODS: float = 4.0
-"""Above m tau0 = this / width the Allan kernel's sin^4 is replaced by its mean 3/8."""
+RESONANCE_TAIL: float = 1e-6
+"""Least ``r^J`` (the resonance's decay over the output filter's length J) for which the
+filtered resonance's autocovariance beyond lag J is taken in closed form; below it the
+filtered autocovariance is summed directly up to its negligible lags."""
 
 
-def resonance_gain2(f_hz: np.ndarray, f0_hz: float, width_hz: float, rate_hz: float
-                    ) -> np.ndarray:
-    """|H_bp(f)|^2 of the simulator's resonance band-pass at ``f_hz`` (peak 1 at f0)."""
-    b, a = resonance_filter(f0_hz, width_hz, rate_hz)
-    _, h = freqz(b, a, worN=np.asarray(f_hz, dtype=float), fs=rate_hz)
-    return np.abs(h) ** 2
+def _resonance_filtered(f0_hz: float, width_hz: float, bandwidth_hz: float,
+                        filter_order: int, rate_hz: float
+                        ) -> tuple[complex, float, complex | None, np.ndarray]:
+    """(pole p, var, C, d) of the resonance of unit height through the output low-pass.
+
+    The simulator's resonance (:class:`lsm6ds_sim.noise.Resonance`) is the real part of a
+    complex AR(1) of pole ``p`` (:func:`lsm6ds_sim.noise.resonance_pole`): autocovariance
+    ``G(k) = var Re(p^|k|)`` with ``var = s^2 / (1 - |p|^2)`` for unit height
+    (:func:`lsm6ds_sim.noise.resonance_drive`). Through the output low-pass, ``G_f(k) =
+    sum_l rho(|l|) G(k - l)`` (l = -J..J) equals ``var Re(C p^k)`` for k >= J with ``C =
+    sum_l rho(|l|) p^-l``, so ``G_f(k) = var (Re(C p^k) + d(k))`` with ``d`` zero beyond
+    lag J (no filter: C = 1, d = [0]). Where ``|p|^J`` < :data:`RESONANCE_TAIL` (C would
+    be large and cancel), the resonance dies out within a few filter lengths: C is None
+    and ``d`` is G_f / var itself up to the lag where ``|p|^k`` < 1e-20 (0 beyond).
+    """
+    pole, s2 = resonance_drive(f0_hz, width_hz, rate_hz)
+    r = abs(pole)
+    var = s2 / (1.0 - r * r)
+    rho = filter_autocorrelation(float(bandwidth_hz), int(filter_order), float(rate_hz))
+    j = rho.size - 1
+    if j == 0:
+        return pole, var, 1.0 + 0j, np.zeros(1)
+    full_rho = np.concatenate([rho[:0:-1], rho])  # rho(|l|), l = -J..J
+    closed = r**j >= RESONANCE_TAIL
+    last = j if closed else j + math.ceil(math.log(1e-20) / math.log(r))
+    lags = np.arange(-j, last + j + 1)
+    head = np.convolve((pole ** np.abs(lags)).real, full_rho, mode="valid")  # 0..last
+    if not closed:
+        return pole, var, None, head
+    c = complex(np.sum(full_rho * pole ** -np.arange(-j, j + 1)))
+    return pole, var, c, head - (c * pole ** np.arange(j + 1)).real
 
 
 def resonance_avar(m: Sequence[int] | np.ndarray, rate_hz: float, f0_hz: float,
@@ -340,47 +366,35 @@ def resonance_avar(m: Sequence[int] | np.ndarray, rate_hz: float, f0_hz: float,
                    ) -> np.ndarray:
     """AVAR at averaging factors ``m`` of the resonance of unit height (1 unit^2/Hz).
 
-    The Allan variance of a PSD (IEEE Std 1139-2008 / NIST SP 1065 eq. 65, one-sided
-    S_y): ``AVAR(tau) = 2 int_0^inf S_y(f) sin^4(pi f tau) / (pi f tau)^2 df``; for
-    means of m samples (tau = m tau0) the sinc becomes the Dirichlet kernel and the
-    integral stops at fs/2::
-
-        AVAR(m) = 2 int_0^{fs/2} S(f) sin^4(pi f m tau0) / (m sin(pi f tau0))^2 df
-
-    (the frequency-domain form of the module's G(k) formula; for white noise, S = 2 N^2,
-    it gives N^2/tau exactly). Here S(f) = |H_bp(f)|^2 |H_lp(f)|^2: the simulated
-    band-pass (:func:`resonance_gain2`) and the output low-pass (:func:`filter_gain2`).
-    Trapezoid rule on a uniform grid over [0, fs/2] with :data:`RESONANCE_GRID_PER_WIDTH`
-    points per width. Where the kernel oscillates faster than the grid resolves
-    (m tau0 > :data:`RESONANCE_FAST_PERIODS` / width) sin^4 is replaced by its mean 3/8:
-    the terms dropped, cos(2x)/2 and cos(4x)/8, integrate S(f)/sin^2 against oscillations
-    of period 1/(m tau0), i.e. they are the resonance's autocovariance at lags m and 2m,
-    which has decayed by exp(-pi width m tau0) < 4e-6 there.
+    With G_f from :func:`_resonance_filtered`: the module's G(k) formula is linear in G, so
+    the AVAR is ``var (Re(C A(p)) + A_d)``, ``A(phi)`` the Gauss-Markov closed form
+    (:func:`_markov_closed`) at the complex ``phi = p`` and ``A_d`` that of the short
+    sequence d (:func:`_avar_short`): exact, O(1) per m.
     """
     m = np.asarray(m, dtype=np.int64)
-    nyquist = 0.5 * rate_hz
-    n = math.ceil(nyquist / width_hz * RESONANCE_GRID_PER_WIDTH) + 1
-    f = np.linspace(0.0, nyquist, n)
-    s = resonance_gain2(f, f0_hz, width_hz, rate_hz) * filter_gain2(
-        f / rate_hz, bandwidth_hz, filter_order, rate_hz)
-    x = np.pi * f / rate_hz
-    sin2 = np.sin(x) ** 2
-    inner = sin2 > 0
-    out = np.zeros(m.size)
-    for i, mi in enumerate(m):
-        num = (np.full(n, 0.375) if mi / rate_hz > RESONANCE_FAST_PERIODS / width_hz
-               else np.sin(mi * x) ** 4)
-        kern = np.zeros(n)
-        kern[inner] = 2.0 * num[inner] / (float(mi) ** 2 * sin2[inner])
-        out[i] = float(np.trapezoid(s * kern, f))
-    return out
+    pole, var, c, d = _resonance_filtered(f0_hz, width_hz, bandwidth_hz, filter_order,
+                                          rate_hz)
+    tail = 0.0 if c is None else (c * _markov_closed(m, pole)).real
+    return var * (tail + _avar_short(d, m))
+
+
+def resonance_gacv(kmax: int, rate_hz: float, f0_hz: float, width_hz: float,
+                   bandwidth_hz: float = 0.0, filter_order: int = 1) -> np.ndarray:
+    """G_f(k), k = 0..kmax, of the resonance of unit height through the output low-pass
+    (:func:`_resonance_filtered`)."""
+    pole, var, c, d = _resonance_filtered(f0_hz, width_hz, bandwidth_hz, filter_order,
+                                          rate_hz)
+    g = np.zeros(kmax + 1) if c is None else (c * pole ** np.arange(kmax + 1.0)).real
+    n = min(d.size, kmax + 1)
+    g[:n] += d[:n]
+    return var * g
 
 
 def resonance_psd(f_hz: np.ndarray, height: float, f0_hz: float, width_hz: float,
                   rate_hz: float) -> np.ndarray:
     """Two-sided PSD (unit^2/Hz) of the resonance at ``f_hz``, before the output filter:
-    ``height |H_bp|^2 / 2`` (height is the peak of the one-sided PSD)."""
-    return 0.5 * height * resonance_gain2(f_hz, f0_hz, width_hz, rate_hz)
+    ``height L(f) / 2`` (height is the one-sided PSD at the centre f0)."""
+    return 0.5 * height * resonance_shape(f_hz, f0_hz, width_hz, rate_hz)
 
 
 def _sine_closed(m: np.ndarray, nu0: float) -> np.ndarray:
@@ -395,8 +409,10 @@ def _sine_closed(m: np.ndarray, nu0: float) -> np.ndarray:
     return np.sin(math.pi * nu0 * mf) ** 4 / den
 
 
-def _markov_closed(m: np.ndarray, phi: float) -> np.ndarray:
+def _markov_closed(m: np.ndarray, phi: complex) -> np.ndarray:
     """The module formula summed in closed form for G(k) = phi^k (unit variance AR(1)).
+
+    Complex ``phi`` gives a complex result, the AVAR of the complex G (the resonance's).
 
     sum_{k=1}^{m-1} (m-k) phi^k = phi (m (1-phi) - (1-phi^m)) / (1-phi)^2 and
     sum_{k=1}^{2m-1} (m-|k-m|) phi^k = phi (1-phi^m)^2 / (1-phi)^2.
@@ -474,7 +490,7 @@ __all__ = [
     "gacv_unit",
     "key_value",
     "resonance_avar",
-    "resonance_gain2",
+    "resonance_gacv",
     "resonance_psd",
     "sum_variance",
     "term_avar",

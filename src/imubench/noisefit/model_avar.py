@@ -24,6 +24,7 @@ from imubench.noisefit.kernels import (
     averaging_factors,
     filter_autocorrelation,
     gacv_unit,
+    resonance_gacv,
     sum_variance,
     term_avar,
 )
@@ -100,7 +101,8 @@ def model_avar_m(cm: ChannelModel, m: np.ndarray, rate_hz: float) -> np.ndarray:
 
 BLOCK_TERMS = ("white", "flicker", "random_walk", "quantization", "outliers")
 """Terms that enter :func:`block_increment_acv` through the generalized autocovariance
-(the Gauss-Markov term and the white noise after the filter enter too, on their own)."""
+(the Gauss-Markov term, the resonance and the white noise after the filter enter too, on
+their own)."""
 
 
 def block_increment_key(cm: ChannelModel) -> tuple[float, ...]:
@@ -108,7 +110,8 @@ def block_increment_key(cm: ChannelModel) -> tuple[float, ...]:
     the same key have the same block-increment covariance."""
     return (cm.white, cm.flicker, cm.random_walk, cm.quantization, cm.outlier_rate,
             cm.outlier_amplitude, cm.markov_sigma, cm.markov_tau, cm.bandwidth_hz,
-            float(cm.filter_order), cm.output_white)
+            float(cm.filter_order), cm.output_white, cm.resonance_height,
+            cm.resonance_freq_hz, cm.resonance_width_hz)
 
 
 def block_increment_acv(cm: ChannelModel, m: int, n_lags: int, rate_hz: float) -> np.ndarray:
@@ -128,10 +131,10 @@ def block_increment_acv(cm: ChannelModel, m: int, n_lags: int, rate_hz: float) -
 
     and the lag-0 value is ``2 AVAR(m)`` (:func:`model_avar_m`). Flicker and random walk
     have no autocovariance but a generalized one; the constant it is defined up to cancels
-    because ``sum c = 0``. The output filter is applied as in :func:`model_avar_m`. Left
-    out: ramp and sine (deterministic) and the resonance (a band-pass at Hz frequencies:
-    block means of seconds keep only its power near 0 Hz, ~(width / 2 f0)^2 of its
-    height).
+    because ``sum c = 0``. The output filter is applied as in :func:`model_avar_m`; the
+    resonance enters with its filtered autocovariance (:func:`kernels.resonance_gacv`:
+    block means of seconds keep its lines' floor near 0 Hz, about 2 (width / 2 f0)^2 of
+    its height). Left out: ramp and sine (deterministic).
     """
     if m < 1 or n_lags < 1:
         raise FitError(f"block increment covariance: m {m} and n_lags {n_lags} must be >= 1")
@@ -147,6 +150,10 @@ def block_increment_acv(cm: ChannelModel, m: int, n_lags: int, rate_hz: float) -
         g += cm.markov_sigma**2 * apply_filter(
             gacv_unit("markov", kmax, tau0, tau_c_s=float(cm.markov_tau)), rho,
             multiplicative=True)
+    if cm.resonance_height > 0:
+        g += cm.resonance_height * resonance_gacv(
+            g.size - 1, rate_hz, float(cm.resonance_freq_hz), float(cm.resonance_width_hz),
+            float(cm.bandwidth_hz), int(cm.filter_order))
     g[0] += cm.output_white**2 * rate_hz  # white after the filter
     v = sum_variance(g, np.arange(n_lags + 2, dtype=np.int64) * m)
     c = np.array([1.0, -2.0, 1.0])
