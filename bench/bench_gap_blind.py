@@ -2,7 +2,7 @@
 
 Usage: ``PYTHONPATH=src:drivers:simulator .venv/bin/python bench/bench_gap_blind.py
 [--quick] [--set tune,heldout] [--jobs 2] [--cases sine,markov,...] [--keep DIR]
-[--pairs]``
+[--pairs | --weak-lines | --line-shapes]``
 
 What it measures. An independent generator written here from textbook definitions
 (numpy / scipy only; NOT :mod:`lsm6ds_sim`) makes 1 h at 104 Hz of one gyro channel
@@ -131,13 +131,27 @@ EFFECTS: dict[str, list[dict[str, float]]] = {
     "resonance": [{"resonance_height": 3.2e-4, "resonance_width_hz": 1.0},
                   {"resonance_height": 1.0e-4, "resonance_width_hz": 1.0}],
 }
-EXPECTED = {"filter": "base_model"}
+LINE_SHAPES = {"resonance_bandpass": "bandpass", "resonance_mechanical": "mechanical"}
+"""A resonance drawn with another line shape than the Lorentzian (``--line-shapes``, added
+on 2026-12-06 when the simulator's resonance became a Lorentzian line, so that the
+diagnosis is not judged on its own line shape alone), at the magnitudes of the Lorentzian
+resonance of :data:`EFFECTS`, peak H at f0 and FWHM 1 Hz, f0 in 5-25 Hz (Q 5-25):
+
+* ``bandpass``: a second-order band-pass, ``H (f f0 / Q)^2 / ((f0^2 - f^2)^2 + (f f0 /
+  Q)^2)``: zero at 0 Hz, wings falling as 1/f^2 above the centre;
+* ``mechanical``: a mass-spring-damper driven by white noise, ``H (f0^2 / Q)^2 / ((f0^2 -
+  f^2)^2 + (f f0 / Q)^2)``: a floor at 0 Hz, wings falling as 1/f^4 above.
+
+Scored apart, never mixed into the fixed set's figures; seeds past the others'."""
+EXPECTED = {"filter": "base_model", "resonance_bandpass": "resonance",
+            "resonance_mechanical": "resonance"}
 """Verdict expected for a withheld effect whose name differs from the truth's."""
 MAIN = {"temperature": "temp_coeff", "sine": "sine_amplitude", "random_walk": "random_walk",
         "flicker": "flicker", "ramp": "ramp", "markov": "markov_sigma",
         "quantization": "quantization", "outliers": "outlier_rate",
         "filter": "bandwidth_hz", "bias_step": "step_size", "telegraph": "telegraph_step",
-        "resonance": "resonance_freq_hz"}
+        "resonance": "resonance_freq_hz", "resonance_bandpass": "resonance_freq_hz",
+        "resonance_mechanical": "resonance_freq_hz"}
 N_NULL = 4
 PAIRS = ("temperature+sine", "ramp+sine", "bias_step+temperature", "random_walk+sine",
          "flicker+ramp", "markov+temperature", "outliers+random_walk", "telegraph+ramp",
@@ -296,14 +310,26 @@ def _add(rng: np.random.Generator, effect: str, p: dict[str, float], y: np.ndarr
             level = 1.0 - level
             i += k
         y += out
-    elif effect == "resonance":
+    elif effect == "resonance" or effect in LINE_SHAPES:
         f0 = float(rng.uniform(5.0, 25.0))
         truth["resonance_freq_hz"] = f0
-        s = p["resonance_height"] / (1.0 + (2.0 * (f - f0) / p["resonance_width_hz"]) ** 2)
-        y += spectral(rng, n, fs, s)
+        y += spectral(rng, n, fs, line_shape(LINE_SHAPES.get(effect, "lorentzian"), f, f0,
+                                             p["resonance_width_hz"], p["resonance_height"]))
     elif effect != "none":
         raise ValueError(effect)
     return y
+
+
+def line_shape(kind: str, f: np.ndarray, f0: float, width: float, height: float
+               ) -> np.ndarray:
+    """One-sided PSD of a resonance of peak ``height`` near ``f0`` and FWHM ``width``:
+    the Lorentzian of :data:`EFFECTS` or a shape of :data:`LINE_SHAPES`."""
+    if kind == "lorentzian":
+        return height / (1.0 + (2.0 * (f - f0) / width) ** 2)
+    q = f0 / width
+    den = (f0**2 - f**2) ** 2 + (f * f0 / q) ** 2
+    num = (f * f0 / q) ** 2 if kind == "bandpass" else np.full_like(f, (f0**2 / q) ** 2)
+    return height * num / den
 
 
 def model_toml(lsb_rounding: bool = True) -> str:
@@ -354,7 +380,8 @@ class Case:
         """Each withheld effect with its own parameters (the keys of :data:`EFFECTS`)."""
         if self.effect == "none":
             return [("none", {})]
-        return [(e, {k: v for k, v in self.params.items() if k in EFFECTS[e][0]})
+        return [(e, {k: v for k, v in self.params.items()
+                     if k in EFFECTS["resonance" if e in LINE_SHAPES else e][0]})
                 for e in self.names]
 
     @property
@@ -473,6 +500,15 @@ def weak_line_cases(split: str) -> list[Case]:
             for i, a in enumerate(WEAK_LINES) for j in range(3)]
 
 
+def line_shape_cases(split: str) -> list[Case]:
+    """Each shape of :data:`LINE_SHAPES` at the resonance's clear and near magnitudes, two
+    records each."""
+    base, diag_seed = SPLITS[split]
+    return [Case(split, shape, ("clear", "near")[j], base + 900 + 10 * i + 2 * j + k,
+                 diag_seed, dict(EFFECTS["resonance"][j]))
+            for i, shape in enumerate(LINE_SHAPES) for j in range(2) for k in range(2)]
+
+
 def make_cases(split: str, quick: bool, only: tuple[str, ...]) -> list[Case]:
     base, diag_seed = SPLITS[split]
     out = []
@@ -552,6 +588,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="with --pairs: the pairs of MORE_PAIRS instead of PAIRS")
     ap.add_argument("--weak-lines", action="store_true",
                     help="sines below the near-limit size (WEAK_LINES) instead")
+    ap.add_argument("--line-shapes", action="store_true",
+                    help="resonances of other line shapes (LINE_SHAPES) instead")
     args = ap.parse_args(argv)
     print(f"# bench_gap_blind {datetime.datetime.now():%Y-%m-%d %H:%M} {platform.node()} "
           f"{platform.machine()} cpus={os.cpu_count()} python {sys.version.split()[0]} "
@@ -565,6 +603,7 @@ def main(argv: list[str] | None = None) -> int:
         for split in args.set.split(","):
             cases = (pair_cases(split, only, args.more_pairs) if args.pairs
                      else weak_line_cases(split) if args.weak_lines
+                     else line_shape_cases(split) if args.line_shapes
                      else make_cases(split, args.quick, only))
             print(f"\n# split {split}: {len(cases)} cases")
             with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as ex:
