@@ -157,6 +157,29 @@ def test_avar_column_matches_oadev_of_simulated_records(f0: float, width: float,
     np.testing.assert_allclose(meas[7:], col[7:], rtol=0.12)
 
 
+@pytest.mark.parametrize(("rate", "f0", "width", "bandwidth", "order"), [
+    (100.0, 19.7, 1.8, 0.0, 1), (100.0, 19.7, 1.8, 15.0, 2), (6660.0, 100.0, 3.0, 50.0, 2),
+    (104.0, 40.0, 20.0, 2.0, 2)])  # the last: the line dies within the filter's length
+def test_avar_column_equals_the_direct_sum_of_its_autocovariance(
+        rate: float, f0: float, width: float, bandwidth: float, order: int) -> None:
+    """The closed form (complex pole, filtered tail) against the Allan sum of the
+    autocovariance var r^k cos(w0 k) convolved with the filter's, lag by lag to 2 max m:
+    the algebra, not the model (the model is checked against simulated records above)."""
+    from lsm6ds_sim.noise import resonance_drive
+
+    from imubench.noisefit.kernels import avar_from_gacv, filter_autocorrelation
+
+    m = np.unique(np.geomspace(1, 3000, 25).astype(np.int64))
+    pole, s2 = resonance_drive(f0, width, rate)
+    rho = filter_autocorrelation(bandwidth, order, rate)
+    j = rho.size - 1
+    lags = np.arange(-j, 2 * int(m.max()) + 10 + j + 1)
+    g = np.convolve((pole ** np.abs(lags)).real, np.concatenate([rho[:0:-1], rho]), "valid")
+    want = s2 / (1 - abs(pole) ** 2) * avar_from_gacv(g, m)
+    np.testing.assert_allclose(resonance_avar(m, rate, f0, width, bandwidth, order), want,
+                               rtol=1e-11)
+
+
 def test_model_edf_and_correlation_with_a_resonance_match_monte_carlo() -> None:
     """The covariance model with the resonance's spectrum against 150 simulated records
     (white + resonance, 2^15 samples): EDF and the correlation of neighbouring octaves.
