@@ -28,8 +28,9 @@ Gauss-Markov        sigma, tau_c                 (q tau_c)^2/tau [1 - tau_c/(2 t
                                                  q = sigma sqrt(2 / tau_c)
 sinusoid            A (peak), f0                 A^2 sin^4(pi f0 tau) / (pi f0 tau)^2
 resonance           height h, f0, width w        2 int S(f) sin^4(pi f tau)/(pi f tau)^2 df,
-                                                 S = h x resonance_shape (no closed form; see
-                                                 imubench.noisefit.kernels.resonance_avar)
+                                                 S = h x resonance_shape; in closed form at
+                                                 the complex pole: imubench.noisefit.
+                                                 kernels.resonance_avar
 outliers            rate lambda, std s           impulses: white-like, lambda s^2 tau0 / tau
 ==================  ===========================  =========================================
 

@@ -791,6 +791,13 @@ def _acceptable(c: Candidate, st: _Step) -> str:
     if not (c.evidence_closed >= MIN_CLOSURE or drop > need_fit or _explains_own_test(c, st)):
         return (f"{removes(c.evidence_closed)} the significant excess (needs {MIN_CLOSURE:.0%}) "
                 f"and lowers chi-squared by {drop:.1f} (needs {need_fit:.1f})")
+    noise = c.effect in NOISE_PROCESSES or c.effect == "base_model"
+    before_fit, after_fit = st.before.excess_moment, c.fit.excess_moment
+    if noise and after_fit - before_fit > st.before.gap_null:
+        return (f"makes the fit part's Allan curve, where it was fitted, depart more: the "
+                f"excess of its gap over the scatter, sqrt(gap^2 - scatter^2), rises "
+                f"{before_fit:.3f} -> {after_fit:.3f}, by more than the scatter "
+                f"{st.before.gap_null:.3f}")
     if c.whole_record:
         spans = temperature_spans(*st.series_parts)
         where = f" ({spans_text(spans)})" if spans is not None else ""
@@ -818,7 +825,6 @@ def _acceptable(c: Candidate, st: _Step) -> str:
             if opposite:
                 return opposite
         before, after = st.hold.excess_moment, c.holdout.excess_moment
-        noise = c.effect in NOISE_PROCESSES or c.effect == "base_model"
         if noise and after - before > st.hold.gap_null:
             return (f"makes the held-out Allan curve depart more: the excess of its gap "
                     f"over the scatter, sqrt(gap^2 - scatter^2), rises {before:.3f} -> "

@@ -37,8 +37,8 @@ sample is the interval mean of a Wiener rate, Var(ybar_{i+k} - ybar_i) = K^2 tau
 Resonance (model keys ``resonance_freq_hz``, ``resonance_width_hz``, ``resonance_height``):
 narrowband noise of one-sided PSD ``h L(f)``, a pair of Lorentzian lines at +-f0 of value 1
 at f0 (the simulator's damped-cosine process, :func:`lsm6ds_sim.noise.resonance_shape`);
-its AVAR is linear in the height h itself (:data:`HEIGHT_TERMS`) and computed in the
-frequency domain (:func:`resonance_avar`).
+its AVAR is linear in the height h itself (:data:`HEIGHT_TERMS`) and the Gauss-Markov
+closed form at its complex pole (:func:`resonance_avar`).
 
 Output filter (model keys ``bandwidth_hz``, ``filter_order``): the Butterworth low-pass of
 the simulator (scipy.signal.butter, bilinear with prewarping) with impulse response h and

@@ -6,7 +6,7 @@ low-pass once, and evaluates the exact sampled-data Allan variance at m = round(
 rate_hz). Without a filter it equals the closed forms (N^2/tau, K^2 tau/3, R^2 tau^2/2,
 3 Q^2/tau^2, the sampled sine) exactly, and tends to (2 ln2/pi) B^2 (flicker) and IEEE 952
 C.6 (Gauss-Markov) as m grows; with a filter it is what the closed forms cannot give. The
-resonance's AVAR is the frequency-domain integral of :func:`kernels.resonance_avar`.
+resonance's AVAR is the closed form at its complex pole, :func:`kernels.resonance_avar`.
 """
 
 from __future__ import annotations
