@@ -369,9 +369,8 @@ def resonance_shape(f_hz: np.ndarray, f0_hz: float, width_hz: float, rate_hz: fl
     the centre; the mirror adds ``(1 - r)^2 / (1 - 2 r cos 2 w0 + r^2)`` there (< 1 % for
     a width under a fifth of the centre frequency).
     """
-    pole = resonance_pole(f0_hz, width_hz, rate_hz)
-    return _line_pair(f_hz, pole, rate_hz) / float(_line_pair(np.array([f0_hz]), pole,
-                                                              rate_hz)[0])
+    pole, s2 = resonance_drive(f0_hz, width_hz, rate_hz)
+    return _line_pair(f_hz, pole, rate_hz) * (s2 / rate_hz)
 
 
 def resonance_drive(f0_hz: float, width_hz: float, rate_hz: float) -> tuple[complex, float]:

@@ -792,12 +792,10 @@ def _acceptable(c: Candidate, st: _Step) -> str:
         return (f"{removes(c.evidence_closed)} the significant excess (needs {MIN_CLOSURE:.0%}) "
                 f"and lowers chi-squared by {drop:.1f} (needs {need_fit:.1f})")
     noise = c.effect in NOISE_PROCESSES or c.effect == "base_model"
-    before_fit, after_fit = st.before.excess_moment, c.fit.excess_moment
-    if noise and after_fit - before_fit > st.before.gap_null:
-        return (f"makes the fit part's Allan curve, where it was fitted, depart more: the "
-                f"excess of its gap over the scatter, sqrt(gap^2 - scatter^2), rises "
-                f"{before_fit:.3f} -> {after_fit:.3f}, by more than the scatter "
-                f"{st.before.gap_null:.3f}")
+    departs = _departs_more("the fit part's Allan curve, where it was fitted,", st.before,
+                            c.fit) if noise else ""
+    if departs:
+        return departs
     if c.whole_record:
         spans = temperature_spans(*st.series_parts)
         where = f" ({spans_text(spans)})" if spans is not None else ""
@@ -824,11 +822,21 @@ def _acceptable(c: Candidate, st: _Step) -> str:
             opposite = _drifts_the_other_way(c.params["ramp"], *st.hold_drift())
             if opposite:
                 return opposite
-        before, after = st.hold.excess_moment, c.holdout.excess_moment
-        if noise and after - before > st.hold.gap_null:
-            return (f"makes the held-out Allan curve depart more: the excess of its gap "
-                    f"over the scatter, sqrt(gap^2 - scatter^2), rises {before:.3f} -> "
-                    f"{after:.3f}, by more than the scatter {st.hold.gap_null:.3f}")
+        if noise:
+            return _departs_more("the held-out Allan curve", st.hold, c.holdout)
+    return ""
+
+
+def _departs_more(where: str, before: Comparison, after: Comparison) -> str:
+    """Why a noise process is refused because ``where`` departs more with it (empty if it
+    does not): the excess of the Allan gap over its scatter, ``sqrt(gap^2 - scatter^2)``
+    (:attr:`~imubench.gap.curves.Comparison.excess_moment`), rises by more than that
+    scatter (``gap_null`` of ``before``)."""
+    b, a = before.excess_moment, after.excess_moment
+    if a - b > before.gap_null:
+        return (f"makes {where} depart more: the excess of its gap over the scatter, "
+                f"sqrt(gap^2 - scatter^2), rises {b:.3f} -> {a:.3f}, by more than the "
+                f"scatter {before.gap_null:.3f}")
     return ""
 
 

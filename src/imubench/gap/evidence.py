@@ -154,9 +154,11 @@ STEP_WINDOW_BLOCKS = 8
 """Blocks on each side of a located step whose means give its size."""
 
 
-def _mad_sigma(v: np.ndarray) -> float:
+def mad_sigma(v: np.ndarray) -> float:
+    """:func:`imubench.gap.curves.robust_sigma` of the finite values of ``v`` (NaN when
+    there are none)."""
     v = v[np.isfinite(v)]
-    return float(1.4826 * np.median(np.abs(v - np.median(v)))) if v.size else float("nan")
+    return robust_sigma(v) if v.size else float("nan")
 
 
 STEP_SCALES = (1, 2, 4, 8)
@@ -196,7 +198,7 @@ def _step_scan(y: np.ndarray) -> tuple[float, int, int]:
         win = sliding_window_view(m, w).mean(axis=1)  # win[k] = mean of m[k:k+w]
         for gap in (0, 1):
             d = win[w + gap:] - win[:len(win) - w - gap]  # after (from k+w+gap) - before
-            s = _mad_sigma(d)
+            s = mad_sigma(d)
             if not s > 0:
                 continue
             r = np.abs(d - np.nanmedian(d)) / s

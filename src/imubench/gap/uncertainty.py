@@ -143,9 +143,8 @@ def step_time_floor(step_size: float, noise: np.ndarray, rate_hz: float) -> floa
     point is then found to the sample), and the floor is below a sample there."""
     if not step_size:
         return math.nan
-    d = np.diff(noise, axis=1)
-    mad = np.nanmedian(np.abs(d - np.nanmedian(d, axis=1, keepdims=True)), axis=1)
-    sigma2 = float(np.median((1.4826 * mad) ** 2 / 2.0))
+    sigma2 = float(np.median([evidence.mad_sigma(d) ** 2 / 2.0
+                              for d in np.diff(noise, axis=1)]))
     return math.sqrt(STEP_TIME_VARIANCE) * sigma2 / step_size**2 / rate_hz
 
 
