@@ -185,6 +185,20 @@ def held_out_closed(d, null: dict | None = None) -> float:
     return float("nan")
 
 
+def look_alike_text(la: dict | None) -> str:
+    """' look_alike=E score S/V held-out drop D/DV' (the rival's and the verdict's, JSON
+    ``look_alike``), or nothing."""
+    if not la:
+        return ""
+
+    def num(v: float | None) -> str:
+        return "-" if v is None else f"{v:.1f}"
+
+    return (f" look_alike={la['effect']} score {la['score']:.1f}/{la['score_verdict']:.1f}"
+            f" held-out drop {num(la['holdout_chi2_drop'])}/"
+            f"{num(la['holdout_chi2_drop_verdict'])}")
+
+
 def run(group: str, case: str, bg: str, model: NoiseModel, ch: str, series: Series,
         reps: list[Series] | None = None, truth: dict[str, float] | None = None) -> Result:
     t0 = time.perf_counter()
@@ -208,7 +222,7 @@ def run(group: str, case: str, bg: str, model: NoiseModel, ch: str, series: Seri
         r.param_error = abs(abs(got) - abs(truth[key])) / abs(truth[key])
     r.detail = (f"reason={out['reason']!r} step_z={out['bias_step_z'] or 0:.1f} "
                 f"rejected={[e['effect'] for e in out['effects'] if e.get('rejected_because')]}"
-                + check)
+                + check + look_alike_text(out["look_alike"]))
     print(f"  {group:7s} {bg:10s} {case:18s} verdict={r.verdict:12s} kept={r.kept} "
           f"held-out excess closed={r.closed:5.2f} perr={r.param_error:5.2f} "
           f"{'OK ' if r.right else 'BAD'} ({r.seconds:.0f} s) {r.detail}", flush=True)

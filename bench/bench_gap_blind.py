@@ -464,6 +464,11 @@ def run_case(c: Case, work: Path) -> Case:
                 f"{h.get('gap_excess_after') or 0:.3f} null {h.get('gap_null', math.nan):.3f}; "
                 f"global {d['global']['chi2_smooth']:.1f}/{d['global']['threshold_smooth']:.1f}"
                 f" temp_z {d['temperature_slope_z']:.1f} top {top}")
+    if d.get("look_alike"):  # another effect the fit part does not tell apart
+        la = d["look_alike"]
+        c.detail += (f" look_alike {la['effect']} by "
+                     f"{la['score'] - la['score_verdict']:.2f}, held-out drops "
+                     f"{la['holdout_chi2_drop']} / {la['holdout_chi2_drop_verdict']}")
     return c
 
 

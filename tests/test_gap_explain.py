@@ -12,6 +12,7 @@ from imubench.gap.candidates import DENSE_TAIL
 from imubench.gap.curves import POOLED_DOF, Z_SLOPE, t_threshold
 from imubench.gap.diagnose import MIN_CLOSURE
 from imubench.gap.explain import describe, explain_channel, params_text
+from imubench.gap.explain import headline as verdict_words
 
 
 def _entry(verdict: str, **kw: Any) -> dict[str, Any]:
@@ -60,6 +61,22 @@ def test_effect_verdict_names_evidence_margin_and_runner_up() -> None:
     assert "over the fit part's regions 0.9 -> 0.1" in text
     # below-threshold statistics are not listed as evidence
     assert "time trend" not in text and "spectral line" not in text
+
+
+def test_a_look_alike_the_record_does_not_tell_apart_is_said_in_the_headline() -> None:
+    units = gap_units(["gx"])["params"]["gx"]  # type: ignore[index]
+    look = {"effect": "random_walk", "params": {"random_walk": 2.39e-3}, "score": 90.8,
+            "score_verdict": 90.0, "holdout_chi2_drop": 73.7,
+            "holdout_chi2_drop_verdict": 70.5}
+    c = _entry("temperature", effects=[TEMP_EFFECT, RW_EFFECT], kept=[TEMP_EFFECT],
+               look_alike=look)
+    text = verdict_words(c, 10, units)
+    assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
+    assert ("A look-alike fits nearly as well, and this record does not tell the two "
+            "apart: the bias wanders as a random walk (K = 0.00239 dps/sqrt(s)) (score "
+            "90.8 against 90.0 on the fit part") in text
+    assert "held-out chi-squared falls by 73.7 with it, by 70.5 with the verdict." in text
+    assert "look-alike" not in verdict_words({**c, "look_alike": None}, 10, units)
 
 
 def test_unexplained_gives_the_shortfall() -> None:

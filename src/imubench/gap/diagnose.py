@@ -107,6 +107,12 @@ n_params)`` (Wilks 1938: the likelihood-ratio statistic of nested models with n_
 more parameters), the alternative to MIN_CLOSURE."""
 HOLDOUT_TOP = 3
 """Candidates (in score order) examined for acceptance, with the held-out check, per step."""
+LOOK_ALIKE_SCORE = 2.0
+"""A first-step candidate of another effect that scores within this of the chosen one
+(score: chi-squared plus the BIC penalty, lower is better) and passes the same checks is
+reported as a look-alike the record does not tell apart from the verdict (JSON
+``look_alike``): a BIC difference below 2 is "not worth more than a bare mention" (Kass
+and Raftery, J. Am. Stat. Assoc. 90, 1995, p. 777)."""
 HOLDOUT_ALPHA = 0.05
 """Level of the held-out check: the held-out chi-squared must fall by more than
 ``chi2.isf(HOLDOUT_ALPHA, n_params)``."""
@@ -244,6 +250,9 @@ class ChannelDiagnosis:
     alternative: dict[str, Any] | None = None
     """Another set of effects that explains the record nearly as well and was not kept
     (:attr:`_Path.alternative`; JSON ``alternative``, None when there is none)."""
+    look_alike: dict[str, Any] | None = None
+    """Another effect the fit part does not tell apart from the verdict's (JSON
+    ``look_alike``, :func:`_look_alike_dict`; None when there is none)."""
     temp_mean_c: float = float("nan")
     """The record's mean temperature (degC; NaN without one)."""
     temp_ref_c: float = float("nan")
@@ -335,6 +344,7 @@ class ChannelDiagnosis:
             "global": self.before.global_dict(),
             "background": self.background,
             "alternative": self.alternative,
+            "look_alike": self.look_alike,
             "ramp_temperature_alias": self.ramp_temperature,
         }
         for entry in out["effects"]:
@@ -968,6 +978,36 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
     return None, None
 
 
+def _look_alike(ranked: list[Candidate], best: dict[int, np.ndarray], chosen: Candidate,
+                hold: PartSetup | None, st: _Step,
+                replicate_check: Callable[[Candidate], str] | None
+                ) -> tuple[Candidate, Candidate] | None:
+    """``(chosen, rival)`` when the best-scoring candidate of another effect that
+    :func:`_choose` did not examine scores within :data:`LOOK_ALIKE_SCORE` of ``chosen``
+    and passes the same checks (:func:`_acceptable`, the held-out check included, and the
+    replicates'): the fit part does not tell the two apart (ADIS16405 backgrounds: an
+    injected random walk named ``temperature`` by 90.0 against 90.8, a Gauss-Markov
+    process named ``flicker`` by 39.6 against 40.4), which the verdict then says. A
+    rival the checks refuse gets that reason as its ``note`` (the runner-up's "refused"
+    in the report); None when there is no such rival or its realisations were not
+    kept."""
+    rival = next((c for c in ranked if c is not chosen and c.effect != chosen.effect
+                  and not c.refusal and not c.note and c.score >= chosen.score), None)
+    if rival is None or rival.score - chosen.score >= LOOK_ALIKE_SCORE:
+        return None
+    cs = best.get(id(rival))
+    if cs is None:
+        return None
+    if hold is not None and st.hold is not None and rival.holdout is None:
+        n_fit = cs.shape[1] - len(hold.series.y)
+        rival.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]), rival.noise)
+        rival.holdout_dparts = _holdout_drop(st.hold, rival, hold)
+    rival.note = _acceptable(rival, st)
+    if not rival.note and replicate_check is not None:
+        rival.note = replicate_check(rival)
+    return None if rival.note else (chosen, rival)
+
+
 def _on_replicates(variant: Variant, channel: str, reps: list[tuple[PartSetup, Series]],
                    seeds: list[int]) -> list[Comparison]:
     """Each replicate recording against realisations of ``variant`` over it."""
@@ -1403,6 +1443,10 @@ class _Path:
     alternative: dict[str, Any] | None = None
     """The selection that examined the fired deterministic effects first, where it kept
     other effects and was not taken (:func:`_better_start`; JSON ``alternative``)."""
+    look_alike: tuple[Candidate, Candidate] | None = None
+    """The first step's chosen candidate and a candidate of another effect that scores
+    within :data:`LOOK_ALIKE_SCORE` of it and passes the same checks
+    (:func:`_look_alike`)."""
 
 
 def _fired_effects(st: _Step) -> tuple[str, ...]:
@@ -1458,9 +1502,12 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
             ranked, best_sims, ev = _evaluate(r, path.kept, st, sims, subset)
             if k == 0 and subset is todo:
                 path.ranked0, path.ev0 = ranked, ev
-            chosen, chosen_sims = _choose(ranked, best_sims, r.hold, st, _check_of(
-                variant, r.channel, reps, r.seeds, path.rep_now))
+            check = _check_of(variant, r.channel, reps, r.seeds, path.rep_now)
+            chosen, chosen_sims = _choose(ranked, best_sims, r.hold, st, check)
             if chosen is not None and chosen_sims is not None:
+                if k == 0 and subset is todo:
+                    path.look_alike = _look_alike(ranked, best_sims, chosen, r.hold, st,
+                                                  check)
                 break
         if chosen is None or chosen_sims is None:
             path.residual = st.significant
@@ -1580,7 +1627,7 @@ def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
                   f"tests fired are tried first: score {s_alt:.1f} against {s_main:.1f} on the fit "
                   f"part, held-out gap's excess over its scatter {h_alt:.3f} against "
                   f"{h_main:.3f} (scatter {scatter:.3f})")
-    alt.ranked0, alt.ev0 = main.ranked0, main.ev0
+    alt.ranked0, alt.ev0, alt.look_alike = main.ranked0, main.ev0, main.look_alike
     return alt, gone
 
 
@@ -1720,10 +1767,27 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             ramp_temperature=ramp_as_temperature(kept, cm0, series),
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [],
-                            alternative=path.alternative)
+                            alternative=path.alternative,
+                            look_alike=_look_alike_dict(path.look_alike, verdict, kept))
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag
+
+
+def _look_alike_dict(pair: tuple[Candidate, Candidate] | None, verdict: str,
+                     kept: list[Candidate]) -> dict[str, Any] | None:
+    """JSON ``look_alike``: the first step's rival of the verdict (:func:`_look_alike`)
+    when the verdict is the effect it rivalled and the rival was not kept later."""
+    if pair is None:
+        return None
+    chosen, rival = pair
+    if chosen.effect != verdict or rival.effect in {c.effect for c in kept}:
+        return None
+    return {"effect": rival.effect, "params": rival.params, **rival.at_output(),
+            "score": rival.score, "score_verdict": chosen.score,
+            "holdout_chi2_drop": (None if rival.holdout is None else rival.holdout_dchi2),
+            "holdout_chi2_drop_verdict": (None if chosen.holdout is None
+                                          else chosen.holdout_dchi2)}
 
 
 RAMP_TEMP_R = 0.9

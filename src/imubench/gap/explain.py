@@ -509,7 +509,7 @@ def headline(c: dict[str, Any], realisations: int,
         alone += f" ({_not_independent(main)})"
     if others and alone.startswith("; modelling it closes "):  # read as all of them (a reviewer)
         alone = alone.replace("; modelling it closes ", "; modelling it on its own closes ", 1)
-    text = text[0].upper() + text[1:] + alone + "."
+    text = text[0].upper() + text[1:] + alone + "." + _look_alike_text(c, units)
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units, k)
                                            + _unfixed(k) for k in others)
@@ -525,6 +525,24 @@ def headline(c: dict[str, Any], realisations: int,
         else:
             text += "."
     return text
+
+
+def _look_alike_text(c: dict[str, Any], units: Mapping[str, str] | None) -> str:
+    """' A look-alike fits nearly as well ...' for the JSON's ``look_alike`` (empty
+    without one): another effect that scores within 2 of the verdict's on the fit part
+    and passes the same checks, so that the record does not tell the two apart."""
+    la = c.get("look_alike")
+    if not la:
+        return ""
+    held = ""
+    if la.get("holdout_chi2_drop") is not None and la.get("holdout_chi2_drop_verdict") is not None:
+        held = (f"; the held-out chi-squared falls by {la['holdout_chi2_drop']:.1f} with it, "
+                f"by {la['holdout_chi2_drop_verdict']:.1f} with the verdict")
+    return (f" A look-alike fits nearly as well, and this record does not tell the two "
+            f"apart: {describe(la['effect'], la['params'], units, la)} (score "
+            f"{la['score']:.1f} against {la['score_verdict']:.1f} on the fit part, lower is "
+            f"better; a difference below 2 is no evidence either way), and it passes the "
+            f"same checks{held}.")
 
 
 PART_NAMES = {"allan": "Allan curve", "bands": "spectrum bands", "statistics":
