@@ -79,6 +79,19 @@ def test_a_look_alike_the_record_does_not_tell_apart_is_said_in_the_headline() -
     assert "look-alike" not in verdict_words({**c, "look_alike": None}, 10, units)
 
 
+def test_a_departure_left_after_the_kept_effects_names_the_tests_that_still_fire() -> None:
+    """An outside reviewer read "a significant departure remains" with every test it
+    listed below its threshold: the one still firing was a new Allan region."""
+    c = _entry("temperature", effects=[TEMP_EFFECT], kept=[TEMP_EFFECT],
+               residual_significant=True, fired_after=["regions", "drift_t"],
+               regions_after=[{"tau_min_s": 1.23, "tau_max_s": 2.46,
+                               "direction": "real_below", "gap": 0.06, "z_max": 4.14}])
+    text = "\n".join(explain_channel(c, 10))
+    assert ("A significant departure remains after the kept effects (still firing: the "
+            "Allan curve real below over 1.23-2.46 s (largest |z| 4.1); the whole-record "
+            "drift test).") in text
+
+
 def test_unexplained_gives_the_shortfall() -> None:
     c = _entry("unexplained", effects=[RW_EFFECT],
                bands=[{"f_min_hz": 0.01, "f_max_hz": 0.04, "direction": "real_above"}])

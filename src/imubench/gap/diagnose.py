@@ -253,6 +253,9 @@ class ChannelDiagnosis:
     look_alike: dict[str, Any] | None = None
     """Another effect the fit part does not tell apart from the verdict's (JSON
     ``look_alike``, :func:`_look_alike_dict`; None when there is none)."""
+    residual_step: _Step | None = None
+    """The step against the model with the kept effects when a significant departure is
+    left after them (JSON ``fired_after``, ``regions_after``: what still fires)."""
     temp_mean_c: float = float("nan")
     """The record's mean temperature (degC; NaN without one)."""
     temp_ref_c: float = float("nan")
@@ -309,6 +312,10 @@ class ChannelDiagnosis:
             "not_kept": [{"effect": c.effect, "params": c.params, **c.at_output(),
                           "reason": c.note} for c in self.not_kept],
             "residual_significant": self.residual_significant,
+            "fired_after": ([] if self.residual_step is None
+                            else self.residual_step.fired),
+            "regions_after": ([] if self.residual_step is None else
+                              [r.to_dict() for r in self.residual_step.before.regions]),
             "gap_after": ff.gap,
             "gap_null": self.before.gap_null,
             "gap_null_after": ff.gap_null,
@@ -607,6 +614,17 @@ class _Step:
     @property
     def significant(self) -> bool:
         return self.before.significant or self.record_fired
+
+    @property
+    def fired(self) -> list[str]:
+        """The tests that fire, by the JSON's names: the fit part's
+        (:attr:`~imubench.gap.curves.Comparison.fired`) and the whole-record ones
+        (``bias_step_z``, ``drift_t``, ``temperature_record_z``, ``line_across_z``, as in
+        ``whole_record_after``)."""
+        return self.before.fired + [name for name, hit in (
+            ("bias_step_z", self.step_fired), ("drift_t", self.drift_fired),
+            ("temperature_record_z", self.temp_fired), ("line_across_z", self.across_fired))
+            if hit]
 
     def _record_excess(self, step_z: float, drift_t: float, temp_z: float,
                        across_z: float) -> float:
@@ -1768,7 +1786,8 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [],
                             alternative=path.alternative,
-                            look_alike=_look_alike_dict(path.look_alike, verdict, kept))
+                            look_alike=_look_alike_dict(path.look_alike, verdict, kept),
+                            residual_step=realiser.step(kept) if kept and residual else None)
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag

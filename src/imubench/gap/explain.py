@@ -527,6 +527,28 @@ def headline(c: dict[str, Any], realisations: int,
     return text
 
 
+RECORD_WORDS = {"bias_step_z": "the whole-record bias-step test",
+                "drift_t": "the whole-record drift test",
+                "temperature_record_z": "the whole-record temperature test",
+                "line_across_z": "the held-out part's line test"}
+"""The whole-record tests of the JSON's ``fired_after``, in words."""
+
+
+def _still_firing(c: dict[str, Any]) -> str:
+    """' (still firing: ...)': the tests that fire against the model with the kept
+    effects (the JSON's ``fired_after``, the Allan regions from ``regions_after``); empty
+    without them."""
+    words = []
+    for name in c.get("fired_after") or []:
+        if name == "regions":
+            words += [f"the Allan curve {r['direction'].replace('_', ' ')} "
+                      f"{_span(r['tau_min_s'], r['tau_max_s'], 's')} (largest |z| "
+                      f"{r['z_max']:.1f})" for r in c.get("regions_after") or []]
+        else:
+            words.append(FIRED_WORDS.get(name) or RECORD_WORDS.get(name, name))
+    return f" (still firing: {'; '.join(words)})" if words else ""
+
+
 def _look_alike_text(c: dict[str, Any], units: Mapping[str, str] | None) -> str:
     """' A look-alike fits nearly as well ...' for the JSON's ``look_alike`` (empty
     without one): another effect that scores within 2 of the verdict's on the fit part
@@ -698,7 +720,8 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
             why = f" (the selection keeps at most {MAX_EFFECTS} effects)"
         else:
             why = ""
-        out.append(f"A significant departure remains after the kept effects{why}.")
+        out.append(f"A significant departure remains after the kept effects"
+                   f"{_still_firing(c)}{why}.")
     alt = _alternative_line(c, units)
     if alt:
         out.append(alt)
