@@ -485,11 +485,15 @@ def _without_line(tau_s: np.ndarray, real_avar: np.ndarray, rate_hz: float,
     """The real Allan variance less the fitted spectral line's (IEEE 952 C.7 for means of
     m samples, :func:`lsm6ds_sim.noise.avar_sine_sampled`), floored at a tenth of it.
 
-    The base model's refit is fitted to this: where a line stands in the spectrum, its
-    power belongs to the sine candidate, not to the white level or an output filter
-    (Samsung S5 accelerometer, a 0.36 mg sine at 1.02 Hz: the refit took it as white
-    8.8e-5 g/sqrt(Hz) behind a 4.3 Hz two-pole filter, ranked first, and the sine was then
-    never kept, so no sine limit was found on ax and ay)."""
+    The noise processes (flicker, random walk, quantization, Markov, telegraph) and the
+    base model's refit are fitted to this: where a line stands in the spectrum, its power
+    belongs to the sine candidate, not to the white level or an output filter (Samsung S5
+    accelerometer, a 0.36 mg sine at 1.02 Hz: the refit took it as white 8.8e-5
+    g/sqrt(Hz) behind a 4.3 Hz two-pole filter, ranked first, and the sine was then never
+    kept, so no sine limit was found on ax and ay), nor to a Gauss-Markov process (S5 gx,
+    16 mdps at 0.97 Hz: a Markov process kept first took the line's variance, the sine
+    then raised the chi-squared beside it and was never kept, 1 of 3 injections lost at
+    every size up to 16x)."""
     if sf is None:
         return real_avar
     line = avar_sine_sampled(tau_s, sf.sine_amplitude, sf.sine_freq, 1.0 / rate_hz)
@@ -540,11 +544,24 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     model_avar = cur.avar.mean(axis=0)
     sig = sigma_ln_adev
     dof = cur.k - 1
+    line: evidence.SineFit | None = None
+    if "sine" in effects:
+        # the line the held-out part confirmed, unless the fit part's own line test
+        # fired: its gate (line z 3) alone is weaker evidence (an outside reviewer's
+        # drifting 12 Hz line, confirmed at z 5.1, was fitted at a 0.05 Hz peak of
+        # line z > 3 in the flicker's range, and refused)
+        guess = (line_hint_hz if line_hint_hz is not None and "line_z" not in before.fired
+                 else before.line_f_hz if before.line_z > Z_LINE_CANDIDATE else None)
+        if guess is not None:
+            line = evidence.fit_sine(s.y, s.rate_hz, guess, s.rate_hz / line_segment(len(s.y)))
+            ev["sine"] = line
+    # the Allan variance the noise processes and the base model's refit are fitted to
+    real_avar = _without_line(fit.tau_s, fit.real.avar, s.rate_hz, line)
     markov: tuple[float, float] | None = None  # (sigma, tau_c), shared by the telegraph
     if {"markov", "telegraph"} & set(effects):
-        sg, tc = avarfit.fit_markov(fit.tau_s, fit.real.avar, model_avar, sig)
+        sg, tc = avarfit.fit_markov(fit.tau_s, real_avar, model_avar, sig)
         share = markov_share(sg, tc, fit.tau_s, model_avar)
-        descent = avarfit.markov_over_lookalikes(fit.tau_s, fit.real.avar, model_avar, sig,
+        descent = avarfit.markov_over_lookalikes(fit.tau_s, real_avar, model_avar, sig,
                                                  sg, tc)
         ev["markov_fit"] = (sg, tc, float(fit.tau_s[-1]) / MARKOV_SPAN, share, descent)
         shown = (tc * MARKOV_SPAN <= fit.tau_s[-1] and descent > 0.0) or (
@@ -555,11 +572,11 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                 2.0 * sg, 2.0 * tc, fit.tau_s, model_avar, len(s.y) / s.rate_hz))
     for eff in effects:
         if eff in avarfit.BASES:
-            p = avarfit.fit_single(eff, fit.tau_s, fit.real.avar, model_avar, sig)
+            p = avarfit.fit_single(eff, fit.tau_s, real_avar, model_avar, sig)
             p0 = getattr(cm, eff)
             cands.append(Candidate(eff, {eff: math.sqrt(p0 * p0 + p * p)}, 1))
             if eff == "quantization":
-                cands[-1].refusal = _quantization_refusal(fit.tau_s, fit.real.avar,
+                cands[-1].refusal = _quantization_refusal(fit.tau_s, real_avar,
                                                           model_avar, sig)
         elif eff == "ramp":
             cands.append(Candidate(eff, {"ramp": cm.ramp + fit.real.trend_slope
@@ -569,8 +586,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                           evidence.block_means_of(s.y, m))
         elif eff == "base_model":
             bw, order, white = avarfit.fit_base_model(
-                cm, fit.tau_s, s.rate_hz, _without_line(fit.tau_s, fit.real.avar, s.rate_hz,
-                                                        ev.get("sine")), model_avar, sig)
+                cm, fit.tau_s, s.rate_hz, real_avar, model_avar, sig)
             cands.append(Candidate(eff, {"bandwidth_hz": bw, "filter_order": order,
                                          "white": white}, 3))
         elif eff == "markov" and markov is not None:
@@ -579,20 +595,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
         elif eff == "telegraph" and markov is not None:
             cands.append(Candidate(eff, {"telegraph_step": 2.0 * markov[0],
                                          "telegraph_dwell_s": 2.0 * markov[1]}, 2))
-        elif eff == "sine":
-            # the line the held-out part confirmed, unless the fit part's own line test
-            # fired: its gate (line z 3) alone is weaker evidence (an outside reviewer's
-            # drifting 12 Hz line, confirmed at z 5.1, was fitted at a 0.05 Hz peak of
-            # line z > 3 in the flicker's range, and refused)
-            guess = (line_hint_hz if line_hint_hz is not None and "line_z" not in before.fired
-                     else before.line_f_hz if before.line_z > Z_LINE_CANDIDATE else None)
-            if guess is not None:
-                bin_hz = s.rate_hz / line_segment(len(s.y))
-                sf = evidence.fit_sine(s.y, s.rate_hz, guess, bin_hz)
-                g2 = filter_power_gain(sf.sine_freq, cm, s.rate_hz)
-                cands.append(Candidate(eff, {"sine_amplitude": sf.sine_amplitude / math.sqrt(g2),
-                                             "sine_freq": sf.sine_freq}, 2, output_gain2=g2))
-                ev["sine"] = sf
+        elif eff == "sine" and line is not None:
+            g2 = filter_power_gain(line.sine_freq, cm, s.rate_hz)
+            cands.append(Candidate(eff, {"sine_amplitude": line.sine_amplitude / math.sqrt(g2),
+                                         "sine_freq": line.sine_freq}, 2, output_gain2=g2))
         elif eff == "resonance":
             above = any(b["direction"] == "real_above" for b in before.bands)
             if above or before.line_z > Z_LINE_CANDIDATE:

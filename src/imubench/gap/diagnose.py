@@ -92,6 +92,7 @@ from imubench.gap.parts import PartSetup, RecordTemperature, Series, seeds_of, s
 from imubench.gap.two_level import two_level_llr as llr
 from imubench.gap.uncertainty import Refit, standard_errors
 from imubench.noisefit.outliers import held_runs
+from imubench.noisefit.spectral_line import SCAN_BAND, peak_test
 
 MIN_CLOSURE = 1.0 / 3.0
 """Share of the significant excess chi-squared (over the taus, bands and statistics that
@@ -846,6 +847,10 @@ def _acceptable(c: Candidate, st: _Step) -> str:
             parts = ", ".join(f"{k} {v:.1f}" for k, v in c.holdout_dparts.items())
             return (f"does not reduce the held-out chi-squared beyond its scatter (drop "
                     f"{c.holdout_dchi2:.1f}: {parts}; needs {need:.1f})")
+        if c.effect == "resonance":
+            unseen = _peak_not_held_out(c, st)
+            if unseen:
+                return unseen
         if c.effect == "ramp":
             opposite = _drifts_the_other_way(c.params["ramp"], *st.hold_drift())
             if opposite:
@@ -853,6 +858,27 @@ def _acceptable(c: Candidate, st: _Step) -> str:
         if noise:
             return _departs_more("the held-out Allan curve", st.hold, c.holdout)
     return ""
+
+
+RESONANCE_HELD_OUT_Z = 2.0
+"""z of the held-out part's own narrowband-peak test a kept resonance needs there."""
+
+
+def _peak_not_held_out(c: Candidate, st: _Step) -> str:
+    """Why a resonance is refused because the held-out part, less the kept effects'
+    deterministic parts, shows no narrowband peak at its centre
+    (:func:`imubench.noisefit.spectral_line.peak_test` over [f0 / 1.25, 1.25 f0], z
+    above :data:`RESONANCE_HELD_OUT_Z`); empty when it does or cannot be tested."""
+    fit_part, hold = st.series_parts
+    if hold is None:
+        return ""
+    f0 = c.params["resonance_freq_hz"]
+    pk = peak_test(st.residual[len(fit_part.y):], st.rate_hz, f0 / SCAN_BAND,
+                   min(f0 * SCAN_BAND, 0.49 * st.rate_hz))
+    if pk is None or pk.z > RESONANCE_HELD_OUT_Z:
+        return ""
+    return (f"the held-out part shows no narrowband peak there: {pk.describe()}, z "
+            f"{pk.z:.1f} against its flanks (needs {RESONANCE_HELD_OUT_Z:.1f})")
 
 
 def _departs_more(where: str, before: Comparison, after: Comparison) -> str:
