@@ -72,9 +72,13 @@ def test_a_look_alike_the_record_does_not_tell_apart_is_said_in_the_headline() -
                look_alike=look)
     text = verdict_words(c, 10, units)
     assert text.startswith("The rate drifts with temperature, 0.0081 dps/degC")
-    assert ("A look-alike fits nearly as well, and this record does not tell the two "
+    assert ("A look-alike fits nearly as well, and the fit part does not tell the two "
             "apart: the bias wanders as a random walk (K = 0.00239 dps/sqrt(s)) (score "
             "90.8 against 90.0 on the fit part") in text
+    assert "decided" not in text  # the verdict scored better on the fit part as well
+    swapped = verdict_words({**c, "look_alike": {**look, "score": 89.5}}, 10, units)
+    assert ("no evidence either way, the held-out part decided), and it passes the same "
+            "checks") in swapped
     assert "held-out chi-squared falls by 73.7 with it, by 70.5 with the verdict." in text
     assert "look-alike" not in verdict_words({**c, "look_alike": None}, 10, units)
 

@@ -111,9 +111,10 @@ HOLDOUT_TOP = 3
 LOOK_ALIKE_SCORE = 2.0
 """A first-step candidate of another effect that scores within this of the chosen one
 (score: chi-squared plus the BIC penalty, lower is better) and passes the same checks is
-reported as a look-alike the record does not tell apart from the verdict (JSON
-``look_alike``): a BIC difference below 2 is "not worth more than a bare mention" (Kass
-and Raftery, J. Am. Stat. Assoc. 90, 1995, p. 777)."""
+reported as a look-alike the fit part does not tell apart from the verdict (JSON
+``look_alike``), and the held-out part decides between the two
+(:func:`_held_out_prefers`): a BIC difference below 2 is "not worth more than a bare
+mention" (Kass and Raftery, J. Am. Stat. Assoc. 90, 1995, p. 777)."""
 HOLDOUT_ALPHA = 0.05
 """Level of the held-out check: the held-out chi-squared must fall by more than
 ``chi2.isf(HOLDOUT_ALPHA, n_params)``."""
@@ -1031,10 +1032,10 @@ def _look_alike(ranked: list[Candidate], best: dict[int, np.ndarray], chosen: Ca
     and passes the same checks (:func:`_acceptable`, the held-out check included, and the
     replicates'): the fit part does not tell the two apart (ADIS16405 backgrounds: an
     injected random walk named ``temperature`` by 90.0 against 90.8, a Gauss-Markov
-    process named ``flicker`` by 39.6 against 40.4), which the verdict then says. A
-    rival the checks refuse gets that reason as its ``note`` (the runner-up's "refused"
-    in the report); None when there is no such rival or its realisations were not
-    kept."""
+    process named ``flicker`` by 39.6 against 40.4), which the verdict then says and
+    the held-out part decides (:func:`_held_out_prefers`). A rival the checks refuse
+    gets that reason as its ``note`` (the runner-up's "refused" in the report); None
+    when there is no such rival or its realisations were not kept."""
     rival = next((c for c in ranked if c is not chosen and c.effect != chosen.effect
                   and not c.refusal and not c.note and c.score >= chosen.score), None)
     if rival is None or rival.score - chosen.score >= LOOK_ALIKE_SCORE:
@@ -1552,6 +1553,10 @@ def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, .
                 if k == 0 and subset is todo:
                     path.look_alike = _look_alike(ranked, best_sims, chosen, r.hold, st,
                                                   check)
+                    if path.look_alike is not None and _held_out_prefers(*path.look_alike):
+                        rival = path.look_alike[1]
+                        chosen, chosen_sims = rival, best_sims[id(rival)]
+                        path.look_alike = (rival, path.look_alike[0])
                 break
         if chosen is None or chosen_sims is None:
             path.residual = st.significant
@@ -1817,6 +1822,16 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag
+
+
+def _held_out_prefers(chosen: Candidate, rival: Candidate) -> bool:
+    """Whether the look-alike ``rival`` is taken in place of ``chosen``: the fit part does
+    not tell the two apart (:func:`_look_alike`), so the held-out part decides, by the
+    fit-part score less the held-out chi-squared drop (the evidence of both parts) being
+    lower."""
+    if chosen.holdout is None or rival.holdout is None:
+        return False
+    return rival.score - rival.holdout_dchi2 < chosen.score - chosen.holdout_dchi2
 
 
 def _look_alike_dict(pair: tuple[Candidate, Candidate] | None, verdict: str,

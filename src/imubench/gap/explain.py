@@ -560,11 +560,12 @@ def _look_alike_text(c: dict[str, Any], units: Mapping[str, str] | None) -> str:
     if la.get("holdout_chi2_drop") is not None and la.get("holdout_chi2_drop_verdict") is not None:
         held = (f"; the held-out chi-squared falls by {la['holdout_chi2_drop']:.1f} with it, "
                 f"by {la['holdout_chi2_drop_verdict']:.1f} with the verdict")
-    return (f" A look-alike fits nearly as well, and this record does not tell the two "
+    decided = (", the held-out part decided" if la["score"] < la["score_verdict"] else "")
+    return (f" A look-alike fits nearly as well, and the fit part does not tell the two "
             f"apart: {describe(la['effect'], la['params'], units, la)} (score "
             f"{la['score']:.1f} against {la['score_verdict']:.1f} on the fit part, lower is "
-            f"better; a difference below 2 is no evidence either way), and it passes the "
-            f"same checks{held}.")
+            f"better; a difference below 2 is no evidence either way{decided}), and it "
+            f"passes the same checks{held}.")
 
 
 PART_NAMES = {"allan": "Allan curve", "bands": "spectrum bands", "statistics":
