@@ -1011,16 +1011,25 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
         cs = best.get(id(c))
         if cs is None:
             continue
-        if hold is not None and st.hold is not None:
-            n_fit = cs.shape[1] - len(hold.series.y)
-            c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]), c.noise)
-            c.holdout_dparts = _holdout_drop(st.hold, c, hold)
-        c.note = _acceptable(c, st)
-        if not c.note and replicate_check is not None:
-            c.note = replicate_check(c)
+        c.note = _examine(c, cs, hold, st, replicate_check)
         if not c.note:
             return c, cs
     return None, None
+
+
+def _examine(c: Candidate, cs: np.ndarray, hold: PartSetup | None, st: _Step,
+             replicate_check: Callable[[Candidate], str] | None) -> str:
+    """Why ``c`` (realised as ``cs``) is not kept, empty if it is: its held-out comparison
+    (made here when there is a held-out part), :func:`_acceptable`, then the replicates'
+    check."""
+    if hold is not None and st.hold is not None and c.holdout is None:
+        n_fit = cs.shape[1] - len(hold.series.y)
+        c.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]), c.noise)
+        c.holdout_dparts = _holdout_drop(st.hold, c, hold)
+    note = _acceptable(c, st)
+    if not note and replicate_check is not None:
+        note = replicate_check(c)
+    return note
 
 
 def _look_alike(ranked: list[Candidate], best: dict[int, np.ndarray], chosen: Candidate,
@@ -1043,13 +1052,7 @@ def _look_alike(ranked: list[Candidate], best: dict[int, np.ndarray], chosen: Ca
     cs = best.get(id(rival))
     if cs is None:
         return None
-    if hold is not None and st.hold is not None and rival.holdout is None:
-        n_fit = cs.shape[1] - len(hold.series.y)
-        rival.holdout = hold.compare(hold.sim_features(cs[:, n_fit:]), rival.noise)
-        rival.holdout_dparts = _holdout_drop(st.hold, rival, hold)
-    rival.note = _acceptable(rival, st)
-    if not rival.note and replicate_check is not None:
-        rival.note = replicate_check(rival)
+    rival.note = _examine(rival, cs, hold, st, replicate_check)
     return None if rival.note else (chosen, rival)
 
 
