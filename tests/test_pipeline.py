@@ -3,6 +3,7 @@ consumers, stalls between the FIFO status and data reads, and chip faults (issue
 
 from __future__ import annotations
 
+import threading
 import time
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from imubench.commands import acquire as acquire_cmd
 from imubench.pipeline import NOT_PROCESSED, Consumer, Pipeline
 from imubench.recorder import Recorder
 from imubench.recording import load_recording
+from imubench.sources.base import SourceInfo
 from imubench.sources.registry import open_source
 
 
@@ -259,6 +261,33 @@ def test_a_pipeline_that_will_not_start_closes_its_recording(tmp_path: Path) -> 
                         [Recorder(out, {})])
     pipeline.prepare()
     pipeline.close_unstarted()
+    r = load_recording(out)
+    assert r.complete and len(r) == 0
+
+
+def test_a_recording_opened_after_the_daemon_gave_up_on_the_start_is_closed(
+        tmp_path: Path) -> None:
+    """The daemon stops a start while a set-up thread is inside a consumer's prepare
+    (opening the recording, compiling the kernels) and abandons that thread: what the
+    thread opens after the give-up is closed by it, with the end record (the daemon's
+    SIGINT-while-compiling test found a recording without one under load)."""
+    out = tmp_path / "late.imbr"
+    opening, release = threading.Event(), threading.Event()
+
+    class SlowRecorder(Recorder):
+        def prepare(self, info: SourceInfo) -> None:
+            opening.set()
+            release.wait(10)
+            super().prepare(info)
+
+    pipeline = Pipeline(open_source("sim://lsm6dsl?odr_hz=104&duration_s=1"),
+                        [SlowRecorder(out, {})])
+    setup = threading.Thread(target=pipeline.prepare)
+    setup.start()
+    assert opening.wait(10)
+    pipeline.close_unstarted()  # while the recorder is still being set up
+    release.set()
+    setup.join(10)
     r = load_recording(out)
     assert r.complete and len(r) == 0
 

@@ -177,6 +177,15 @@ class _Runner(threading.Thread):
         return batch
 
 
+def _finish_quietly(c: Consumer) -> None:
+    """``c.finish()``, an error logged rather than raised (the others are closed all the
+    same)."""
+    try:
+        c.finish()
+    except Exception as exc:
+        log.error("consumer %s failed to finish: %s", c.name, exc)
+
+
 class Pipeline:
     """Source -> ring buffer -> consumers (see the module docstring).
 
@@ -210,6 +219,10 @@ class Pipeline:
         self._runners: list[_Runner] = []
         self._thread: threading.Thread | None = None
         self._prepared: list[Consumer] = []
+        self._prepare_lock = threading.Lock()
+        self._given_up = False
+        """:meth:`close_unstarted` was called: a set-up still running closes what it
+        opens after that."""
         self.started_at: float | None = None
 
     # -- life cycle -------------------------------------------------------------------
@@ -223,7 +236,13 @@ class Pipeline:
         self.source.prepare()
         for c in self.consumers:
             c.prepare(self.source.info)
-            self._prepared.append(c)
+            with self._prepare_lock:
+                given_up = self._given_up
+                if not given_up:
+                    self._prepared.append(c)
+            if given_up:  # the daemon gave up on this start while c was being set up
+                _finish_quietly(c)
+                return
 
     def close_unstarted(self) -> None:
         """A pipeline that will not start (stopped while it was set up): each consumer
@@ -233,12 +252,11 @@ class Pipeline:
         threads finish them."""
         if self._runners:
             return
-        for c in list(self._prepared):  # (a set-up thread may still append to it)
-            try:
-                c.finish()
-            except Exception as exc:  # the others are closed all the same
-                log.error("consumer %s failed to finish: %s", c.name, exc)
-        self._prepared = []
+        with self._prepare_lock:  # a set-up thread still running closes what it opens next
+            self._given_up = True
+            prepared, self._prepared = self._prepared, []
+        for c in prepared:
+            _finish_quietly(c)
 
     def start(self) -> None:
         """Open the source and start the acquisition and consumer threads (call
