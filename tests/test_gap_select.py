@@ -39,7 +39,7 @@ from imubench.gap.curves import (
     welch_psd,
     wilson_hilferty_z,
 )
-from imubench.gap.diagnose import LOOK_ALIKE_SCORE, _peak_not_held_out
+from imubench.gap.diagnose import LOOK_ALIKE_SCORE, _held_out_prefers, _peak_not_held_out
 from imubench.gap.evidence import (
     drift_statistic,
     fit_bias_step,
@@ -391,6 +391,22 @@ def test_a_noise_process_kept_first_does_not_take_a_line_s_allan_variance() -> N
     assert kept["markov"]["markov_sigma"] == pytest.approx(0.01, rel=0.15)
     assert kept["markov"]["markov_tau"] == pytest.approx(1.0, rel=0.3)
     assert kept["sine"]["sine_amplitude"] == pytest.approx(0.015, rel=0.05)
+
+
+def test_the_held_out_part_decides_a_look_alike_only_where_it_is_independent() -> None:
+    """Between look-alikes the lower fit-part score less held-out chi-squared drop wins,
+    but never for an effect fitted on the whole record (the held-out part included)."""
+    def cand(effect: str, score: float, drop: float, whole: bool = False) -> Candidate:
+        c = Candidate(effect, {}, 1)
+        c.score, c.holdout_dparts, c.whole_record = score, {"allan": drop}, whole
+        c.holdout = cast(Any, object())
+        return c
+
+    chosen, rival = cand("flicker", 39.6, 52.4), cand("markov", 40.4, 64.5)
+    assert _held_out_prefers(chosen, rival) and not _held_out_prefers(rival, chosen)
+    assert not _held_out_prefers(cand("random_walk", 90.0, 10.0),
+                                 cand("temperature", 90.8, 70.0, whole=True))
+    assert not _held_out_prefers(cand("random_walk", 90.0, 10.0), cand("bias_step", 90.8, 70.0))
 
 
 def test_the_gls_temperature_slope_is_not_biased_by_a_ramp() -> None:

@@ -1831,8 +1831,10 @@ def _held_out_prefers(chosen: Candidate, rival: Candidate) -> bool:
     """Whether the look-alike ``rival`` is taken in place of ``chosen``: the fit part does
     not tell the two apart (:func:`_look_alike`), so the held-out part decides, by the
     fit-part score less the held-out chi-squared drop (the evidence of both parts) being
-    lower."""
-    if chosen.holdout is None or rival.holdout is None:
+    lower. Not where either was fitted on the whole record (a bias step, a temperature
+    response fitted there): the held-out part is not independent of it."""
+    if chosen.holdout is None or rival.holdout is None or chosen.on_record \
+            or rival.on_record:
         return False
     return rival.score - rival.holdout_dchi2 < chosen.score - chosen.holdout_dchi2
 
