@@ -80,6 +80,7 @@ from imubench.gap.curves import (
     STAT_TESTS,
     Z_SLOPE,
     Comparison,
+    Region,
     block_means,
     line_bands,
     line_z_cap,
@@ -255,9 +256,12 @@ class ChannelDiagnosis:
     look_alike: dict[str, Any] | None = None
     """Another effect the fit part does not tell apart from the verdict's (JSON
     ``look_alike``, :func:`_look_alike_dict`; None when there is none)."""
-    residual_step: _Step | None = None
-    """The step against the model with the kept effects when a significant departure is
-    left after them (JSON ``fired_after``, ``regions_after``: what still fires)."""
+    fired_after: list[str] = field(default_factory=list)
+    """The tests that still fire against the model with the kept effects
+    (:attr:`_Step.fired`; JSON ``fired_after``), empty when nothing significant is left."""
+    regions_after: list[Region] = field(default_factory=list)
+    """The fit part's Allan regions against the model with the kept effects, when a
+    significant departure is left (JSON ``regions_after``)."""
     temp_mean_c: float = float("nan")
     """The record's mean temperature (degC; NaN without one)."""
     temp_ref_c: float = float("nan")
@@ -314,10 +318,8 @@ class ChannelDiagnosis:
             "not_kept": [{"effect": c.effect, "params": c.params, **c.at_output(),
                           "reason": c.note} for c in self.not_kept],
             "residual_significant": self.residual_significant,
-            "fired_after": ([] if self.residual_step is None
-                            else self.residual_step.fired),
-            "regions_after": ([] if self.residual_step is None else
-                              [r.to_dict() for r in self.residual_step.before.regions]),
+            "fired_after": self.fired_after,
+            "regions_after": [r.to_dict() for r in self.regions_after],
             "gap_after": ff.gap,
             "gap_null": self.before.gap_null,
             "gap_null_after": ff.gap_null,
@@ -869,10 +871,9 @@ def _peak_not_held_out(c: Candidate, st: _Step) -> str:
     """Why a resonance is refused because the held-out part, less the kept effects'
     deterministic parts, shows no narrowband peak at its centre
     (:func:`imubench.noisefit.spectral_line.peak_test` over [f0 / 1.25, 1.25 f0], z
-    above :data:`RESONANCE_HELD_OUT_Z`); empty when it does or cannot be tested."""
-    fit_part, hold = st.series_parts
-    if hold is None:
-        return ""
+    above :data:`RESONANCE_HELD_OUT_Z`); empty when it does or cannot be tested. Called
+    by :func:`_acceptable` with a held-out part only."""
+    fit_part = st.series_parts[0]
     f0 = c.params["resonance_freq_hz"]
     pk = peak_test(st.residual[len(fit_part.y):], st.rate_hz, f0 / SCAN_BAND,
                    min(f0 * SCAN_BAND, 0.49 * st.rate_hz))
@@ -1820,8 +1821,10 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [],
                             alternative=path.alternative,
-                            look_alike=_look_alike_dict(path.look_alike, verdict, kept),
-                            residual_step=realiser.step(kept) if kept and residual else None)
+                            look_alike=_look_alike_dict(path.look_alike, verdict, kept))
+    if kept and residual:  # what still fires
+        last = realiser.step(kept)
+        diag.fired_after, diag.regions_after = last.fired, last.before.regions
     for (_, rep), b, a in zip(rep_setups, rep_before, rep_now, strict=True):
         diag.replicates.append((rep.name, b, a if kept else None))
     return diag

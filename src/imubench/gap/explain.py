@@ -552,7 +552,7 @@ def _still_firing(c: dict[str, Any]) -> str:
 def _look_alike_text(c: dict[str, Any], units: Mapping[str, str] | None) -> str:
     """' A look-alike fits nearly as well ...' for the JSON's ``look_alike`` (empty
     without one): another effect that scores within 2 of the verdict's on the fit part
-    and passes the same checks, so that the record does not tell the two apart."""
+    and passes the same checks, so that the fit part does not tell the two apart."""
     la = c.get("look_alike")
     if not la:
         return ""
