@@ -549,6 +549,22 @@ def test_a_departure_left_after_the_most_effects_says_the_selection_stopped() ->
             f"keeps at most {MAX_EFFECTS} effects).") in text, text
 
 
+def test_a_tried_noise_term_at_the_model_s_own_value_is_said_to_add_nothing() -> None:
+    """An outside reviewer read "tried next and not kept: flicker (flicker = 0.0130051
+    dps)" as an effect the record might have, where 0.0130051 was the model's own."""
+    kept = [{"effect": "markov", "params": {"markov_sigma": 0.01, "markov_tau": 1.0},
+             "gap_after": 0.1}]
+    tried = [{"effect": "flicker", "params": {"flicker": 0.0130051},
+              "model_params": {"flicker": 0.0130051}, "reason": "no gain on the fit part"},
+             {"effect": "random_walk", "params": {"random_walk": 2e-4},
+              "model_params": {"random_walk": 1e-4}, "reason": "no held-out gain"}]
+    c = _entry("markov", kept=kept, residual_significant=True, not_kept=tried)
+    text = "\n".join(explain_channel(c, 10))
+    assert ("flicker (flicker = 0.01301, no more than the model's own: it adds nothing): "
+            "no gain on the fit part") in text, text
+    assert "random_walk (random_walk = 0.0002): no held-out gain" in text
+
+
 def test_a_verdict_that_does_not_close_the_gap_alone_says_so_beside_the_others() -> None:
     """A temperature + sine pair: "on the held-out part the Allan-curve gap does not
     close (1.42 -> 1.35)" opened the sentence, before it said both together close 100 %;
@@ -649,6 +665,8 @@ def test_the_text_says_why_a_better_scoring_first_step_effect_is_not_the_verdict
                                              dropped=[flicker]), 10, units))
     assert "kept at step 2, after sine, in place of flicker, kept first and then replaced" \
         in text
+    # the first step's ranking is not the rivals of an effect kept at step 2
+    assert "runner-up" not in text and "first step's best" not in text
 
 
 def test_a_null_whose_held_out_part_passes_its_floor_says_so() -> None:

@@ -268,7 +268,7 @@ class ChannelDiagnosis:
     """The model's ``temp_ref`` (degC), where the temperature coefficients are stated."""
     model_noise: dict[str, float] = field(default_factory=dict)
     """The model's own value of each noise term a kept effect of the same name raises
-    (:data:`RAISED_TERMS`; JSON ``model_params`` of those kept effects)."""
+    (:data:`RAISED_TERMS`; JSON ``model_params`` of those kept, dropped or not kept)."""
     temp_spans_c: tuple[float, float, float] | None = None
     """The fit part's, the held-out part's and the record's temperature spans (degC) when
     the split cannot both fit and test a temperature response (:func:`temperature_spans`)."""
@@ -298,6 +298,16 @@ class ChannelDiagnosis:
     def final_holdout(self) -> Comparison | None:
         return self.kept[-1].holdout if self.kept else None
 
+    def _refused_dict(self, c: Candidate) -> dict[str, Any]:
+        """A dropped or not-kept candidate's JSON entry, with the model's own value of
+        the term it raises (``model_params``; a flicker fitted at the model's own value
+        raises nothing)."""
+        d: dict[str, Any] = {"effect": c.effect, "params": c.params, **c.at_output(),
+                             "reason": c.note}
+        if c.effect in self.model_noise:
+            d["model_params"] = {c.effect: self.model_noise[c.effect]}
+        return d
+
     def to_dict(self) -> dict[str, Any]:
         ff = self.final_fit or self.before
         kept_effects = {c.effect for c in self.kept}
@@ -313,10 +323,8 @@ class ChannelDiagnosis:
             "verdict": self.verdict,
             "reason": self.reason,
             "kept": [_kept_dict(c, self.model_noise) for c in self.kept],
-            "dropped": [{"effect": c.effect, "params": c.params, **c.at_output(),
-                         "reason": c.note} for c in self.pruned],
-            "not_kept": [{"effect": c.effect, "params": c.params, **c.at_output(),
-                          "reason": c.note} for c in self.not_kept],
+            "dropped": [self._refused_dict(c) for c in self.pruned],
+            "not_kept": [self._refused_dict(c) for c in self.not_kept],
             "residual_significant": self.residual_significant,
             "fired_after": self.fired_after,
             "regions_after": [r.to_dict() for r in self.regions_after],

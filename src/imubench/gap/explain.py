@@ -686,7 +686,7 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if not kept:
         return []
     h = c.get("holdout") or {}
-    dropped = [f"{d['effect']} ({params_text(d['params'], units)}), {d['reason']}"
+    dropped = [f"{d['effect']} ({_refused_params(d, units)}), {d['reason']}"
                for d in c.get("dropped", [])]
     parts = []
     for i, k in enumerate(kept, 1):
@@ -713,7 +713,7 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if dropped:
         out.append("Kept first, then dropped: " + "; ".join(dropped) + ".")
     if c.get("residual_significant") and c["verdict"] not in ("none",):
-        tried = [f"{d['effect']} ({params_text(d['params'], units)}): {d['reason']}"
+        tried = [f"{d['effect']} ({_refused_params(d, units)}): {d['reason']}"
                  for d in c.get("not_kept", [])]
         if tried:
             why = "; tried next and not kept: " + "; ".join(tried)
@@ -727,6 +727,19 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     if alt:
         out.append(alt)
     return out
+
+
+def _refused_params(d: dict[str, Any], units: Mapping[str, str] | None) -> str:
+    """A dropped or not-kept candidate's parameters, saying so when a noise term it raises
+    was fitted at no more than the model's own value (JSON ``model_params``): such a
+    candidate adds nothing to the model (an outside reviewer read a tried flicker equal
+    to the model's own as an effect)."""
+    txt = params_text(d["params"], units)
+    own = (d.get("model_params") or {}).get(d["effect"])
+    v = d["params"].get(d["effect"])
+    if own is not None and v is not None and v <= own * (1.0 + 1e-6):
+        txt += ", no more than the model's own: it adds nothing"
+    return txt
 
 
 def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None) -> str:
@@ -961,7 +974,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
         txt = f"Verdict {verdict} ({params_text(params, units, shown)}){after}: {share}"
         if "score" in w:
             txt += f"; score {w['score']:.1f}"
-        r = next((e for e in effects if e["effect"] != verdict), None)
+        # the effects list ranks the first step's candidates: a verdict kept at a later
+        # step had other rivals, chosen beside the effects kept before it (an outside
+        # reviewer read "the runner-up sine" for a sine kept at step 1)
+        r = (next((e for e in effects if e["effect"] != verdict), None) if step == 0
+             else None)
         if r is not None and "n_params" in w:
             # the first step's best score is not called a runner-up (an outside reviewer)
             lead = ("the runner-up" if "score" not in w or r["score"] >= w["score"]
