@@ -81,6 +81,14 @@ def test_a_look_alike_the_record_does_not_tell_apart_is_said_in_the_headline() -
             "checks") in swapped
     assert "held-out chi-squared falls by 73.7 with it, by 70.5 with the verdict." in text
     assert "look-alike" not in verdict_words({**c, "look_alike": None}, 10, units)
+    assert "a difference below 2 is no evidence" in text and "step" not in text
+    later = verdict_words({**c, "look_alike": {**look, "step": 2, "overdispersion": 147.2}},
+                          10, units)
+    assert ("A look-alike fits nearly as well at step 2, beside the effects kept before it, "
+            "and the fit part does not tell the two apart") in later
+    assert ("a difference below 294.4 (2 times the fit's chi-squared per term, 147.2: a fit "
+            "this far from a perfect one makes score differences that much weaker as "
+            "evidence) is no evidence either way") in later
 
 
 def test_a_departure_left_after_the_kept_effects_names_the_tests_that_still_fire() -> None:

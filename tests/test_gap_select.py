@@ -1129,6 +1129,44 @@ def test_real_null_does_not_keep_an_effect_that_moves_the_held_out_curve_away(
     assert h["gap_excess_after"] <= h["gap_excess_before"] + h["gap_null"]
 
 
+def test_look_alikes_on_a_far_off_base_model_are_decided_by_the_held_out_part(
+        reference_dir: Any) -> None:
+    """Samsung S5 accelerometer x, second segment against the first's model, with a random
+    walk of 2.09e-5 g/sqrt(s) added (acceptance 2's draw): after the base model's refit
+    the fit's chi-squared is ~147 per term, and a ramp beat the walk by 7.2 (4712.4
+    against 4719.6), a difference that is no evidence at that misfit; the held-out part,
+    whose chi-squared falls by 113.6 with the walk and 76.9 with the ramp, was not asked,
+    and the ramp was named. Score differences are weighed in units of the overdispersion
+    (chi-squared per term), at every step and in the sequential replacement."""
+    from imubench.noisefit import fit_channel
+
+    path = reference_dir / "imu-real" / "samsung-s5-static" / "samsung_galaxy_s5_static.npz"
+    if not path.is_file():
+        pytest.skip("Samsung S5 reference data not present")
+    z = np.load(path)
+    ax = z["accel_m_s2"][:, 0] / 9.80665
+    fs = float(z["fs_hz"])
+    n = len(ax) // 3
+    fit = fit_channel(ax[:n], fs, terms="auto", channel="ax")
+    model = NoiseModel.single_term("ax", **{k: v for k, v in fit.params.items() if v})
+    rng = np.random.default_rng([20261127, 3, 1, 2])  # bench_gap_limits_real's draw
+    y = ax[n:2 * n] + np.cumsum(2.09e-5 * math.sqrt(1.0 / fs) * rng.standard_normal(n))
+    t = np.arange(n) / fs  # the bench's temperature history (degC)
+    temp = np.round((24.0 + 3.0 * np.sin(2 * math.pi * t / 1300.0 + 0.7)
+                     + 1.5 * np.sin(2 * math.pi * t / 410.0) + t / 3600.0) / 0.0625) * 0.0625
+    d = diagnose_channel(model, "ax", Series(y, temp, fs, "s5:ax:2+rw"),
+                         GapOptions(seed=139, realisations=10))
+    out = d.to_dict()
+    assert [k["effect"] for k in out["kept"]] == ["base_model", "random_walk"], out["kept"]
+    assert out["kept"][1]["params"]["random_walk"] == pytest.approx(2.09e-5, rel=0.3)
+    look = out["look_alike"]
+    assert look is not None and look["effect"] == "ramp" and look["step"] == 2
+    assert look["overdispersion"] > 50.0
+    assert look["score"] < look["score_verdict"] < look["score"] + 2 * look["overdispersion"]
+    assert look["holdout_chi2_drop_verdict"] > look["holdout_chi2_drop"]
+    assert "the held-out part decided" in explain_channel(out, 10)[0]
+
+
 def test_a_noise_process_the_replicate_does_not_share_is_not_kept() -> None:
     """A random walk in this recording only (its own held-out half confirms it) is kept
     without replicates and refused when a replicate of the sensor does not show it (its

@@ -34,6 +34,7 @@ from imubench.gap.curves import (
 )
 from imubench.gap.diagnose import (
     HOLDOUT_ALPHA,
+    LOOK_ALIKE_SCORE,
     MAX_EFFECTS,
     MIN_CLOSURE,
     REPLACED,
@@ -551,8 +552,9 @@ def _still_firing(c: dict[str, Any]) -> str:
 
 def _look_alike_text(c: dict[str, Any], units: Mapping[str, str] | None) -> str:
     """' A look-alike fits nearly as well ...' for the JSON's ``look_alike`` (empty
-    without one): another effect that scores within 2 of the verdict's on the fit part
-    and passes the same checks, so that the fit part does not tell the two apart."""
+    without one): another effect that scores within 2 (times the step's overdispersion)
+    of the verdict's on the fit part and passes the same checks, so that the fit part
+    does not tell the two apart."""
     la = c.get("look_alike")
     if not la:
         return ""
@@ -561,11 +563,18 @@ def _look_alike_text(c: dict[str, Any], units: Mapping[str, str] | None) -> str:
         held = (f"; the held-out chi-squared falls by {la['holdout_chi2_drop']:.1f} with it, "
                 f"by {la['holdout_chi2_drop_verdict']:.1f} with the verdict")
     decided = (", the held-out part decided" if la["score"] < la["score_verdict"] else "")
-    return (f" A look-alike fits nearly as well, and the fit part does not tell the two "
-            f"apart: {describe(la['effect'], la['params'], units, la)} (score "
+    c_hat = la.get("overdispersion") or 1.0
+    below = (f"{LOOK_ALIKE_SCORE:g}" if c_hat <= 1.0 else
+             f"{LOOK_ALIKE_SCORE * c_hat:.1f} ({LOOK_ALIKE_SCORE:g} times the fit's "
+             f"chi-squared per term, {c_hat:.1f}: a fit this far from a perfect one makes "
+             "score differences that much weaker as evidence)")
+    at = (f" at step {la['step']}, beside the effects kept before it"
+          if (la.get("step") or 1) > 1 else "")
+    return (f" A look-alike fits nearly as well{at}, and the fit part does not tell the "
+            f"two apart: {describe(la['effect'], la['params'], units, la)} (score "
             f"{la['score']:.1f} against {la['score_verdict']:.1f} on the fit part, lower is "
-            f"better; a difference below 2 is no evidence either way{decided}), and it "
-            f"passes the same checks{held}.")
+            f"better; a difference below {below} is no evidence either way{decided}), and "
+            f"it passes the same checks{held}.")
 
 
 PART_NAMES = {"allan": "Allan curve", "bands": "spectrum bands", "statistics":
