@@ -909,7 +909,44 @@ def test_empty_cells_are_lost_samples_of_their_channel_and_said(
     with caplog.at_level("WARNING"):
         rec = load_recording(path)
     assert np.isnan(rec.channel("gx")[7]) and rec.channel("gy")[7] == 7 % 3
-    assert "empty cells (gx 1)" in caplog.text
+    assert "empty cells (gx 1 on line 9)" in caplog.text
+    assert rec.channel_lost("gx") == (1, 1) and rec.channel_lost("gy") == (0, 0)
+
+
+def test_where_empty_cells_and_holes_lie_is_said_by_line(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """An outside reviewer's 1000 empty cells were warned of with no line, and a 100 s
+    jump in the time column was reported only as a hole count."""
+    from imubench.recording import empty_cells_text
+
+    t = np.arange(3000) / 100.0
+    t[2000:] += 100.0  # 10 000 samples missing before the 2001st data row (line 2002)
+    rows = [f"{v:.2f},{'' if 500 <= k < 600 or k == 900 else k % 5}" for k, v in enumerate(t)]
+    path = tmp_path / "h.csv"
+    path.write_text("t,gyro_x [dps]\n" + "\n".join(rows) + "\n")
+    with caplog.at_level("WARNING"):
+        rec = load_recording(path)
+    assert "empty cells (gx 101 on lines 502-601, 902)" in caplog.text
+    assert ("1 hole(s) in the time stamps, 10000 samples missing: before line 2002 (t 120 s, "
+            "10000 samples)") in caplog.text
+    assert rec.lost_samples == 10000 and rec.channel_lost("gx") == (10101, 3)
+    assert empty_cells_text(rec, "gx") == (
+        "gx: 10101 samples lost in 3 run(s), 101 of them empty cells beside the recording's "
+        "1 hole(s); the curves are computed across them")
+
+
+def test_a_column_not_read_is_named_with_the_channel_it_may_misspell(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A header ``t,gx,tmep`` (an outside reviewer's): the temperature went unread and
+    untested, with nothing said."""
+    rows = [f"{k / 100:.2f},{k % 5},{25 + k % 3},1013" for k in range(300)]
+    path = tmp_path / "m.csv"
+    path.write_text("t,gx,tmep,pressure\n" + "\n".join(rows) + "\n")
+    with caplog.at_level("WARNING"):
+        rec = load_recording(path)
+    assert "temp" not in rec.channels
+    assert ("column(s) not read, no channel of that name: tmep (a misspelt temp? name it "
+            "with --columns temp=tmep), pressure") in caplog.text
 
 
 def test_missing_value_cells_interleaved_sensors_and_unreadable_columns(

@@ -511,18 +511,49 @@ def test_cli_says_how_much_of_the_recording_is_missing(tmp_path: Path) -> None:
     keep = np.ones(n, dtype=bool)
     keep[10_000:14_000] = False
     rec = tmp_path / "holes.csv"
-    rec.write_text("t,gx\n" + "".join(f"{i / 100:.2f},{v:.5f}\n"
-                                      for i, v in enumerate(rng.normal(0, 0.04, n)) if keep[i]))
+    rec.write_text("t,gx\n" + "".join(
+        f"{i / 100:.2f},{'' if 20_000 <= i < 20_100 else f'{v:.5f}'}\n"
+        for i, v in enumerate(rng.normal(0, 0.04, n)) if keep[i]))
     model = tmp_path / "m.toml"
     model.write_text(NoiseModel.single_term("gx", white=0.004).to_toml())
     out = tmp_path / "gap.json"
     r = run_cli(str(rec), "--model", str(model), "--channels", "gx", "--realisations", "3",
                 "--effects", "random_walk", "--json", str(out))
     assert r.returncode == 0, r.stderr
-    assert "36000 samples, 1 hole(s) (4000 samples, 10 % missing" in r.stdout.splitlines()[0]
+    head = r.stdout.splitlines()
+    assert "36000 samples, 1 hole(s) (4000 samples, 10 % missing" in head[0]
+    # empty cells are the channel's lost samples too (they were warned of, nothing more)
+    assert ("gx: 4100 samples lost in 2 run(s), 100 of them empty cells beside the "
+            "recording's 1 hole(s)") in head[1]
+    assert "empty cells (gx 100 on lines 16002-16101)" in r.stderr
     doc = json.loads(out.read_text())
     # samples: the record's span (holes included), as before
     assert (doc["samples"], doc["lost_samples"], doc["holes"]) == (40000, 4000, 1)
+    assert (doc["channels"]["gx"]["lost_samples"], doc["channels"]["gx"]["holes"]) == (4100, 2)
+    assert doc["effects_untested"] == {} and doc["effects_tested"] == ["random_walk"]
+
+
+def test_a_recording_without_temperature_says_the_temperature_went_untested(
+        tmp_path: Path, csv_rec: tuple[Path, Path]) -> None:
+    """An outside reviewer's header ``t,gx,tmep``: the default effects' temperature was
+    listed as tested and the text named temperature tests that never ran."""
+    from imubench.gap.explain import explain_channel
+
+    _, model = csv_rec
+    rec = tmp_path / "notemp.csv"
+    write_csv(rec, int(120 * RATE), {}, with_temp=False)
+    out = tmp_path / "x.json"
+    r = run_cli(str(rec), "--model", str(model), "--channels", "gx", "--realisations", "3",
+                "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    assert f"# temperature not tested: {rec} has no temperature column" in r.stdout
+    doc = json.loads(out.read_text())
+    assert "temperature" not in doc["effects_tested"]
+    assert doc["effects_untested"] == {"temperature": f"{rec} has no temperature column"}
+    said = [x for x in explain_channel(doc["channels"]["gx"], 3)
+            if x.startswith("Nothing exceeds")]
+    assert said and all("temperature level" not in x and "no temperature test" in x
+                        for x in said), said
 
 
 def test_a_bias_step_verdict_shows_the_block_means_of_the_whole_record(

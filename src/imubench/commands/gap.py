@@ -25,7 +25,7 @@ from imubench.gap.errors import GapError
 from imubench.gap.explain import explain_channel
 from imubench.gap.recording import default_jobs, pick_channels
 from imubench.progress import progress
-from imubench.recording import coverage_text, load_recording
+from imubench.recording import coverage_text, empty_cells_text, load_recording
 from imubench.recording.options import add_input_arguments, input_options
 
 
@@ -173,6 +173,11 @@ def run(args: argparse.Namespace) -> int:
     if rec.lost_samples:  # the realisations carry the same holes
         print(f"# {args.real}: {coverage_text(len(rec), rec.lost_samples, rec.holes)}",
               file=summary)
+    for ch in out["channels"]:
+        if (cells := empty_cells_text(rec, ch)) is not None:
+            print(f"# {args.real}: {cells}", file=summary)
+    for effect, why in out["effects_untested"].items():
+        print(f"# {effect} not tested: {why}", file=summary)
     for ch, c in out["channels"].items():
         print(headline(ch, c), file=summary)
         for line in explain_channel(c, out["realisations"], out["units"]["params"][ch]):

@@ -264,6 +264,15 @@ def _stat(c: dict[str, Any], key: str) -> float:
     return float("nan") if v is None else float(v)
 
 
+def _has_temp(c: dict[str, Any]) -> bool:
+    """Whether the channel entry ``c`` has temperature tests (a recording without
+    temperature readings has none: an outside reviewer's misspelt ``tmep`` column read
+    "Nothing exceeds its threshold (... temperature ...)" with every one of them null)."""
+    return any(v is not None and math.isfinite(v) for v in
+               (c.get(k) for k in ("temperature_slope_z", "temperature_record_z",
+                                   "temperature_level_z")))
+
+
 def _strongest(c: dict[str, Any], dof: int) -> str:
     """The single statistic closest to its threshold, as 'name t/threshold' (for `none`;
     the Allan, band, whole-curve, whole-record step and drift tests are not ranked with
@@ -292,8 +301,10 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
     if not ratios:
         return ""
     _, n, z, thr, kind = max(ratios)
-    return (f"; of the single statistics (line, line on both parts, tails, temperature, "
-            f"temperature level, trend, whole-record temperature) the closest to its "
+    stats = ("line, line on both parts, tails, temperature, temperature level, trend, "
+             "whole-record temperature" if _has_temp(c)
+             else "line, line on both parts, tails, trend")
+    return (f"; of the single statistics ({stats}) the closest to its "
             f"threshold is {n} ({kind} {z:.1f} against {thr:.1f})"
             + (" (beyond it, but not beyond every realisation of the model at those "
                "frequencies)" if n.startswith("the line on both") and z > thr else ""))
@@ -887,8 +898,11 @@ def explain_channel(c: dict[str, Any], realisations: int,
         lines[-1] = lines[-1][0].upper() + lines[-1][1:]
     else:
         lines.append("Nothing exceeds its threshold (family-wise Allan and band limits, "
-                     "whole-curve test, line, tails, temperature, temperature level, trend, "
-                     "whole-record step, drift and temperature)"
+                     + ("whole-curve test, line, tails, temperature, temperature level, "
+                        "trend, whole-record step, drift and temperature)" if _has_temp(c)
+                        else "whole-curve test, line, tails, trend, whole-record step and "
+                        "drift; no temperature test: the recording has no temperature "
+                        "readings)")
                      + _strongest(c, dof) + ".")
     if c.get("temperature_note"):
         lines.append(f"Temperature: {c['temperature_note']}.")

@@ -103,13 +103,17 @@ def diagnose_recording(
             raise GapError(
                 f"{r.path}: rate {r.rate_hz:g} Hz differs from {rec.path}'s {rec.rate_hz:g} Hz"
             )
+    untested = ({"temperature": f"{rec.path} has no temperature column"}
+                if "temperature" in opt.effects and "temp" not in rec.channels else {})
     out: dict[str, Any] = {"schema": SCHEMA, "recording": str(rec.path),
                            "model": model.source, "rate_hz": rec.rate_hz,
                            "samples": len(rec.channel(chans[0])) if chans else 0,
                            "lost_samples": rec.lost_samples, "holes": rec.holes,
                            "holdout_fraction": opt.holdout_fraction,
                            "realisations": opt.realisations, "seed": opt.seed,
-                           "effects_tested": [e for e in EFFECTS if e in opt.effects],
+                           "effects_tested": [e for e in EFFECTS if e in opt.effects
+                                              and e not in untested],
+                           "effects_untested": untested,
                            "channels": {}}
     work: list[Job] = [(model, ch, series_of(rec, ch), opt,
                         [series_of(r, ch) for r in replicates], limits) for ch in chans]
@@ -129,7 +133,8 @@ def diagnose_recording(
     for ch in chans:
         d, lim = done[ch]
         diags[ch] = d
-        out["channels"][ch] = d.to_dict()
+        lost, runs = rec.channel_lost(ch)
+        out["channels"][ch] = {**d.to_dict(), "lost_samples": lost, "holes": runs}
         if lim is not None:
             out["channels"][ch]["limits"] = lim
     return _clean(out), diags

@@ -247,7 +247,10 @@ def fit_loaded(rec: Recording, source: str, *, channels: str | Sequence[str] | N
             log.info("%s: %s", source, note)
             fits[ch] = replace(fits[ch], notes=(*fits[ch].notes, note))
         missing = no_response_note(ch) if fit_temperature and response is None else None
-        for warning in (missing, None if taken_out else temperature_warning(
+        from imubench.recording import empty_cells_text  # the reader imports the fit
+
+        for warning in (missing, empty_cells_text(rec, ch),
+                        None if taken_out else temperature_warning(
                             ch, UNITS[ch], response, fit_temperature),
                         outlier_warning(ch, y)):
             if warning is not None:

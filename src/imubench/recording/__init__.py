@@ -162,6 +162,15 @@ class Recording:
             )
         return self._dense(self.values[:, CHANNELS.index(name)])
 
+    def channel_lost(self, name: str) -> tuple[int, int]:
+        """(samples lost, runs of them) of channel ``name`` between the first and the
+        last recorded sample: the recording's holes and, besides them, the channel's
+        own empty cells (a CSV line whose ``gx`` is empty keeps its other channels)."""
+        missing = np.isnan(self.channel(name))
+        edges = np.diff(missing.astype(np.int8))
+        runs = int(np.count_nonzero(edges == 1)) + int(bool(missing.size and missing[0]))
+        return int(missing.sum()), runs
+
     def batch(self) -> Batch:
         return Batch(self.index, self.t_s, self.values, self.temp_c, self.raw)
 
@@ -187,6 +196,20 @@ MEASURED_RATE_MIN_SPAN_S = 10.0
 """Shortest span of time stamps the sample rate is measured from, s."""
 MEASURED_RATE_TOLERANCE = 1e-4
 """Relative departure from the nominal ODR below which the nominal rate is kept."""
+
+
+def empty_cells_text(rec: Recording, channel: str) -> str | None:
+    """'gx: 1000 samples lost in 1 run(s), empty cells beside the recording's holes' when
+    ``channel`` misses more samples than the recording's holes (:meth:`Recording.
+    channel_lost`), else None: those samples are lost too (an outside reviewer's 1000
+    empty cells were warned of while the coverage and the JSON said no holes)."""
+    lost, runs = rec.channel_lost(channel)
+    in_holes = (int(rec.index[-1] - rec.index[0]) + 1 - len(rec.index)) if len(rec.index) else 0
+    if lost <= in_holes:
+        return None
+    return (f"{channel}: {lost} samples lost in {runs} run(s), "
+            f"{lost - in_holes} of them empty cells beside the recording's "
+            f"{rec.holes} hole(s); the curves are computed across them")
 
 
 def coverage_text(samples: int, lost_samples: int, holes: int) -> str:

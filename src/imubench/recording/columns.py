@@ -17,7 +17,9 @@ never guessed.
 
 from __future__ import annotations
 
+import difflib
 import re
+from collections.abc import Collection
 from dataclasses import dataclass
 
 from imubench.batch import CHANNELS
@@ -91,6 +93,16 @@ def unit_word(text: str) -> str:
     """A unit as written (``[°/s]``'s ``°/s``, ``deg/hr``) in the spelling of the unit
     tables (``dps``, ``deg/h``); an unknown unit is returned as written."""
     return _UNIT_WORDS.get(text.strip().lower(), text.strip())
+
+
+def near_alias(name: str, taken: Collection[str] = ()) -> str | None:
+    """The channel (``t``, ``temp``, ``gx``..), not among ``taken`` (the channels other
+    columns give), whose header name ``name`` (normalised) is most likely a misspelling
+    of (difflib ratio at least 0.7 to a name of :data:`ALIASES`), or None: ``tmep`` ->
+    ``temp`` beside a time column (an outside reviewer's header, whose temperature went
+    unread and untested with nothing said)."""
+    close = difflib.get_close_matches(name, ALIASES, n=20, cutoff=0.7)
+    return next((ALIASES[c] for c in close if ALIASES[c] not in taken), None)
 
 
 TIME_UNIT_WORDS = frozenset({"s", "ms", "us", "ns", "min", "h"})

@@ -51,6 +51,7 @@ from imubench.recording.columns import (
     is_euroc,
     is_ros_export,
     map_columns,
+    near_alias,
     normalise,
     unit_word,
 )
@@ -809,8 +810,11 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         notes.append(f"{where}: {', '.join(sparse)} left out: no value on most lines ("
                      + ", ".join(f"{empty[ch]} of {len(values)}" for ch in sparse) + ")")
     if any(empty[ch] for ch in used_units):
+        lines = np.asarray(raw.row_lines)
         notes.append(f"{where}: empty cells ("
-                     + ", ".join(f"{ch} {empty[ch]}" for ch in used_units if empty[ch])
+                     + ", ".join(f"{ch} {empty[ch]}"
+                                 + _runs_text(np.isnan(values[:, CHANNELS.index(ch)]), lines)
+                                 for ch in used_units if empty[ch])
                      + "): read as that channel's lost samples, the others' kept")
     _check_gravity(values, used_units, options, where, assumed)
     temp = (_in_degc(table[:, where_col["temp"]], cols[where_col["temp"]], where)
@@ -902,6 +906,20 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     meta.setdefault("channels", [c for c in CHANNELS if c in where_col])
     meta.setdefault("source_format", fmt)
     shown = ", ".join(f"{ch}={cols[k].text.strip()}" for ch, k in where_col.items())
+    unread = [c for k, c in enumerate(cols) if k not in where_col.values()]
+    if unread and raw.header is not None and not (ros or euroc):  # their other fields
+        # (orientation, covariances) are known and not the IMU's samples
+        said = []
+        for c in unread[:UNREAD_SHOWN]:
+            near = near_alias(c.name, where_col)
+            said.append(c.text.strip() + (f" (a misspelt {near}? name it with --columns "
+                                          f"{near}={c.text.strip()})" if near else ""))
+        more = len(unread) - UNREAD_SHOWN
+        notes.append(f"{where}: column(s) not read, no channel of that name: "
+                     + ", ".join(said) + (f" and {more} more" if more > 0 else ""))
+    hole_note = _holes_text(tb.index, t_s[keep], np.asarray(raw.row_lines)[keep])
+    if hole_note:
+        notes.append(f"{where}: {hole_note}")
     units = ", ".join(f"{ch} {u}" for ch, u in used_units.items())
     notes.append(f"{where}: read as {fmt}: {shown}; rate {tb.rate_hz:.6g} Hz ({how})"
                  + (f"; {time_note}" if time_note else "")
@@ -924,6 +942,39 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     return TextRead(meta, batch, raw.gaps, bad, notes, inferred,
                     rate_stated=options.rate_hz is None and stated is not None
                     and "t" in where_col)
+
+
+UNREAD_SHOWN = 8
+"""Header columns not read that a warning names (the rest are counted)."""
+
+
+def _runs_text(missing: np.ndarray, lines: np.ndarray, shown: int = 3) -> str:
+    """' on lines 2002-3001 (and 2 more runs)': where the True runs of ``missing`` lie,
+    by the file's line numbers ``lines`` (one per row)."""
+    edges = np.diff(np.concatenate(([0], missing.astype(np.int8), [0])))
+    starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
+    spans = [f"{lines[a]}" if a == b else f"{lines[a]}-{lines[b]}"
+             for a, b in zip(starts[:shown], ends[:shown], strict=True)]
+    more = len(starts) - shown
+    return (f" on line{'s' if len(starts) > 1 or ends[0] > starts[0] else ''} "
+            + ", ".join(spans) + (f" and {more} more run(s)" if more > 0 else ""))
+
+
+def _holes_text(index: np.ndarray, t_s: np.ndarray, lines: np.ndarray, shown: int = 3) -> str:
+    """'1 hole(s) in the time stamps, 10400 samples: before line 200002 (t 1923.08 s,
+    10400 samples)': where the holes of the sample ``index`` lie, by the file's line
+    numbers and time stamps of the rows after them (the largest ``shown``), or '' (an
+    outside reviewer's 100 s jump was reported only as a hole count)."""
+    step = np.diff(index)
+    at = np.nonzero(step > 1)[0]
+    if not at.size:
+        return ""
+    lost = step[at] - 1
+    big = at[np.argsort(-lost, kind="stable")[:shown]]
+    where = "; ".join(f"before line {lines[i + 1]} (t {t_s[i + 1]:.6g} s, {step[i] - 1} "
+                      "samples)" for i in sorted(big))
+    return (f"{at.size} hole(s) in the time stamps, {int(lost.sum())} samples missing: "
+            + ("the largest " if at.size > shown else "") + where)
 
 
 RESTART_PERIODS = 10.0
