@@ -1820,6 +1820,9 @@ def test_a_response_the_model_carries_as_slow_noise_takes_its_place(
     assert abs(k["params"]["temp_coeff"] / other - 1.0) < 0.2
     text = " ".join(explain_channel(out, 10))
     assert "in place of part of the model's slow terms (markov_sigma scaled by" in text
+    # both causes, not the refit's alone (an outside reviewer's model had no response)
+    assert ("a model fitted without one does not, and a slow term's realisation over one "
+            "record also varies this much by chance") in text
 
 
 def test_a_true_slow_noise_stays_beside_a_temperature_response() -> None:

@@ -343,9 +343,12 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
         terms = [k for k in SLOW_TERMS if k in p]
         slow = (f", in place of part of the model's slow terms ({', '.join(terms)} scaled "
                 f"by {e['slow_terms_scale']:.2g} to " + ", ".join(g(k) for k in terms)
-                + "): a model fitted on a record whose temperature moved carries that "
-                "record's response as such noise; refit the model from a recording with "
-                "temperature readings, with `imubench fit --fit-temperature`")
+                + "): this record's slow noise is weaker than the model's beside the "
+                "response. A model fitted on a record whose temperature moved carries that "
+                "record's response as such noise (then refit it from a recording with "
+                "temperature readings, with `imubench fit --fit-temperature`); a model "
+                "fitted without one does not, and a slow term's realisation over one "
+                "record also varies this much by chance")
     if effect == "temperature" and p.get("temp_coeff2") and \
             e.get("temp_slope_at_mean") is not None:
         return (f"{what} drifts with temperature, "
