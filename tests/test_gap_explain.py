@@ -965,3 +965,10 @@ def test_a_slow_term_the_model_lacks_is_said_to_be_lacking_and_why_that_happens(
                     {"effect": "random_walk", "model_params": {"random_walk": 0.0}})
     assert walk.startswith("the record has a bias that wanders as a random walk that the "
                            "model lacks (K = 0.0002 dps/sqrt(s))")
+
+
+def test_a_share_that_rounds_to_zero_reads_0_percent() -> None:
+    """An outside reviewer read "-0% of the fit part's total"."""
+    from imubench.gap.explain import _pct
+
+    assert (_pct(-0.001), _pct(0.004), _pct(-0.3), _pct(None)) == ("0%", "0%", "-30%", "-")

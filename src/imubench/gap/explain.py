@@ -56,7 +56,10 @@ def _f(v: float | None, digits: int = 3) -> str:
 
 
 def _pct(v: float | None) -> str:
-    return "-" if v is None or not math.isfinite(v) else f"{v:.0%}"
+    """'42%'; '0%' for a share that rounds to zero from below (it read '-0%')."""
+    if v is None or not math.isfinite(v):
+        return "-"
+    return "0%" if round(v * 100.0) == 0 else f"{v:.0%}"
 
 
 def _span(lo: float, hi: float, unit: str) -> str:
