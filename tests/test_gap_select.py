@@ -329,10 +329,7 @@ def test_a_rival_the_fit_part_does_not_tell_apart_is_reported_as_a_look_alike(
     model = NoiseModel.single_term("gy", white=0.0299993, flicker=0.0130051,
                                    bandwidth_hz=25.1245, filter_order=1,
                                    output_white=0.0298952)
-    t = np.arange(n) / fs  # the bench's temperature history (degC)
-    temp = np.round((24.0 + 3.0 * np.sin(2 * math.pi * t / 1300.0 + 0.7)
-                     + 1.5 * np.sin(2 * math.pi * t / 410.0) + t / 3600.0) / 0.0625) * 0.0625
-    d = diagnose_channel(model, "gy", Series(y, temp, fs, "rep2"),
+    d = diagnose_channel(model, "gy", Series(y, _bench_temperature(n, fs), fs, "rep2"),
                          GapOptions(seed=7, realisations=10))
     out = d.to_dict()
     look = out["look_alike"]
@@ -1105,12 +1102,9 @@ def test_a_model_channel_without_noise_is_a_clear_error() -> None:
         diagnose_channel(NoiseModel(), "gx", Series(white(rng, 4096), None, RATE, "r"))
 
 
-def test_real_null_does_not_keep_an_effect_that_moves_the_held_out_curve_away(
-        reference_dir: Any) -> None:
-    """Samsung S5 accelerometer x, second 1.99 h segment against the first segment's
-    fitted model (a reviewer's null): a random walk was kept after the base model's
-    refit although the held-out systematic Allan gap rose 0 -> 0.24 (its wider spread
-    lowered the chi-squared). No effect is named now."""
+def _s5_ax_second_segment(reference_dir: Path) -> tuple[np.ndarray, float, NoiseModel]:
+    """The Samsung S5 accelerometer x's second 1.99 h segment (g), its rate (Hz) and the
+    noise fit of the first segment as a model (``imubench fit``'s engine, terms auto)."""
     from imubench.noisefit import fit_channel
 
     path = reference_dir / "imu-real" / "samsung-s5-static" / "samsung_galaxy_s5_static.npz"
@@ -1121,8 +1115,26 @@ def test_real_null_does_not_keep_an_effect_that_moves_the_held_out_curve_away(
     fs = float(z["fs_hz"])
     n = len(ax) // 3
     fit = fit_channel(ax[:n], fs, terms="auto", channel="ax")
-    model = NoiseModel.single_term("ax", **{k: v for k, v in fit.params.items() if v})
-    d = diagnose_channel(model, "ax", Series(ax[n:2 * n], None, fs, "s5:ax:2"),
+    return ax[n:2 * n], fs, NoiseModel.single_term(
+        "ax", **{k: v for k, v in fit.params.items() if v})
+
+
+def _bench_temperature(n: int, fs: float) -> np.ndarray:
+    """The acceptance benches' temperature history (degC, 0.0625 degC steps:
+    bench_gap_acceptance.temperature_history)."""
+    t = np.arange(n) / fs
+    return np.round((24.0 + 3.0 * np.sin(2 * math.pi * t / 1300.0 + 0.7)
+                     + 1.5 * np.sin(2 * math.pi * t / 410.0) + t / 3600.0) / 0.0625) * 0.0625
+
+
+def test_real_null_does_not_keep_an_effect_that_moves_the_held_out_curve_away(
+        reference_dir: Any) -> None:
+    """Samsung S5 accelerometer x, second 1.99 h segment against the first segment's
+    fitted model (a reviewer's null): a random walk was kept after the base model's
+    refit although the held-out systematic Allan gap rose 0 -> 0.24 (its wider spread
+    lowered the chi-squared). No effect is named now."""
+    ax, fs, model = _s5_ax_second_segment(reference_dir)
+    d = diagnose_channel(model, "ax", Series(ax, None, fs, "s5:ax:2"),
                          GapOptions(seed=7, realisations=10))
     assert d.verdict in ("none", "base_model", "unexplained"), (d.verdict, d.reason)
     h = d.to_dict()["holdout"]
@@ -1138,23 +1150,11 @@ def test_look_alikes_on_a_far_off_base_model_are_decided_by_the_held_out_part(
     whose chi-squared falls by 113.6 with the walk and 76.9 with the ramp, was not asked,
     and the ramp was named. Score differences are weighed in units of the overdispersion
     (chi-squared per term), at every step and in the sequential replacement."""
-    from imubench.noisefit import fit_channel
-
-    path = reference_dir / "imu-real" / "samsung-s5-static" / "samsung_galaxy_s5_static.npz"
-    if not path.is_file():
-        pytest.skip("Samsung S5 reference data not present")
-    z = np.load(path)
-    ax = z["accel_m_s2"][:, 0] / 9.80665
-    fs = float(z["fs_hz"])
-    n = len(ax) // 3
-    fit = fit_channel(ax[:n], fs, terms="auto", channel="ax")
-    model = NoiseModel.single_term("ax", **{k: v for k, v in fit.params.items() if v})
+    ax, fs, model = _s5_ax_second_segment(reference_dir)
+    n = len(ax)
     rng = np.random.default_rng([20261127, 3, 1, 2])  # bench_gap_limits_real's draw
-    y = ax[n:2 * n] + np.cumsum(2.09e-5 * math.sqrt(1.0 / fs) * rng.standard_normal(n))
-    t = np.arange(n) / fs  # the bench's temperature history (degC)
-    temp = np.round((24.0 + 3.0 * np.sin(2 * math.pi * t / 1300.0 + 0.7)
-                     + 1.5 * np.sin(2 * math.pi * t / 410.0) + t / 3600.0) / 0.0625) * 0.0625
-    d = diagnose_channel(model, "ax", Series(y, temp, fs, "s5:ax:2+rw"),
+    y = ax + np.cumsum(2.09e-5 * math.sqrt(1.0 / fs) * rng.standard_normal(n))
+    d = diagnose_channel(model, "ax", Series(y, _bench_temperature(n, fs), fs, "s5:ax:2+rw"),
                          GapOptions(seed=139, realisations=10))
     out = d.to_dict()
     assert [k["effect"] for k in out["kept"]] == ["base_model", "random_walk"], out["kept"]
