@@ -505,7 +505,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                    step_y: np.ndarray | None, temp_record_z: float,
                    temp_whole: RecordTemperature | None = None, *,
                    slow_of_model: bool = False, step_means: np.ndarray | None = None,
-                   line_hint_hz: float | None = None
+                   line_hint_hz: float | None = None, local_avar: np.ndarray | float = 0.0
                    ) -> tuple[list[Candidate], dict[str, Any]]:
     """Each applicable effect with parameters fitted to the real fit part, and evidence.
 
@@ -536,7 +536,10 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     which weighs the Allan-curve fits (:attr:`imubench.gap.diagnose._Step.noise_sigma`);
     ``line_hint_hz``: the fit part's peak at which the held-out part found a line
     (:mod:`imubench.gap.line_across`; None when it did not), where the sine is fitted when
-    the fit part's own line test is below its gate.
+    the fit part's own line test is below its gate; ``local_avar``: the part of the
+    realisations' Allan variance that ``cm``'s terms do not describe (the kept effects
+    realised outside the simulator, :meth:`imubench.gap.diagnose._Realiser.local_avar`),
+    which the base model's refit leaves as it is.
     """
     s = fit.series
     cands: list[Candidate] = []
@@ -586,7 +589,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
                           evidence.block_means_of(s.y, m))
         elif eff == "base_model":
             bw, order, white = avarfit.fit_base_model(
-                cm, fit.tau_s, s.rate_hz, real_avar, model_avar, sig)
+                cm, fit.tau_s, s.rate_hz, real_avar, model_avar, sig, local_avar)
             cands.append(Candidate(eff, {"bandwidth_hz": bw, "filter_order": order,
                                          "white": white}, 3))
         elif eff == "markov" and markov is not None:
