@@ -175,8 +175,15 @@ class Variant:
     local: list[tuple[str, dict[str, float]]] = field(default_factory=list)
 
     def add(self, channel: str, c: Candidate) -> Variant:
+        """This variant with ``c``: a simulator term, or an increment of the output
+        (:data:`extras.LOCAL_EFFECTS`) at the size the record shows
+        (:meth:`Candidate.as_recorded`: a sine's amplitude and a resonance's height are
+        the model file's, before the output filter, and the increment is added after
+        it; added at the model file's size, a 14.6 Hz line behind a 17.4 Hz two-pole
+        filter was realised 1/|H| too large, and the base model's refit beside it bent
+        its filter to make up for that)."""
         if c.effect in extras.LOCAL_EFFECTS:
-            return Variant(self.model, [*self.local, (c.effect, c.params)])
+            return Variant(self.model, [*self.local, (c.effect, c.as_recorded())])
         return Variant(self.model.with_channel(channel, **c.params), list(self.local))
 
     def local_sum(self, n: int, rate_hz: float, seeds: list[int]) -> np.ndarray | float:
@@ -955,7 +962,7 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
             with_c, cs, _ = r.realise(joint)
         else:
             with_c = variant.add(channel, c)
-            cs = candidate_sims(variant.model, channel, c.effect, c.params, series, seeds,
+            cs = candidate_sims(variant.model, channel, c.effect, c.as_recorded(), series, seeds,
                                 sims, local_sum)
         c.noise = with_c.noise(channel)
         c.fit = fit.compare(fit.sim_features(cs[:, :n_fit]), c.noise)
