@@ -949,8 +949,8 @@ UNREAD_SHOWN = 8
 
 
 def _runs_text(missing: np.ndarray, lines: np.ndarray, shown: int = 3) -> str:
-    """' on lines 2002-3001 (and 2 more runs)': where the True runs of ``missing`` lie,
-    by the file's line numbers ``lines`` (one per row)."""
+    """' on lines 2002-3001, 4000 and 2 more run(s)': where the True runs of ``missing``
+    lie (the first ``shown``), by the file's line numbers ``lines`` (one per row)."""
     edges = np.diff(np.concatenate(([0], missing.astype(np.int8), [0])))
     starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
     spans = [f"{lines[a]}" if a == b else f"{lines[a]}-{lines[b]}"
@@ -961,8 +961,8 @@ def _runs_text(missing: np.ndarray, lines: np.ndarray, shown: int = 3) -> str:
 
 
 def _holes_text(index: np.ndarray, t_s: np.ndarray, lines: np.ndarray, shown: int = 3) -> str:
-    """'1 hole(s) in the time stamps, 10400 samples: before line 200002 (t 1923.08 s,
-    10400 samples)': where the holes of the sample ``index`` lie, by the file's line
+    """'1 hole(s) in the time stamps, 10400 samples missing: before line 200002 (t 2023.08
+    s, 10400 samples)': where the holes of the sample ``index`` lie, by the file's line
     numbers and time stamps of the rows after them (the largest ``shown``), or '' (an
     outside reviewer's 100 s jump was reported only as a hole count)."""
     step = np.diff(index)
