@@ -210,7 +210,14 @@ def test_a_consumer_cut_short_at_a_stop_counts_what_it_did_not_take() -> None:
     check_accounts(pipeline, [slow, keep])
     acc = pipeline.accounts()
     assert acc["slow"].lost_by_reason[f"{NOT_PROCESSED}: slow"] >= lagging["slow"] - 64
-    assert acc["keep"].lost == 0  # drained everything
+    # drained everything: nothing lost to the stop, only what every consumer lost at the
+    # source (a wall-clock chip whose FIFO overflows while the reading thread is starved;
+    # once, in a full suite run beside two benchmarks, "keep" lost 224 samples and this
+    # asserted lost == 0, which did not show their reason)
+    shared = {reason: n for reason, n in acc["keep"].lost_by_reason.items()
+              if not reason.startswith(NOT_PROCESSED)
+              and acc["slow"].lost_by_reason.get(reason) == n}
+    assert acc["keep"].lost_by_reason == shared, (acc["keep"], acc["slow"])
 
 
 def test_the_live_engine_reports_taus_at_the_measured_rate() -> None:
