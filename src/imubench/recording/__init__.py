@@ -199,7 +199,8 @@ MEASURED_RATE_TOLERANCE = 1e-4
 
 
 def empty_cells_text(rec: Recording, channel: str) -> str | None:
-    """'gx: 1000 samples lost in 1 run(s), empty cells beside the recording's holes' when
+    """'gx: 1100 samples lost in 2 run(s), 100 of them empty cells beside the recording's
+    1 hole(s); ...' when
     ``channel`` misses more samples than the recording's holes (:meth:`Recording.
     channel_lost`), else None: those samples are lost too (an outside reviewer's 1000
     empty cells were warned of while the coverage and the JSON said no holes)."""
