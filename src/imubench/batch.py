@@ -41,6 +41,13 @@ class Gap:
             raise ValueError(f"Gap at index {self.at}: lost={self.lost} must be positive")
 
 
+def true_runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) index of each run of consecutive True values of ``flags``."""
+    edges = np.diff(np.concatenate(([0], np.asarray(flags).astype(np.int8), [0])))
+    return list(zip(np.flatnonzero(edges == 1).tolist(),
+                    (np.flatnonzero(edges == -1) - 1).tolist(), strict=True))
+
+
 def gaps_before(gaps: Sequence[Gap], end: int) -> list[Gap]:
     """The parts of ``gaps``' holes that lie below sample index ``end`` (a stream cut at
     ``end``), each as a gap at ``min(at, end)``.

@@ -23,15 +23,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
+from imubench.batch import true_runs
+
 MISFIT_ALPHA = 1e-3
 """Family-wise probability that a correct model's curve is said to misfit somewhere."""
-
-
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """(first, last) index of each run of consecutive True values."""
-    edges = np.diff(np.concatenate(([0], flags.astype(np.int8), [0])))
-    return list(zip(np.flatnonzero(edges == 1).tolist(),
-                    (np.flatnonzero(edges == -1) - 1).tolist(), strict=True))
 
 
 MODEL_FILE_FLOOR = 0.1
@@ -62,7 +57,7 @@ def curve_misfit(tau_s: np.ndarray, avar: np.ndarray, model_avar: np.ndarray,
     out: list[tuple[float, str]] = []
     for flags, p, word in ((p_hi < level, p_hi, "under-predicts"),
                            (p_lo < level, p_lo, "over-predicts")):
-        for a, b in _runs(flags):
+        for a, b in true_runs(flags):
             adev = np.sqrt(ratio[a:b + 1])
             where = (f"{tau_s[a]:.4g} s" if a == b else f"{tau_s[a]:.4g}-{tau_s[b]:.4g} s")
             ratios = (f"{adev[0]:.3g}x" if a == b else

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from imubench.batch import CHANNELS, Batch, Gap
+from imubench.batch import CHANNELS, Batch, Gap, true_runs
 from imubench.errors import RecordingError
 from imubench.recording.csvio import CsvWriter
 from imubench.recording.hdf5 import Hdf5Writer, read_hdf5
@@ -167,9 +167,7 @@ class Recording:
         last recorded sample: the recording's holes and, besides them, the channel's
         own empty cells (a CSV line whose ``gx`` is empty keeps its other channels)."""
         missing = np.isnan(self.channel(name))
-        edges = np.diff(missing.astype(np.int8))
-        runs = int(np.count_nonzero(edges == 1)) + int(bool(missing.size and missing[0]))
-        return int(missing.sum()), runs
+        return int(missing.sum()), len(true_runs(missing))
 
     def batch(self) -> Batch:
         return Batch(self.index, self.t_s, self.values, self.temp_c, self.raw)

@@ -41,7 +41,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from imubench.batch import CHANNELS, Batch, Gap
+from imubench.batch import CHANNELS, Batch, Gap, true_runs
 from imubench.errors import RecordingError
 from imubench.recording.columns import (
     OWN_NAMES,
@@ -951,12 +951,10 @@ UNREAD_SHOWN = 8
 def _runs_text(missing: np.ndarray, lines: np.ndarray, shown: int = 3) -> str:
     """' on lines 2002-3001, 4000 and 2 more run(s)': where the True runs of ``missing``
     lie (the first ``shown``), by the file's line numbers ``lines`` (one per row)."""
-    edges = np.diff(np.concatenate(([0], missing.astype(np.int8), [0])))
-    starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
-    spans = [f"{lines[a]}" if a == b else f"{lines[a]}-{lines[b]}"
-             for a, b in zip(starts[:shown], ends[:shown], strict=True)]
-    more = len(starts) - shown
-    return (f" on line{'s' if len(starts) > 1 or ends[0] > starts[0] else ''} "
+    runs = true_runs(missing)
+    spans = [f"{lines[a]}" if a == b else f"{lines[a]}-{lines[b]}" for a, b in runs[:shown]]
+    more = len(runs) - shown
+    return (f" on line{'s' if len(runs) > 1 or runs[0][1] > runs[0][0] else ''} "
             + ", ".join(spans) + (f" and {more} more run(s)" if more > 0 else ""))
 
 
