@@ -567,6 +567,20 @@ def test_bias_step_at_the_split_point_is_named() -> None:
     assert d.kept[0].params["step_time_s"] == pytest.approx(300.0, abs=2.0)
 
 
+@pytest.mark.parametrize("at_s", [12.0, 588.0])
+def test_a_bias_step_near_either_end_of_the_record_is_named(at_s: float) -> None:
+    """Issue 15, acceptance 4, "a bias step anywhere in the record": 2 % from the start and
+    from the end (a few hundred samples on one side), located on the whole record."""
+    n = int(600 * RATE)
+    rng = np.random.default_rng(21)
+    y = white(rng, n) + np.where(np.arange(n) / RATE >= at_s, 0.03, 0.0)
+    d = diagnose_channel(MODEL, "gx", Series(y, None, RATE, "edge step"),
+                         GapOptions(seed=1, realisations=5))
+    assert d.verdict == "bias_step"
+    assert d.kept[0].params["step_time_s"] == pytest.approx(at_s, abs=2.0)
+    assert d.kept[0].params["step_size"] == pytest.approx(0.03, rel=0.25)
+
+
 def test_null_is_none_and_its_reason_says_so() -> None:
     n = int(600 * RATE)
     y = white(np.random.default_rng(9), n)
