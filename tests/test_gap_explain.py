@@ -445,6 +445,35 @@ def test_a_none_verdict_says_when_the_held_out_part_departs() -> None:
     assert explain_channel(c, 10)[0].startswith("No unmodelled effect: the model explains")
 
 
+def test_a_held_out_departure_by_another_test_than_the_taus_names_it() -> None:
+    """An outside reviewer's null: only the held-out whole-curve test fired, and the text
+    read "departs from the model ... (systematic gap 0 against a scatter of 0.0953)"."""
+    hold = {"gap_before": 0.1, "gap_after": 0.1, "gap_excess_before": 0.0,
+            "gap_excess_after": 0.0, "gap_null": 0.0953, "significant": True,
+            "fired": ["global"], "regions": []}
+    c = _entry("none", reason="within the scatter of the realisations", holdout=hold)
+    text = "\n".join(explain_channel(c, 10))
+    assert ("The held-out part departs from the model (by the whole Allan curve's shape) "
+            "where the fit part does not (systematic gap 0 against a scatter of "
+            "0.0953)") in text
+
+
+def test_a_base_model_refit_is_stated_beside_the_model_s_own_values() -> None:
+    """An outside reviewer's null: a refit that moved the white level by 0.5 % read "the
+    base model is off (refit: white 0.000151 g/sqrt(Hz), no output filter)"."""
+    own = {"white": 1.4985e-4, "bandwidth_hz": 0.0, "filter_order": 1.0}
+    text = describe("base_model", {"white": 1.5059e-4, "bandwidth_hz": 0.0,
+                                   "filter_order": 1}, {"white": "g/sqrt(Hz)"},
+                    {"model_params": own})
+    assert text.startswith("the base model is off (refit: white 0.000151 g/sqrt(Hz) "
+                           "(+0.5% on the model's 0.0001499); no output filter, as the "
+                           "model)")
+    text = describe("base_model", {"white": 0.004, "bandwidth_hz": 15.0, "filter_order": 2},
+                    {}, {"model_params": {**own, "white": 0.0041}})
+    assert "(-2.4% on the model's 0.0041); output filter 15 Hz, order 2, where the model " \
+           "has no output filter)" in text
+
+
 def test_a_kept_effect_says_when_the_held_out_part_still_departs_after_it() -> None:
     """Blind pair flicker + random walk: the flicker alone explained the fit part (the
     first half's walk was small) and the held-out part kept a systematic gap of 0.31

@@ -1097,7 +1097,9 @@ def compare(real: Features, real_ci_s: np.ndarray, sims: SimFeatures, tau_s: np.
     """Real features against K realisations (see the module docstring for z and regions).
 
     ``real_ci_s``: the real curve's one-sigma spread in ln ADEV from its confidence
-    interval (NaN where unknown; the realisations' spread is used alone there).
+    interval, widened by the record's kurtosis (:func:`imubench.gap.parts.
+    difference_kurtosis`; NaN where unknown: the realisations' spread is used alone
+    there).
     ``corr``: the model correlation of the OAVAR estimates at ``tau_s`` for the global test
     (:func:`global_chi2`; None skips it). It uses the same per-tau z as the regions,
     :func:`wilson_hilferty_z` of the ratio to the mean AVAR, which is centred under the

@@ -275,9 +275,11 @@ class ChannelDiagnosis:
     """The record's mean temperature (degC; NaN without one)."""
     temp_ref_c: float = float("nan")
     """The model's ``temp_ref`` (degC), where the temperature coefficients are stated."""
-    model_noise: dict[str, float] = field(default_factory=dict)
-    """The model's own value of each noise term a kept effect of the same name raises
-    (:data:`RAISED_TERMS`; JSON ``model_params`` of those kept, dropped or not kept)."""
+    model_params: dict[str, dict[str, float]] = field(default_factory=dict)
+    """By effect, the model's own values of the parameters it sets: of each noise term a
+    kept effect of the same name raises (:data:`RAISED_TERMS`) and of the white level and
+    filter the base model's refit sets (JSON ``model_params`` of those kept, dropped or
+    not kept)."""
     temp_spans_c: tuple[float, float, float] | None = None
     """The fit part's, the held-out part's and the record's temperature spans (degC) when
     the split cannot both fit and test a temperature response (:func:`temperature_spans`)."""
@@ -313,8 +315,8 @@ class ChannelDiagnosis:
         raises nothing)."""
         d: dict[str, Any] = {"effect": c.effect, "params": c.params, **c.at_output(),
                              "reason": c.note}
-        if c.effect in self.model_noise:
-            d["model_params"] = {c.effect: self.model_noise[c.effect]}
+        if c.effect in self.model_params:
+            d["model_params"] = self.model_params[c.effect]
         return d
 
     def to_dict(self) -> dict[str, Any]:
@@ -331,7 +333,7 @@ class ChannelDiagnosis:
             "effects": [c.to_dict(self.before) for c in self.candidates],
             "verdict": self.verdict,
             "reason": self.reason,
-            "kept": [_kept_dict(c, self.model_noise) for c in self.kept],
+            "kept": [_kept_dict(c, self.model_params) for c in self.kept],
             "dropped": [self._refused_dict(c) for c in self.pruned],
             "not_kept": [self._refused_dict(c) for c in self.not_kept],
             "residual_significant": self.residual_significant,
@@ -404,6 +406,7 @@ class ChannelDiagnosis:
                 "chi2_check_before": hb.chi2_check,
                 "chi2_check_after": ha.chi2_check,
                 "significant": hb.significant,
+                "fired": hb.fired,
                 "regions": [r.to_dict() for r in hb.regions],
                 "significant_after": ha.significant,
                 "fired_after": ha.fired,
@@ -443,11 +446,21 @@ class ChannelDiagnosis:
 
 RAISED_TERMS = ("flicker", "random_walk", "quantization")
 """Kept effects that raise a noise term of the model's (a zero: the model lacks it)."""
+BASE_PARAMS = ("white", "bandwidth_hz", "filter_order")
+"""What the base model's refit sets."""
 
 
-def _kept_dict(c: Candidate, model_noise: Mapping[str, float]) -> dict[str, Any]:
-    """A kept effect's JSON entry; ``model_params``: the model's own value of the term a
-    :data:`RAISED_TERMS` effect raises."""
+def _model_params(cm: ChannelModel) -> dict[str, dict[str, float]]:
+    """:attr:`ChannelDiagnosis.model_params` of the model's channel ``cm``."""
+    out = {k: {k: float(getattr(cm, k))} for k in RAISED_TERMS}
+    out["base_model"] = {k: float(getattr(cm, k)) for k in BASE_PARAMS}
+    return out
+
+
+def _kept_dict(c: Candidate, model_params: Mapping[str, dict[str, float]]
+               ) -> dict[str, Any]:
+    """A kept effect's JSON entry; ``model_params``: the model's own values of what it
+    sets (:attr:`ChannelDiagnosis.model_params`)."""
     assert c.fit is not None
     d: dict[str, Any] = {"effect": c.effect, "params": c.params, "n_params": c.n_params,
                          "params_se": dict(c.params_se),  # NaN: null in the JSON
@@ -456,8 +469,8 @@ def _kept_dict(c: Candidate, model_noise: Mapping[str, float]) -> dict[str, Any]
                          "gap_excess_after": c.fit.gap_excess,
                          "evidence_closed": c.evidence_closed, **c.at_output(),
                          **c.fitted_on(), **c.holdout_dict()}
-    if c.effect in model_noise:
-        d["model_params"] = {c.effect: model_noise[c.effect]}
+    if c.effect in model_params:
+        d["model_params"] = model_params[c.effect]
     if c.estimator:
         d["estimator"] = c.estimator
     if c.slow_scale < 1.0:
@@ -1910,7 +1923,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                                          if series.has_temperature and series.temp_c is not None
                                          else math.nan),
                             temp_ref_c=float(cm0.temp_ref), temp_spans_c=realiser.temp_spans,
-                            model_noise={k: float(getattr(cm0, k)) for k in RAISED_TERMS},
+                            model_params=_model_params(cm0),
                             ramp_temperature=ramp_as_temperature(kept, cm0, series),
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [],

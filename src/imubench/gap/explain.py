@@ -313,6 +313,27 @@ def _strongest(c: dict[str, Any], dof: int) -> str:
                "frequencies)" if n.startswith("the line on both") and z > thr else ""))
 
 
+def _filter_text(p: Mapping[str, Any]) -> str:
+    """'output filter 15 Hz, order 2' or 'no output filter' of a model's parameters."""
+    bw = p.get("bandwidth_hz")
+    return (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
+            if bw is not None and bw > 0 else "no output filter")
+
+
+def _base_model_text(p: Mapping[str, Any], white: str, own: Mapping[str, Any]) -> str:
+    """The base model's refit in words, each part beside the model's own (``own``, the
+    JSON's ``model_params``): a refit that moves the white level by 0.5 % read as "the
+    base model is off ... refit the model's white level" (an outside reviewer's null)."""
+    w, w0 = p.get("white"), own.get("white")
+    change = (f" ({(w / w0 - 1.0):+.1%} on the model's {_f(w0, 4)})"
+              if w is not None and w0 else "")
+    filt, filt0 = _filter_text(p), _filter_text(own) if own else ""
+    if filt0:
+        filt += ", as the model" if filt == filt0 else f", where the model has {filt0}"
+    return (f"the base model is off (refit: white {white}{change}; {filt}); refit the "
+            "model's white level and filter")
+
+
 def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = None,
              entry: Mapping[str, Any] | None = None) -> str:
     """What an effect with parameters ``p`` does, in plain words; each value is followed
@@ -368,9 +389,8 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
                 "(imubench fit) on an hour or so of a sensor can leave out a slow term this "
                 "weak, and that fit's notes then say that its model under-predicts the "
                 "longest taus (docs/noise-fit.md)")
-    bw = p.get("bandwidth_hz")
-    filt = (f"output filter {_f(bw, 3)} Hz, order {_f(p.get('filter_order'), 3)}"
-            if bw is not None and bw > 0 else "no output filter")
+    if effect == "base_model":
+        return _base_model_text(p, g("white"), e.get("model_params") or {})
     return {
         "temperature": f"{what} drifts with temperature, {g('temp_coeff')}{slow}",
         "sine": f"a sinusoidal disturbance of amplitude {g('sine_amplitude')} at "
@@ -392,8 +412,6 @@ def describe(effect: str, p: dict[str, Any], units: Mapping[str, str] | None = N
                     f"{g('outlier_amplitude')}",
         "bias_step": f"the bias steps by {g('step_size')} at t = "
                      f"{num('step_time_s', 's', 4)}",
-        "base_model": f"the base model is off (refit: white {g('white')}, {filt}); refit "
-                      "the model's white level and filter",
     }.get(effect, effect)
 
 
@@ -864,8 +882,9 @@ def _held_out_departure(h: dict[str, Any], after: bool) -> str:
     lead = ("The held-out part still departs from the model with the kept effects" if after
             else "The held-out part departs from the model")
     gap = h.get("gap_excess_after" if after else "gap_excess_before")
-    tests = [FIRED_WORDS[t] for t in h.get("fired_after", [])]
-    if after and not regs and tests:  # another test than the Allan taus' regions
+    tests = [FIRED_WORDS[t] for t in h.get("fired_after" if after else "fired", [])
+             if t != "regions"]
+    if not regs and tests:  # another test than the Allan taus' regions
         regs = "by " + ", ".join(tests)
     return (lead + (f" ({regs})" if regs else "")
             + f" where the fit part {'no longer does' if after else 'does not'} (systematic "

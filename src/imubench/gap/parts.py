@@ -247,13 +247,61 @@ class RecordTemperature:
         return gls_slopes(np.diff(yb, axis=1), np.diff(self.tb), self.chol, extra)[0]
 
 
+KURTOSIS_MIN_TERMS = 200
+"""Fewest non-overlapping block-mean differences an excess kurtosis is estimated from
+(:func:`difference_kurtosis`; its standard error is sqrt(24 / n), 0.35 here)."""
+KURTOSIS_Z = 3.0
+"""Standard errors an excess kurtosis must exceed to widen the spread (below it, 0)."""
+
+
+def difference_kurtosis(y: np.ndarray, afs: np.ndarray) -> np.ndarray:
+    """The excess kurtosis ``gamma_m`` of the differences of consecutive non-overlapping
+    means of ``m`` samples of ``y``, per averaging factor ``m`` of ``afs``: the terms the
+    Allan variance at ``m`` averages the squares of. 0 where it is not beyond
+    :data:`KURTOSIS_Z` of its standard error sqrt(24 / n) (Gaussian noise and an LSB's
+    rounding give 0); where fewer than :data:`KURTOSIS_MIN_TERMS` differences hold it, the
+    last estimated value times ``m_last / m`` (a sum of m independent terms has 1/m of
+    their excess kurtosis). Blocks holding a missing sample are left out."""
+    out = np.zeros(len(afs))
+    last: tuple[int, float] | None = None
+    for i, m in enumerate(int(a) for a in afs):
+        nb = len(y) // m
+        if nb - 1 < KURTOSIS_MIN_TERMS:
+            if last is not None:
+                out[i] = last[1] * last[0] / m
+            continue
+        dm = np.diff(y[:nb * m].reshape(nb, m).mean(axis=1))
+        dm = dm[np.isfinite(dm)]
+        if len(dm) < KURTOSIS_MIN_TERMS:
+            continue
+        dm = dm - dm.mean()
+        v = float(np.mean(dm**2))
+        g = float(np.mean(dm**4)) / (v * v) - 3.0 if v > 0 else 0.0
+        out[i] = g if g > KURTOSIS_Z * math.sqrt(24.0 / len(dm)) else 0.0
+        last = (m, out[i])
+    return out
+
+
 def _allan_spread(series: Series, afs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The taus (s) of the averaging factors ``afs`` of the series and its OADEV's
-    one-sigma spread in ln ADEV there, from the confidence interval."""
+    one-sigma spread in ln ADEV there: from the confidence interval (NIST SP 1065 sec.
+    5.3, whose equivalent degrees of freedom are those of Gaussian noise), widened by
+    ``sqrt(1 + gamma_m / 2)`` with ``gamma_m`` the excess kurtosis of the differences the
+    Allan variance averages (:func:`difference_kurtosis`): the variance of a mean of
+    squares is ``(2 + gamma) sigma^4 / n`` where a Gaussian's is ``2 sigma^4 / n``
+    (Cramer, Mathematical Methods of Statistics, 1946, eq. 27.4.2). Impulsive noise
+    makes the short-tau Allan variance far less certain than its EDF says: 0.1 % of
+    samples hit by impulses of 15 sigma (excess kurtosis 39 at one sample) left a held-out
+    half 2.4 % below the realisations at tau0, 13 of the Gaussian sigmas and about one of
+    its own, and the impulses were refused there (an outside reviewer's telegraph +
+    outliers: the white level was refitted instead and the verdict told the user to
+    refit it)."""
     full = oadev(series.y, series.rate_hz, "freq", afs=afs)
     with np.errstate(divide="ignore", invalid="ignore"):
         ci_s = 0.5 * np.log(np.asarray(full.ci_high) / np.asarray(full.ci_low))
-    return np.asarray(full.tau_s), ci_s
+    tau_s = np.asarray(full.tau_s)
+    gamma = difference_kurtosis(np.asarray(series.y, dtype=float), afs[:len(tau_s)])
+    return tau_s, ci_s * np.sqrt(1.0 + 0.5 * gamma)
 
 
 class PartSetup:
