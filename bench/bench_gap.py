@@ -47,7 +47,8 @@ from lsm6ds_sim.temperature import SineTemperature
 from scipy.signal import butter, lfilter
 
 from imubench.gap import GapOptions, Series, diagnose_channel
-from imubench.gap.diagnose import MAIN_PARAM, main_param_error
+from imubench.gap.candidates import MAIN_PARAM
+from imubench.gap.diagnose import main_param_error
 
 RATE = 104.0
 DURATION_S = 3600.0

@@ -51,6 +51,7 @@ from imubench.gap.explain import explain_channel
 from imubench.gap.extras import increment
 from imubench.gap.limits import detection_limits, inject, injection_sign, start_sizes
 from imubench.gap.parts import RecordTemperature, difference_kurtosis
+from imubench.gap.step import Step
 from imubench.gap.two_level import detrend_span, two_level_llr
 
 RATE = 104.0
@@ -1533,8 +1534,8 @@ XX
     The record less its own GLS temperature response (parts.RecordTemperature.
     less_response) shows the step as without the response, and the slope it takes off
     is the response's; a record without a step stays at the null's level."""
-    from imubench.gap.diagnose import STEP_SIGMAS
     from imubench.gap.parts import RecordTemperature, Series
+    from imubench.gap.step import STEP_SIGMAS
 
     fs, n, t, temp, cm, noise = _hour_at_10_hz()
 
@@ -1619,8 +1620,8 @@ def test_a_curved_temperature_response_is_stated_at_the_records_mean() -> None:
     """The model file states temp_coeff at temp_ref; with a curvature the words and the
     JSON give the slope at the record's mean temperature (a reviewer read -5.2e-4
     dps/degC for a response of +1.3e-3 at 26.5 degC)."""
-    from imubench.gap.diagnose import ChannelDiagnosis
     from imubench.gap.explain import describe
+    from imubench.gap.result import ChannelDiagnosis
 
     d = ChannelDiagnosis("gx", cast(Any, None), None, [], "temperature", {},
                          temp_mean_c=26.5, temp_ref_c=25.0)
@@ -2056,7 +2057,7 @@ def test_a_second_effect_is_tried_while_the_held_out_part_departs(
     steps: list[tuple[int, bool, bool]] = []
     goes_on = diagnose._goes_on
 
-    def spy(st: diagnose._Step, k: int) -> bool:
+    def spy(st: Step, k: int) -> bool:
         assert st.hold is not None
         steps.append((k, st.significant, st.hold.significant))
         return goes_on(st, k)
@@ -2140,8 +2141,8 @@ def test_a_step_hidden_in_white_noise_on_single_blocks_is_seen_across_several() 
     on six seeds), the means of several blocks on either side do not (8.0-11.0; the
     null's statistic 2.9-4.2); the step is located within a block, sized within 20 %,
     and named."""
-    from imubench.gap.diagnose import STEP_SIGMAS
     from imubench.gap.evidence import STEP_BLOCKS, block_means_of
+    from imubench.gap.step import STEP_SIGMAS
 
     n = int(3600 * RATE)
     rng = np.random.default_rng(7)
@@ -2213,12 +2214,11 @@ def test_a_markov_candidate_must_fit_the_allan_curve_better_than_its_look_alikes
 def test_candidates_are_weighted_by_the_band_of_the_record_less_the_kept_responses() -> None:
     """After a temperature response is kept, the candidates' Allan-curve fits are weighted
     by the one-sigma band of the fit part less the response against the realisations less
-    it (:attr:`imubench.gap.diagnose._Step.noise_sigma`), the record's own confidence
+    it (:attr:`imubench.gap.step.Step.noise_sigma`), the record's own confidence
     interval recomputed on the view (:meth:`imubench.gap.parts.PartSetup.less`). With the
     response in, every realisation holds it alike, and the band at the long taus is
     narrower than the noise's."""
     from imubench.gap.candidates import deterministic
-    from imubench.gap.diagnose import _Step
     from imubench.gap.parts import PartSetup, seeds_of, simulate_channel
 
     n = int(1800 * RATE)
@@ -2234,7 +2234,7 @@ def test_candidates_are_weighted_by_the_band_of_the_record_less_the_kept_respons
     det = deterministic("temperature", {"temp_coeff": 0.01, "temp_coeff2": 0.0}, cm, series)
     assert det is not None
     sims = simulate_channel(kept, "gx", series, seeds_of(3, 10))
-    st = _Step(fit, hold, sims, series, RecordTemperature(cm, series), det, cm)
+    st = Step(fit, hold, sims, series, RecordTemperature(cm, series), det, cm)
     less = PartSetup(Series(y[:nf] - det[:nf], temp[:nf], RATE, "less"), cm)
     assert np.allclose(st.fit_part.ci_s, less.ci_s, equal_nan=True)
     assert np.allclose(st.noise_sigma, less.compare(st.noise_feats).sigma, equal_nan=True)
@@ -2242,7 +2242,7 @@ def test_candidates_are_weighted_by_the_band_of_the_record_less_the_kept_respons
     # 0.11, 0.16, 0.25 against 0.14, 0.18, 0.33 at 39-158 s)
     assert np.all(st.before.sigma[-3:] < st.noise_sigma[-3:])
     # nothing kept: the band is the comparison's own
-    st0 = _Step(fit, hold, simulate_channel(model, "gx", series, seeds_of(3, 10)), series,
+    st0 = Step(fit, hold, simulate_channel(model, "gx", series, seeds_of(3, 10)), series,
                 RecordTemperature(cm, series), 0.0, cm)
     assert st0.noise_sigma is st0.before.sigma
 
@@ -2313,13 +2313,12 @@ def test_the_temperature_slope_error_under_the_walks_covariance_is_the_slopes_sc
 def test_the_whole_record_temperature_test_beside_a_kept_walk_is_made_under_its_covariance(
 ) -> None:
     """With a random walk kept, the whole-record temperature test is made under the
-    covariance of the model with the walk (:class:`imubench.gap.diagnose._Step`'s
+    covariance of the model with the walk (:class:`imubench.gap.step.Step`'s
     ``noise``): a response of 2e-3 dps/degC beside a walk of 3e-4 dps/sqrt(s) fires
     there (z 3.8), and not under the base model's covariance (z 2.8), where the walk's
     slow increments are weighed as flicker's (blind pairs temperature 1e-3 + random walk
     3e-4 on the hour: z 1.5 and 2.6 after the walk under the base model's covariance, 3.1
     and 2.9 under the walk's)."""
-    from imubench.gap.diagnose import _Step
     from imubench.gap.parts import PartSetup, seeds_of, simulate_channel
 
     base, walk, series = _walk_record(1001, 2e-3)
@@ -2328,8 +2327,8 @@ def test_the_whole_record_temperature_test_beside_a_kept_walk_is_made_under_its_
     fit, hold = PartSetup(series.part(0, n // 2), cm0), PartSetup(series.part(n // 2, n), cm0)
     sims = simulate_channel(walk, "gx", series, seeds_of(3, 10))
     rt = RecordTemperature(cm0, series)
-    under_walk = _Step(fit, hold, sims, series, rt, 0.0, walk["gx"])
-    under_base = _Step(fit, hold, sims, series, rt, 0.0, cm0)
+    under_walk = Step(fit, hold, sims, series, rt, 0.0, walk["gx"])
+    under_base = Step(fit, hold, sims, series, rt, 0.0, cm0)
     assert under_walk.temp_fired and under_walk.temp_z > 3.6
     assert not under_base.temp_fired and under_base.temp_z < 3.0
 

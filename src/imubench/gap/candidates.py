@@ -143,11 +143,11 @@ class Candidate:
     (:class:`imubench.gap.parts.RecordTemperature`)."""
     across_z: float = float("nan")
     """The held-out line test's z with the line this effect explains left out
-    (:meth:`imubench.gap.diagnose._Step.across_without`)."""
+    (:meth:`imubench.gap.step.Step.across_without`)."""
     held_out_line_z: float = float("nan")
     """The held-out line test's z where it fired at the line this effect explains (a sine
     there), for which it is the held-out check
-    (:meth:`imubench.gap.diagnose._Step.explains_across`); NaN otherwise."""
+    (:meth:`imubench.gap.step.Step.explains_across`); NaN otherwise."""
     shape_z: float = float("nan")
     """Two-level log-likelihood ratio of the whole real record against this candidate's
     realisations (:func:`imubench.gap.two_level.two_level_llr`, telegraph against Markov),
@@ -333,7 +333,7 @@ tau_c 10 s over a model with a large flicker term: ratio 0.76; on a quieter axis
 def markov_share(sigma: float, tau_c_s: float, tau_s: np.ndarray,
                  noise_avar: np.ndarray) -> float:
     """A fitted Gauss-Markov term's AVAR at 3 tau_c over the model's NOISE there
-    (``noise_avar``, :attr:`imubench.gap.diagnose._Step.noise_feats`: the realisations'
+    (``noise_avar``, :attr:`imubench.gap.step.Step.noise_feats`: the realisations'
     mean AVAR without the kept effects' deterministic parts); it must reach
     :data:`MARKOV_DOMINANCE`.
 
@@ -514,7 +514,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     comes first); ``cur``: features of the
     current realisations on the fit part; ``step_y``: the whole record as the
     whole-record step test saw it (``whole`` less its own temperature response when the
-    temperature test fired, :meth:`imubench.gap.diagnose._Step._for_step`), on which the
+    temperature test fired, :meth:`imubench.gap.step.Step._for_step`), on which the
     bias step is located, sized and checked for persistence; None when that test did not
     fire; ``step_means``: the block means of the current realisations seen the same way
     (:func:`imubench.gap.evidence.step_block_means`), whose spread of the persistence
@@ -533,7 +533,7 @@ def fit_candidates(cm: ChannelModel, fit: PartSetup, whole: Series, before: Comp
     (:meth:`imubench.gap.parts.PartSetup.less`), so the realisations' mean AVAR is the
     model's noise (the Markov candidate's share, :func:`markov_share`);
     ``sigma_ln_adev``: the one-sigma band (ln ADEV per tau) of ``fit`` against ``cur``,
-    which weighs the Allan-curve fits (:attr:`imubench.gap.diagnose._Step.noise_sigma`);
+    which weighs the Allan-curve fits (:attr:`imubench.gap.step.Step.noise_sigma`);
     ``line_hint_hz``: the fit part's peak at which the held-out part found a line
     (:mod:`imubench.gap.line_across`; None when it did not), where the sine is fitted when
     the fit part's own line test is below its gate; ``local_avar``: the part of the

@@ -2,7 +2,8 @@
 
 For one channel: simulate K realisations of the model over the record's length, rate and
 temperature history (:mod:`imubench.gap.curves` compares them with the real record on the
-fit part, :mod:`imubench.gap.evidence` tests a bias step on the whole record); then
+fit part, :mod:`imubench.gap.evidence` tests a bias step on the whole record, and
+:class:`imubench.gap.step.Step` holds one step's comparisons); then
 **forward selection** (Efroymson 1960, in Ralston & Wilf, Mathematical Methods for Digital
 Computers, ch. 17): fit every candidate (:mod:`imubench.gap.candidates`) to the REAL fit
 part, re-simulate with it added (same seeds), rank by the score
@@ -48,7 +49,8 @@ recording's own variation (:mod:`imubench.gap.background`: replicates first, the
 halves of the record when no candidate is kept; ``reason`` says which); the kept
 unmodelled effect whose removal costs most (:func:`_main_effect`, after the backward
 step :func:`_prune`); ``base_model`` when only the base model's refit is kept;
-``unexplained`` when no candidate is accepted.
+``unexplained`` when no candidate is accepted. The result is a
+:class:`imubench.gap.result.ChannelDiagnosis`.
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -67,30 +69,31 @@ from scipy.stats import t as student_t
 
 from imubench.gap import background, evidence, extras
 from imubench.gap.candidates import (
-    EFFECTS,
     MAIN_PARAM,
     Candidate,
     candidate_sims,
     deterministic,
     fit_candidates,
-    temperature_slope,
 )
 from imubench.gap.curves import (
     POOLED_DOF,
-    STAT_TESTS,
     Z_SLOPE,
     Comparison,
-    Region,
     block_means,
     line_bands,
-    line_z_cap,
     oavar_at,
     stat_fired,
     z_against,
 )
 from imubench.gap.errors import GapError
-from imubench.gap.line_across import Z_ACROSS, explained_by, line_across
+from imubench.gap.line_across import explained_by
 from imubench.gap.parts import PartSetup, RecordTemperature, Series, seeds_of, simulate_channel
+from imubench.gap.result import (
+    ChannelDiagnosis,
+    GapOptions,
+    model_params_of,
+)
+from imubench.gap.step import Z_DRIFT, Step
 from imubench.gap.two_level import two_level_llr as llr
 from imubench.gap.uncertainty import Refit, standard_errors
 from imubench.noisefit.outliers import held_runs
@@ -130,41 +133,6 @@ NOISE_KEYS = ("white", "flicker", "random_walk", "quantization", "markov_sigma",
 """Model keys of the random terms; a channel needs at least one to be diagnosed."""
 MAX_EFFECTS = 3
 """Most effects kept by the forward selection."""
-STEP_SIGMAS = 5.0
-"""Largest normalised jump of block means that flags a bias step (it must also exceed
-every realisation's). About 2000 differences of window means are tested
-(:func:`imubench.gap.evidence.step_statistic`: widths 1-8 of 256 blocks, adjacent or one
-block apart); Gaussian ones exceed 5 robust sigmas somewhere with probability ~1e-3 at
-most (Bonferroni, two-sided, ``2 x 2000 Q(5)``; the wide windows' differences overlap and
-are correlated, so fewer in effect)."""
-Z_DRIFT = 3.5
-"""Normal-equivalent threshold of the whole-record drift t (two-sided, as Student t)."""
-
-
-@dataclass(frozen=True)
-class GapOptions:
-    """Knobs of the diagnosis (CLI flags)."""
-
-    realisations: int = 10
-    seed: int = 0
-    holdout_fraction: float = 0.5
-    effects: tuple[str, ...] = EFFECTS
-    standard_errors: bool = True
-    """Refit the kept effects on the realisations for their ``params_se``
-    (:func:`imubench.gap.uncertainty.standard_errors`); off where only the verdict is
-    used (the detection limits' injections)."""
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.holdout_fraction < 1.0:
-            raise GapError(
-                f"--holdout-fraction must be in [0, 1), got {self.holdout_fraction!r}"
-            )
-        if self.realisations < 3:
-            raise GapError(f"--realisations must be >= 3, got {self.realisations!r}")
-        bad = [e for e in self.effects if e not in EFFECTS]
-        if bad:
-            raise GapError(f"unknown effect(s) {bad}; candidates are {', '.join(EFFECTS)}")
-
 
 @dataclass
 class Variant:
@@ -212,499 +180,6 @@ class Variant:
                           markov_tau=tele["telegraph_dwell_s"] / 2.0)
 
 
-@dataclass
-class ChannelDiagnosis:
-    channel: str
-    before: Comparison
-    holdout_before: Comparison | None
-    candidates: list[Candidate]
-    """The first step's candidates, ranked by score (one per effect)."""
-    verdict: str
-    evidence: dict[str, Any]
-    kept: list[Candidate] = field(default_factory=list)
-    """Effects kept by the forward selection, in order."""
-    reason: str = ""
-    step_z: float = float("nan")
-    """Whole-record bias-step statistic against the base realisations."""
-    drift_t: float = float("nan")
-    """Whole-record drift t (:func:`imubench.gap.evidence.drift_statistic`)."""
-    step_fired: bool = False
-    """The whole-record bias-step test fired at the first step."""
-    drift_fired: bool = False
-    """The whole-record drift test fired at the first step."""
-    temp_record_z: float = float("nan")
-    """Whole-record temperature z (:class:`imubench.gap.parts.RecordTemperature`)."""
-    temp_fired: bool = False
-    """The whole-record temperature test fired at the first step."""
-    across_z: float = float("nan")
-    """The held-out line test's z at the first step (:mod:`imubench.gap.line_across`)."""
-    across_f_hz: float = float("nan")
-    """Its held-out bin's frequency (Hz)."""
-    across_f_fit_hz: float = float("nan")
-    """The fit part's peak that chose that bin (Hz)."""
-    across_fired: bool = False
-    """The held-out line test fired at the first step."""
-    temp_note: str = ""
-    """Why the temperature test could not be made (:attr:`RecordTemperature.note`)."""
-    held_samples: tuple[float, float] | None = None
-    """(share of the record's samples that repeat the previous one, median number of
-    samples a value is held for) when the record holds its output
-    (:func:`imubench.noisefit.outliers.held_runs`), else None: the realisations do not
-    hold theirs."""
-    residual_significant: bool = False
-    """A significant departure remains after the kept effects."""
-    background: dict[str, Any] | None = None
-    pruned: list[Candidate] = field(default_factory=list)
-    """Effects the forward selection kept and the sequential replacement
-    (:func:`_exchange`) or the backward step (:func:`_prune`) dropped, each with its
-    ``note``."""
-    replicates: list[tuple[str, Comparison, Comparison | None]] = field(default_factory=list)
-    alternative: dict[str, Any] | None = None
-    """Another set of effects that explains the record nearly as well and was not kept
-    (:attr:`_Path.alternative`; JSON ``alternative``, None when there is none)."""
-    look_alike: dict[str, Any] | None = None
-    """Another effect the fit part does not tell apart from the verdict's (JSON
-    ``look_alike``, :func:`_look_alike_dict`; None when there is none)."""
-    fired_after: list[str] = field(default_factory=list)
-    """The tests that still fire against the model with the kept effects
-    (:attr:`_Step.fired`; JSON ``fired_after``), empty when nothing significant is left."""
-    regions_after: list[Region] = field(default_factory=list)
-    """The fit part's Allan regions against the model with the kept effects, when a
-    significant departure is left (JSON ``regions_after``)."""
-    temp_mean_c: float = float("nan")
-    """The record's mean temperature (degC; NaN without one)."""
-    temp_ref_c: float = float("nan")
-    """The model's ``temp_ref`` (degC), where the temperature coefficients are stated."""
-    model_params: dict[str, dict[str, float]] = field(default_factory=dict)
-    """By effect, the model's own values of the parameters it sets: of each noise term a
-    kept effect of the same name raises (:data:`RAISED_TERMS`) and of the white level and
-    filter the base model's refit sets (JSON ``model_params`` of those kept, dropped or
-    not kept)."""
-    temp_spans_c: tuple[float, float, float] | None = None
-    """The fit part's, the held-out part's and the record's temperature spans (degC) when
-    the split cannot both fit and test a temperature response (:func:`temperature_spans`)."""
-    ramp_temperature: dict[str, float] | None = None
-    """A kept ramp's drift read as a temperature response, when the record's temperature
-    drifted in step with time (:func:`ramp_as_temperature`; JSON
-    ``ramp_temperature_alias``)."""
-    not_kept: list[Candidate] = field(default_factory=list)
-    """The candidates examined at the step where the forward selection stopped with a
-    significant departure left (after at least one kept effect), each with the ``note``
-    that refused it: what a second or third effect would have been and why it was not
-    kept."""
-
-    @property
-    def winner(self) -> Candidate | None:
-        """The verdict's effect (a kept unmodelled effect, or the base model)."""
-        for c in self.kept:
-            if c.effect == self.verdict:
-                return c
-        return None
-
-    @property
-    def final_fit(self) -> Comparison | None:
-        return self.kept[-1].fit if self.kept else None
-
-    @property
-    def final_holdout(self) -> Comparison | None:
-        return self.kept[-1].holdout if self.kept else None
-
-    def _refused_dict(self, c: Candidate) -> dict[str, Any]:
-        """A dropped or not-kept candidate's JSON entry, with the model's own value of
-        the term it raises (``model_params``; a flicker fitted at the model's own value
-        raises nothing)."""
-        d: dict[str, Any] = {"effect": c.effect, "params": c.params, **c.at_output(),
-                             "reason": c.note}
-        if c.effect in self.model_params:
-            d["model_params"] = self.model_params[c.effect]
-        return d
-
-    def to_dict(self) -> dict[str, Any]:
-        ff = self.final_fit or self.before
-        kept_effects = {c.effect for c in self.kept}
-        out: dict[str, Any] = {
-            "gap_before": self.before.gap,
-            "significant": (self.before.significant or self.step_fired or self.drift_fired
-                            or self.temp_fired or self.across_fired),
-            "whole_record": {"step_fired": self.step_fired, "drift_fired": self.drift_fired,
-                             "temperature_fired": self.temp_fired,
-                             "line_across_fired": self.across_fired},
-            "regions": [r.to_dict() for r in self.before.regions],
-            "effects": [c.to_dict(self.before) for c in self.candidates],
-            "verdict": self.verdict,
-            "reason": self.reason,
-            "kept": [_kept_dict(c, self.model_params) for c in self.kept],
-            "dropped": [self._refused_dict(c) for c in self.pruned],
-            "not_kept": [self._refused_dict(c) for c in self.not_kept],
-            "residual_significant": self.residual_significant,
-            "fired_after": self.fired_after,
-            "regions_after": [r.to_dict() for r in self.regions_after],
-            "gap_after": ff.gap,
-            "gap_null": self.before.gap_null,
-            "gap_null_after": ff.gap_null,
-            "gap_excess_before": self.before.gap_excess,
-            "gap_excess_after": ff.gap_excess,
-            "gap_excess_floor": self.before.gap_excess_floor,
-            "gap_excess_floor_after": ff.gap_excess_floor,
-            "holdout": None,
-            "bands": [dict(b) for b in self.before.bands],
-            "line": {"f_hz": self.before.line_f_hz, "z": self.before.line_z},
-            "impulses_z": self.before.tail_z,
-            "temperature_slope_z": self.before.temp_z,
-            "temperature_level_z": self.before.temp_level_z,
-            "trend_z": self.before.trend_z,
-            "bias_step_z": self.step_z,
-            "drift_t": self.drift_t,
-            "temperature_record_z": self.temp_record_z,
-            "line_across": {"z": self.across_z, "f_hz": self.across_f_hz,
-                            "f_fit_hz": self.across_f_fit_hz, "threshold": Z_ACROSS},
-            "statistics_after": {key: getattr(ff, key) for key, _, _ in STAT_TESTS},
-            "whole_record_after": self._whole_record_after(),
-            "global_after": ff.global_dict(),
-            "temperature_note": self.temp_note or None,
-            "held_samples": (None if self.held_samples is None else
-                             {"share": self.held_samples[0],
-                              "median_hold_samples": self.held_samples[1]}),
-            "temperature_spans_c": (None if self.temp_spans_c is None else
-                                    {"fit_part": self.temp_spans_c[0],
-                                     "held_out": self.temp_spans_c[1],
-                                     "record": self.temp_spans_c[2]}),
-            "not_fitted": {e: why for e, why in self.evidence.get("not_fitted", {}).items()
-                           if e not in kept_effects},
-            "global": self.before.global_dict(),
-            "background": self.background,
-            "alternative": self.alternative,
-            "look_alike": self.look_alike,
-            "ramp_temperature_alias": self.ramp_temperature,
-        }
-        for entry in out["effects"]:
-            entry["kept"] = entry["effect"] in kept_effects
-        for entry in (out["effects"] + out["kept"] + out["dropped"] + out["not_kept"]):
-            self._slope_at_mean(entry)
-        for rd, r in zip(out["regions"], self.before.regions, strict=True):
-            rd["gap_after"] = ff.gap_over(r.tau_min_s, r.tau_max_s)
-        for bd in out["bands"]:
-            bd["z_max_after"] = ff.band_z_over(float(bd["f_min_hz"]), float(bd["f_max_hz"]))
-        for kd, c in zip(out["kept"], self.kept, strict=True):
-            if c.holdout is not None:
-                kd["holdout_region_gap_after"] = c.holdout.region_gap(self.before.regions)
-        if self.holdout_before is not None:
-            hb = self.holdout_before
-            ha = self.final_holdout or hb
-            regions = self.before.regions
-            out["holdout"] = {
-                "gap_before": hb.gap, "gap_after": ha.gap,
-                "region_gap_before": hb.region_gap(regions),
-                "region_gap_after": ha.region_gap(regions),
-                "chi2_closed": ha.excess_closed(hb) if self.kept else 0.0,
-                "gap_null": hb.gap_null,
-                "gap_null_after": ha.gap_null,
-                "gap_excess_before": hb.gap_excess,
-                "gap_excess_after": ha.gap_excess,
-                "gap_excess_floor": hb.gap_excess_floor,
-                "gap_excess_floor_after": ha.gap_excess_floor,
-                "chi2_check_before": hb.chi2_check,
-                "chi2_check_after": ha.chi2_check,
-                "significant": hb.significant,
-                "fired": hb.fired,
-                "regions": [r.to_dict() for r in hb.regions],
-                "significant_after": ha.significant,
-                "fired_after": ha.fired,
-                "regions_after": [r.to_dict() for r in ha.regions],
-            }
-        if self.replicates:
-            reps = [{"recording": name, "gap_before": b.gap,
-                     "gap_after": (a.gap if a is not None else b.gap),
-                     "gap_null": b.gap_null, "gap_excess_before": b.gap_excess,
-                     "significant": b.significant}
-                    for name, b, a in self.replicates]
-            out["holdout"] = dict(out["holdout"] or {})
-            out["holdout"]["recordings"] = reps
-        return out
-
-    def _whole_record_after(self) -> dict[str, float]:
-        """The whole-record statistics against the model with all kept effects
-        (``bias_step_z``, ``drift_t``, ``temperature_record_z``, ``line_across_z``; the
-        first step's without a kept effect)."""
-        last = self.kept[-1] if self.kept else None
-        return {"bias_step_z": self.step_z if last is None else last.step_z,
-                "drift_t": self.drift_t if last is None else last.drift_t,
-                "temperature_record_z": (self.temp_record_z if last is None
-                                         else last.temp_record_z),
-                "line_across_z": self.across_z if last is None else last.across_z}
-
-    def _slope_at_mean(self, entry: dict[str, Any]) -> None:
-        """Adds to a temperature effect's ``entry`` its response's slope at the record's
-        mean temperature, ``temp_slope_at_mean`` (unit/degC, :func:`imubench.gap.
-        candidates.temperature_slope`) at ``temp_mean_c`` (degC)."""
-        if entry.get("effect") != "temperature" or not math.isfinite(self.temp_mean_c):
-            return
-        entry["temp_mean_c"] = self.temp_mean_c
-        entry["temp_slope_at_mean"] = temperature_slope(entry["params"], self.temp_mean_c,
-                                                        self.temp_ref_c)
-
-
-RAISED_TERMS = ("flicker", "random_walk", "quantization")
-"""Kept effects that raise a noise term of the model's (a zero: the model lacks it)."""
-BASE_PARAMS = ("white", "bandwidth_hz", "filter_order")
-"""What the base model's refit sets."""
-
-
-def _model_params(cm: ChannelModel) -> dict[str, dict[str, float]]:
-    """:attr:`ChannelDiagnosis.model_params` of the model's channel ``cm``."""
-    out = {k: {k: float(getattr(cm, k))} for k in RAISED_TERMS}
-    out["base_model"] = {k: float(getattr(cm, k)) for k in BASE_PARAMS}
-    return out
-
-
-def _kept_dict(c: Candidate, model_params: Mapping[str, dict[str, float]]
-               ) -> dict[str, Any]:
-    """A kept effect's JSON entry; ``model_params``: the model's own values of what it
-    sets (:attr:`ChannelDiagnosis.model_params`)."""
-    assert c.fit is not None
-    d: dict[str, Any] = {"effect": c.effect, "params": c.params, "n_params": c.n_params,
-                         "params_se": dict(c.params_se),  # NaN: null in the JSON
-                         "params_bias": dict(c.params_bias), "params_n": dict(c.params_n),
-                         "gap_after": c.fit.gap,
-                         "gap_excess_after": c.fit.gap_excess,
-                         "evidence_closed": c.evidence_closed, **c.at_output(),
-                         **c.fitted_on(), **c.holdout_dict()}
-    if c.effect in model_params:
-        d["model_params"] = model_params[c.effect]
-    if c.estimator:
-        d["estimator"] = c.estimator
-    if c.slow_scale < 1.0:
-        d["slow_terms_scale"] = c.slow_scale
-    if math.isfinite(c.unique_chi2):
-        d["chi2_rise_without"] = c.unique_chi2
-    return d
-
-
-class _Step:
-    """One step of the forward selection: the current realisations against the record.
-
-    Besides the fit part's comparison, three whole-record tests: the bias step (the largest
-    normalised jump of block means, :func:`imubench.gap.evidence.step_statistic`, fired
-    when it exceeds STEP_SIGMAS and every realisation's; scored as its t against the
-    realisations; record and realisations each less their own temperature response when
-    the temperature test fired, :meth:`_for_step`), the drift
-    (:func:`imubench.gap.evidence.drift_statistic` of the record minus the deterministic
-    parts of the kept effects, self-normalised Student t) and the temperature response
-    (:class:`imubench.gap.parts.RecordTemperature`, z against the realisations, fired
-    beyond Z_SLOPE). With a held-out part, a fourth: a line at one of the fit part's
-    highest peaks found again on the held-out part (:mod:`imubench.gap.line_across`;
-    the lines of ``explained`` left out).
-    """
-
-    def __init__(self, fit: PartSetup, hold: PartSetup | None, sims: np.ndarray,
-                 series: Series, temp: RecordTemperature, det_sum: np.ndarray | float,
-                 noise: ChannelModel, explained: tuple[tuple[float, float], ...] = ()
-                 ) -> None:
-        n_fit = len(fit.series.y)
-        rate = series.rate_hz
-        self.det_sum = det_sum
-        self.feats = fit.sim_features(sims[:, :n_fit])
-        self.before = fit.compare(self.feats, noise)
-        self.hold = (hold.compare(hold.sim_features(sims[:, n_fit:]), noise)
-                     if hold is not None else None)
-        self.fit_part = fit.less(det_sum if np.ndim(det_sum) == 0
-                                 else np.asarray(det_sum)[:n_fit])
-        """The fit part less the kept effects' deterministic parts (:meth:`PartSetup.less`),
-        on which the candidates are fitted."""
-        self.noise_feats = (self.feats if self.fit_part is fit
-                            else self.fit_part.sim_features(sims[:, :n_fit]))
-        """The realisations' features over the fit part, each less the kept effects'
-        deterministic parts: the model's noise, against which the candidates are fitted.
-
-        The comparisons of the record with the model (:attr:`before`, :attr:`hold`) keep
-        those parts in both; a noise candidate fitted to the record's Allan variance less
-        the model's with them in sees their Allan variance and its cross term with the
-        noise, which differs from one realisation to the next, where the parts dominate.
-        An outside reviewer's Markov sigma 4.6 mdps, tau_c 30 s, beside a temperature
-        response of 6e-3 dps/degC on +-3 degC: once the response was kept the Markov
-        term's share of the realisations' Allan variance at 3 tau_c was 0.23, most of it
-        the response's (:func:`imubench.gap.candidates.markov_share`). Blind-generator
-        pair Markov 4 mdps, 30 s beside 0.01 dps/degC: after the response, the Markov's
-        descent beyond 3 tau_c was hidden the same way (fitted tau_c 49 s, not shown)
-        and a random walk of 8.2e-4 dps/sqrt(s) was kept (3 seeds of 3); fitted on the
-        record less the response, the Markov is kept beside it (sigma 3.9 mdps, tau_c
-        22-33 s). The comparisons themselves keep the parts in: without them the error of
-        a fitted response (5 % of 6e-3 dps/degC) showed as a held-out gap that a random
-        walk's wide realisations covered, and the random walk was kept over temperature +
-        Markov (:func:`_better_start`)."""
-        self.rate_hz = rate
-        self.series_parts = (fit.series, None if hold is None else hold.series)
-        """The fit and held-out parts' series (the latter None without a held-out part)."""
-        self.residual = series.y - det_sum
-        """The record less the kept effects' deterministic parts."""
-        self.drift_t, self.drift_dof = evidence.drift_statistic(self.residual, rate)
-        self.drift_fired = stat_fired(self.drift_t, Z_DRIFT, False, self.drift_dof)
-        self.temp = temp.for_model(noise)
-        """The whole-record temperature test under the covariance of the model's noise
-        (``noise``: the base model's with the kept noise processes)."""
-        self.temp_z = self.temp.z(self.residual, sims, det_sum)
-        self.temp_fired = stat_fired(self.temp_z, Z_SLOPE, False, POOLED_DOF)
-        self.step_y = self._for_step(self.residual[None, :])[0]
-        """The record as the whole-record step test sees it (:meth:`_for_step`)."""
-        self.step_real = evidence.step_statistic(self.step_y)[0]
-        noise_sims = sims - det_sum  # as the record is in :attr:`residual` (one copy)
-        step_sims = self._for_step(noise_sims)
-        self.step_means = np.array([evidence.step_block_means(y) for y in step_sims])
-        """The block means of the realisations as the step test sees them
-        (:meth:`_for_step`): a step's persistence against the model's wander (K x
-        :data:`imubench.gap.evidence.STEP_BLOCKS`; the realisations themselves, K x n,
-        are not kept by the cached steps)."""
-        sim_steps = np.array([evidence.step_statistic(y)[0] for y in step_sims])
-        self.step_z = z_against(self.step_real, sim_steps)
-        self.step_fired = bool(self.step_real > STEP_SIGMAS
-                               and self.step_real > float(np.max(sim_steps)))
-        self.explained = explained
-        """Frequency intervals (Hz) of the lines the model's own sine and the kept effects
-        explain (:meth:`_Realiser.explained`)."""
-        self.across = (None if hold is None else line_across(
-            self.residual[:n_fit], self.residual[n_fit:], noise_sims[:, n_fit:], rate,
-            explained))
-        """The held-out part's test at the fit part's highest peaks (None without a
-        held-out part or where it is too short)."""
-        self.across_z, self.across_f_hz, self.across_f_fit_hz = (
-            (math.nan,) * 3 if self.across is None else self.across.z(explained))
-        self.across_fired = self.across is not None and self.across.fired(explained)
-
-    @functools.cached_property
-    def noise_sigma(self) -> np.ndarray:
-        """The one-sigma band (ln ADEV per tau) of the fit part less the kept effects'
-        deterministic parts against :attr:`noise_feats`: the weights of the candidates'
-        Allan-curve fits, made in that frame. The band of :attr:`before` (parts in) is
-        narrow at the long taus where a kept response dominates every realisation alike,
-        and there a record's ln AVAR of few degrees of freedom lies below ln E[AVAR]
-        (E ln(chi2_nu / nu) = -0.58 at nu = 2), which such weights then follow. An
-        outside reviewer's random walk 3e-4 dps/sqrt(s) kept after a temperature response
-        of 3e-3 dps/degC, three records: 2.03, 1.65, 2.19e-4 with those weights, 2.25,
-        1.76, 2.27e-4 with these. (The rest of the shortfall is the records': their fit
-        halves less the true response have ADEVs of 0.69, 0.23 and 0.74 of the truth's
-        at 300 s.)"""
-        if self.noise_feats is self.feats:  # nothing kept with a deterministic part
-            return self.before.sigma
-        return self.fit_part.compare(self.noise_feats).sigma
-
-    def hold_drift(self) -> tuple[float, int]:
-        """The held-out part's own drift test (:func:`imubench.gap.evidence.
-        drift_statistic` of the record less the kept effects' deterministic parts, over
-        the held-out samples): its t and degrees of freedom; NaN without a held-out
-        part."""
-        fit_part, hold_part = self.series_parts
-        if hold_part is None:
-            return math.nan, 1
-        return evidence.drift_statistic(self.residual[len(fit_part.y):], self.rate_hz)
-
-    def _for_step(self, ys: np.ndarray) -> np.ndarray:
-        """``ys`` as the step test sees them: less the kept effects' deterministic parts
-        (done by the caller for the record) and, when the temperature test fired, less
-        each one's own temperature response (:meth:`RecordTemperature.less_response`),
-        fitted beside a step at the place a first pass locates in each (the largest one
-        it then sees). A temperature response widens the block means' increments and
-        hid a step: a kept one hid a second effect's step (CATS gy, bias step +
-        temperature at 2x their limits), an unmodelled one let a random walk take the
-        step's excess first (CATS az seg 1; ax seg 2 still keeps the walk)."""
-        if not self.temp_fired:
-            return ys
-        first = self.temp.less_response(ys)
-        out = np.empty_like(first)
-        for k, y in enumerate(first):
-            at = round(evidence.fit_bias_step(y, self.rate_hz).step_time_s * self.rate_hz)
-            out[k] = self.temp.less_response(ys[k:k + 1], step_at=at)[0]
-        return out
-
-    def explains_across(self, c: Candidate) -> bool:
-        """The held-out line test fired at this step at a frequency whose line ``c``
-        explains (a sine there)."""
-        hold = self.series_parts[1]
-        if not self.across_fired or hold is None:
-            return False
-        span = explained_by(c.effect, c.params, len(hold.y), self.rate_hz)
-        return span is not None and span[0] <= self.across_f_hz <= span[1]
-
-    def across_without(self, c: Candidate) -> float:
-        """The held-out line test's z with the line ``c`` explains left out as well (its
-        z at this step for an effect that explains none)."""
-        if self.across is None:
-            return math.nan
-        hold = self.series_parts[1]
-        assert hold is not None
-        more = explained_by(c.effect, c.params, len(hold.y), self.rate_hz)
-        return self.across_z if more is None else self.across.z((*self.explained, more))[0]
-
-    def step_stats(self, sims: np.ndarray) -> np.ndarray:
-        """The step statistic of each realisation, seen as the record is (:meth:`_for_step`)."""
-        ys = self._for_step(sims - self.det_sum)
-        return np.array([evidence.step_statistic(y)[0] for y in ys])
-
-    @property
-    def record_fired(self) -> bool:
-        """A whole-record test fired (bias step, drift, temperature or the held-out
-        line)."""
-        return self.step_fired or self.drift_fired or self.temp_fired or self.across_fired
-
-    @property
-    def significant(self) -> bool:
-        return self.before.significant or self.record_fired
-
-    @property
-    def fired(self) -> list[str]:
-        """The tests that fire, by the JSON's names: the fit part's
-        (:attr:`~imubench.gap.curves.Comparison.fired`) and the whole-record ones
-        (``bias_step_z``, ``drift_t``, ``temperature_record_z``, ``line_across_z``, as in
-        ``whole_record_after``)."""
-        return self.before.fired + [name for name, hit in (
-            ("bias_step_z", self.step_fired), ("drift_t", self.drift_fired),
-            ("temperature_record_z", self.temp_fired), ("line_across_z", self.across_fired))
-            if hit]
-
-    def _record_excess(self, step_z: float, drift_t: float, temp_z: float,
-                       across_z: float) -> float:
-        e = 0.0
-        if self.across_fired and math.isfinite(across_z):
-            e += max(min(across_z, self.across_cap) ** 2 - 1.0, 0.0)
-        if self.step_fired and math.isfinite(step_z):
-            e += max(max(step_z, 0.0) ** 2 - 1.0, 0.0)
-        if self.drift_fired and math.isfinite(drift_t):
-            e += max(drift_t**2 - 1.0, 0.0)
-        if self.temp_fired and math.isfinite(temp_z):
-            e += max(temp_z**2 - 1.0, 0.0)
-        return e
-
-    def evidence_closed(self, c: Candidate) -> float:
-        """Share of the significant excess (fit part and whole-record tests) removed."""
-        assert c.fit is not None
-        zb = self.before._fired_z(self.before)
-        za = c.fit._fired_z(self.before)
-        e0 = float(np.sum(np.maximum(zb * zb - 1.0, 0.0)))
-        e1 = float(np.sum(np.maximum(za * za - 1.0, 0.0)))
-        e0 += self._record_excess(self.step_z, self.drift_t, self.temp_z, self.across_z)
-        e1 += self._record_excess(c.step_z, c.drift_t, c.temp_record_z, c.across_z)
-        return 1.0 - e1 / e0 if e0 > 0 else float("nan")
-
-    @property
-    def across_cap(self) -> float:
-        """The largest held-out line z the chi-squared counts: the comparisons' line cap
-        (:func:`imubench.gap.curves.line_z_cap`), so that a sine gains no more from a line
-        seen on both parts than from one seen on the fit part."""
-        return line_z_cap(self.before.realisations)
-
-    def record_chi2(self, step_z: float, drift_t: float, temp_z: float,
-                    across_z: float) -> float:
-        """The whole-record tests' chi-squared at these values (this step's, or a
-        candidate's); the held-out line counts where it fired at this step, capped
-        (:attr:`across_cap`)."""
-        across = (min(max(across_z, 0.0), self.across_cap) ** 2
-                  if self.across_fired and math.isfinite(across_z) else 0.0)
-        return ((max(step_z, 0.0) ** 2 if math.isfinite(step_z) else 0.0)
-                + (drift_t**2 if math.isfinite(drift_t) else 0.0)
-                + (temp_z**2 if math.isfinite(temp_z) else 0.0) + across)
-
-    def chi2(self) -> float:
-        return self.before.chi2 + self.record_chi2(self.step_z, self.drift_t, self.temp_z,
-                                                   self.across_z)
 
 
 def removes(share: float | None) -> str:
@@ -715,7 +190,7 @@ def removes(share: float | None) -> str:
     return f"removes {share:.0%} of" if share >= 0 else f"removes none (adds {-share:.0%} to)"
 
 
-def _cand_chi2(c: Candidate, st: _Step) -> float:
+def _cand_chi2(c: Candidate, st: Step) -> float:
     """``c``'s chi-squared at step ``st``: its fit part's and the whole-record tests'."""
     assert c.fit is not None
     return c.fit.chi2 + st.record_chi2(c.step_z, c.drift_t, c.temp_record_z, c.across_z)
@@ -765,9 +240,9 @@ outliers) and the base model's refit are not checked on replicates; the held-out
 systematic Allan gap checks these and the base model's refit (:func:`_acceptable`)."""
 
 
-def _explains_own_test(c: Candidate, st: _Step) -> bool:
+def _explains_own_test(c: Candidate, st: Step) -> bool:
     """Whether ``c`` is a temperature response or a ramp whose own whole-record test fired
-    at this step (:attr:`_Step.temp_fired`, :attr:`_Step.drift_fired`) and no longer fires
+    at this step (:attr:`Step.temp_fired`, :attr:`Step.drift_fired`) and no longer fires
     with it, or a sine at the line the held-out line test found
     (:attr:`Candidate.held_out_line_z`): the third way to pass the first acceptance
     rule, beside the share of the significant excess and the fit part's likelihood
@@ -830,7 +305,7 @@ def spans_text(spans: tuple[float, float, float]) -> str:
 def _drifts_the_other_way(ramp: float, t_hold: float, dof: int) -> str:
     """Why a ramp of ``ramp`` (unit/s) fitted on the fit part is refused by the held-out
     part's own drift test (``t_hold`` with ``dof`` degrees of freedom,
-    :meth:`_Step.hold_drift`): that part drifts the other way at the HOLDOUT_ALPHA level
+    :meth:`Step.hold_drift`): that part drifts the other way at the HOLDOUT_ALPHA level
     (two-sided), whatever the Allan curve, which cannot see a drift's sign; empty
     otherwise (NaN ``t_hold``: no held-out part)."""
     if (math.isfinite(t_hold) and t_hold * ramp < 0
@@ -841,7 +316,7 @@ def _drifts_the_other_way(ramp: float, t_hold: float, dof: int) -> str:
     return ""
 
 
-def _acceptable(c: Candidate, st: _Step) -> str:
+def _acceptable(c: Candidate, st: Step) -> str:
     """Empty when ``c`` is kept; else why not, in plain words."""
     assert c.fit is not None
     if c.refusal:
@@ -897,7 +372,7 @@ RESONANCE_HELD_OUT_Z = 2.0
 """z of the held-out part's own narrowband-peak test a kept resonance needs there."""
 
 
-def _peak_not_held_out(c: Candidate, st: _Step) -> str:
+def _peak_not_held_out(c: Candidate, st: Step) -> str:
     """Why a resonance is refused because the held-out part, less the kept effects'
     deterministic parts, shows no narrowband peak at its centre
     (:func:`imubench.noisefit.spectral_line.peak_test` over [f0 / 1.25, 1.25 f0], z
@@ -926,7 +401,7 @@ def _departs_more(where: str, before: Comparison, after: Comparison) -> str:
     return ""
 
 
-def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
+def _evaluate(r: _Realiser, kept: list[Candidate], st: Step, sims: np.ndarray,
               effects: tuple[str, ...]
               ) -> tuple[list[Candidate], dict[int, np.ndarray], dict[str, Any]]:
     """Fit, realise and score every candidate of one step, beside the ``kept`` effects
@@ -965,7 +440,7 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: _Step, sims: np.ndarray,
     # spectral check cannot tell the two apart, so this takes nothing from that check
     two_level = ev.get("two_level")
     # (the record and the realisations less the kept effects' deterministic parts, as
-    # the candidates are fitted, _Step.noise_feats: a kept ramp of 0.054 dps over the fit
+    # the candidates are fitted, Step.noise_feats: a kept ramp of 0.054 dps over the fit
     # part smeared two levels 0.008 dps apart)
     shape_real = llr(st.residual, rate, *two_level) if two_level is not None else math.nan
     for c in cands:
@@ -1026,7 +501,7 @@ def _holdout_drop(before: Comparison, c: Candidate, hold: PartSetup) -> dict[str
 
 
 def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetup | None,
-            st: _Step, replicate_check: Callable[[Candidate], str] | None = None
+            st: Step, replicate_check: Callable[[Candidate], str] | None = None
             ) -> tuple[Candidate | None, np.ndarray | None]:
     """The best of the first HOLDOUT_TOP candidates that passes :func:`_acceptable`
     (each examined one gets its held-out comparison and, if refused, its reason); a
@@ -1049,7 +524,7 @@ def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetu
     return None, None
 
 
-def _examine(c: Candidate, cs: np.ndarray, hold: PartSetup | None, st: _Step,
+def _examine(c: Candidate, cs: np.ndarray, hold: PartSetup | None, st: Step,
              replicate_check: Callable[[Candidate], str] | None) -> str:
     """Why ``c`` (realised as ``cs``) is not kept, empty if it is: its held-out comparison
     (made here when there is a held-out part), :func:`_acceptable`, then the replicates'
@@ -1064,7 +539,7 @@ def _examine(c: Candidate, cs: np.ndarray, hold: PartSetup | None, st: _Step,
     return note
 
 
-def overdispersion(c: Candidate, st: _Step) -> float:
+def overdispersion(c: Candidate, st: Step) -> float:
     """The chi-squared per term of ``c``'s fit at step ``st``, at least 1: the variance
     inflation factor c-hat of quasi-likelihood model selection (Burnham and Anderson,
     Model Selection and Multimodel Inference, 2nd ed. 2002, sec. 2.5.1: chi-squared over
@@ -1093,7 +568,7 @@ class _LookAlike:
 
 
 def _look_alike(ranked: list[Candidate], best: dict[int, np.ndarray], chosen: Candidate,
-                hold: PartSetup | None, st: _Step,
+                hold: PartSetup | None, st: Step,
                 replicate_check: Callable[[Candidate], str] | None, step: int
                 ) -> _LookAlike | None:
     """``chosen`` and its rival when the best-scoring candidate of another effect that
@@ -1176,7 +651,7 @@ class _Realiser:
         self.temp_spans = temperature_spans(fit.series, None if hold is None else hold.series)
         """The parts' temperature spans when a temperature response is fitted and tested on
         the whole record (:func:`temperature_spans`), else None."""
-        self._steps: dict[tuple[tuple[str, tuple[tuple[str, float], ...]], ...], _Step] = {}
+        self._steps: dict[tuple[tuple[str, tuple[tuple[str, float], ...]], ...], Step] = {}
 
     def stages(self, kept: list[Candidate]
                ) -> tuple[Variant, list[ChannelModel], list[np.ndarray | float]]:
@@ -1232,24 +707,24 @@ class _Realiser:
         rate = self.series.rate_hz
         return np.mean([oavar_at(y, rate, self.fit.afs) for y in np.atleast_2d(sums)], axis=0)
 
-    def step(self, kept: list[Candidate]) -> _Step:
+    def step(self, kept: list[Candidate]) -> Step:
         """The step against the model with ``kept`` (realised afresh, same seeds)."""
         key = self._key(kept)
         if key not in self._steps:
             self.realise(kept)
         return self._steps[key]
 
-    def step_of(self, kept: list[Candidate], sims: np.ndarray) -> _Step:
+    def step_of(self, kept: list[Candidate], sims: np.ndarray) -> Step:
         """The step against the model with ``kept``, whose realisations ``sims`` are (the
         run's seeds); built from them when it is not cached yet."""
         key = self._key(kept)
         if key not in self._steps:
             variant, det = self.variant(kept)
-            self._steps[key] = _Step(self.fit, self.hold, sims, self.series, self.temp,
+            self._steps[key] = Step(self.fit, self.hold, sims, self.series, self.temp,
                                      det, variant.noise(self.channel), self.explained(kept))
         return self._steps[key]
 
-    def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, _Step]:
+    def realise(self, kept: list[Candidate]) -> tuple[Variant, np.ndarray, Step]:
         """The model with ``kept``, its realisations (the run's seeds) and its step; the
         step is built from these realisations when it is not cached yet."""
         variant, _ = self.variant(kept)
@@ -1283,7 +758,7 @@ class _Realiser:
         for j, c in enumerate(kept):
             beside = [x for x in kept if x is not c] if c.backfitted else kept[:j]
             ref = self.step(beside)
-            # as the effect was fitted (_Step.noise_feats): less the deterministic parts
+            # as the effect was fitted (Step.noise_feats): less the deterministic parts
             # of the effects it was fitted beside (ref.fit_part's); the others left in. A
             # temperature response backfitted on the record less a ramp kept after it,
             # refitted with the ramp left in, read 0.0026 dps/degC low for 0.00397 (an
@@ -1492,7 +967,7 @@ def _exchange(r: _Realiser, kept: list[Candidate], effects: tuple[str, ...],
 
 
 def _held_out_keeps(occupant: Candidate | None, new: Candidate, best: dict[int, np.ndarray],
-                    hold: PartSetup | None, st: _Step,
+                    hold: PartSetup | None, st: Step,
                     replicate_check: Callable[[Candidate], str] | None) -> bool:
     """Whether the sequential replacement of a kept effect, fitted again as ``occupant``,
     by ``new`` is refused because the two are look-alikes the held-out part decides for
@@ -1605,7 +1080,7 @@ class _Path:
     does not tell apart from it (:func:`_look_alike`), in step order."""
 
 
-def _fired_effects(st: _Step) -> tuple[str, ...]:
+def _fired_effects(st: Step) -> tuple[str, ...]:
     """The deterministic effects whose own whole-record test fired at ``st``: the
     temperature response (temperature test), the ramp (drift test), the bias step (step
     test)."""
@@ -1621,7 +1096,7 @@ def _with_base_of(kept: list[Candidate], c: Candidate) -> list[Candidate]:
     return [c.base_refit if x.effect == "base_model" else x for x in kept]
 
 
-def _forward(r: _Realiser, first: _Step, sims: np.ndarray, effects: tuple[str, ...],
+def _forward(r: _Realiser, first: Step, sims: np.ndarray, effects: tuple[str, ...],
              reps: list[tuple[PartSetup, Series]], rep_before: list[Comparison],
              fired_first: bool) -> _Path:
     """Forward selection from the model alone (Efroymson's stepwise method): at each step
@@ -1720,14 +1195,14 @@ def _polish(r: _Realiser, effects: tuple[str, ...],
     return gone
 
 
-def _goes_on(st: _Step, k: int) -> bool:
+def _goes_on(st: Step, k: int) -> bool:
     """Whether the forward selection takes step ``k`` (0 = the first): the fit part (or a
     whole-record test) departs significantly from the model with the kept effects, or,
     after the first effect, the held-out part does (see :func:`_forward`)."""
     return st.significant or (k > 0 and st.hold is not None and st.hold.significant)
 
 
-def _better_start(r: _Realiser, first: _Step, main: _Path, alt: _Path
+def _better_start(r: _Realiser, first: Step, main: _Path, alt: _Path
                   ) -> tuple[_Path, list[Candidate]]:
     """The better of two forward selections: ``main`` from the best-scoring candidate,
     ``alt`` with the deterministic effects whose own whole-record tests fire examined
@@ -1923,7 +1398,7 @@ def diagnose_channel(model: NoiseModel, channel: str, series: Series,
                                          if series.has_temperature and series.temp_c is not None
                                          else math.nan),
                             temp_ref_c=float(cm0.temp_ref), temp_spans_c=realiser.temp_spans,
-                            model_params=_model_params(cm0),
+                            model_params=model_params_of(cm0),
                             ramp_temperature=ramp_as_temperature(kept, cm0, series),
                             residual_significant=residual, background=bg_summary,
                             pruned=pruned, not_kept=not_kept if residual else [],
@@ -2003,7 +1478,4 @@ def main_param_error(effect: str, fitted: dict[str, float], truth: float) -> flo
     return abs(abs(fitted[key]) - abs(truth)) / abs(truth)
 
 
-__all__ = [
-    "EFFECTS", "MAIN_PARAM", "MIN_CLOSURE", "Candidate", "ChannelDiagnosis",
-    "GapOptions", "Series", "diagnose_channel", "main_param_error", "simulate_channel",
-]
+__all__ = ["MIN_CLOSURE", "diagnose_channel", "main_param_error"]

@@ -44,9 +44,10 @@ from lsm6ds_sim.model import NoiseModel
 
 from imubench.gap import extras
 from imubench.gap.curves import analysis_afs, oavar_at, welch_psd
-from imubench.gap.diagnose import GapOptions, diagnose_channel
+from imubench.gap.diagnose import diagnose_channel
 from imubench.gap.evidence import STEP_BLOCKS, block_means_of
 from imubench.gap.parts import RecordTemperature, Series
+from imubench.gap.result import GapOptions
 
 FACTORS: tuple[float, ...] = (4.0, 2.0, 1.0, 0.5)
 """Sizes tried downwards, as multiples of the starting size, largest first."""

@@ -356,7 +356,7 @@ class PartSetup:
         record, and out of each realisation :meth:`sim_features` is given: the
         realisations of a model with those effects carry the same ``det``, so what each
         holds then is noise. The forward selection fits its candidates on such a view
-        (:attr:`imubench.gap.diagnose._Step.noise_feats` says why)."""
+        (:attr:`imubench.gap.step.Step.noise_feats` says why)."""
         if np.ndim(det) == 0 and float(det) == 0.0:
             return self
         view = copy.copy(self)

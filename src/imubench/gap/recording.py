@@ -13,14 +13,11 @@ from typing import Any
 import numpy as np
 from lsm6ds_sim.model import NoiseModel
 
-from imubench.gap.diagnose import (
-    EFFECTS,
-    ChannelDiagnosis,
-    GapOptions,
-    Series,
-    diagnose_channel,
-)
+from imubench.gap.candidates import EFFECTS
+from imubench.gap.diagnose import diagnose_channel
 from imubench.gap.errors import GapError
+from imubench.gap.parts import Series
+from imubench.gap.result import ChannelDiagnosis, GapOptions
 from imubench.recording import Recording
 
 SCHEMA = "imubench.gap/1"

@@ -22,10 +22,10 @@ import numpy as np
 from imubench.batch import UNITS
 from imubench.gap.candidates import temperature_response, temperature_slope
 from imubench.gap.curves import Comparison
-from imubench.gap.diagnose import ChannelDiagnosis
 from imubench.gap.errors import GapError
 from imubench.gap.evidence import STEP_WINDOW_BLOCKS
 from imubench.gap.explain import explain_channel, params_text
+from imubench.gap.result import ChannelDiagnosis
 
 
 def _adev_panel(ax: Any, title: str, before: Comparison, after: Comparison | None,
