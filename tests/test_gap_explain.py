@@ -928,16 +928,38 @@ def test_a_close_alternative_that_was_not_taken_is_said() -> None:
             "(markov_sigma = 0.00398, markov_tau = 33.1), the effects that the other "
             "selection (the one that examines first the effects whose own whole-record "
             "tests fired) kept.") in text, text
-    assert ("It scores 76.9 against 68.5 for the kept effects on the fit part (3 parameters "
-            "against 1; lower is better), held-out gap's excess over its scatter 0.0509 "
-            "against 0.12 (scatter 0.0994); the held-out part favours it; not taken "
-            "because it does not score lower on the fit part.") in text
+    assert ("It scores 76.9 against 68.5 for the kept effects on the fit part, both as the "
+            "selections end, refitted (3 parameters against 1; lower is better), held-out "
+            "gap's excess over its scatter 0.0509 against 0.12 (scatter 0.0994); the "
+            "held-out part favours it; not taken because it scores higher on the fit part "
+            "by 2 or more.") in text
+    alt.update(score=69.5, holdout_excess=0.2)  # within the look-alike margin, held-out worse
+    text = "\n".join(explain_channel(c, 10))
+    assert ("not taken because it scores higher on the fit part (by less than 2, which the "
+            "fit part does not tell apart) and its held-out gap's excess is not lower.") in text
     alt.update(score=60.0, holdout_excess=0.3)
     text = "\n".join(explain_channel(c, 10))
     assert "favours it" not in text
     assert "not taken because its held-out gap's excess is above the kept effects'" in text
     c["alternative"] = None
     assert "Examined and not kept" not in "\n".join(explain_channel(c, 10))
+
+
+def test_an_effect_whose_test_fired_and_that_was_refused_when_tried_first_is_said() -> None:
+    """An outside reviewer: the temperature tests fired (z 7.0-10.8), a random walk was
+    kept alone, and nothing said whether the selection that examines the temperature
+    response first ran (it had, and refused the response on the held-out part). The
+    JSON's ``fired_first_refused`` is said, with the reason."""
+    rw = dict(RW_EFFECT, params={"random_walk": 7.1e-4}, holdout_gap_after=0.15)
+    refused = {"effect": "temperature", "params": {"temp_coeff": 0.00386, "temp_coeff2": 0.0},
+               "reason": "does not reduce the held-out chi-squared beyond its scatter"}
+    c = _entry("random_walk", effects=[rw], kept=[rw], fired_first_refused=[refused])
+    text = "\n".join(explain_channel(c, 10))
+    assert ("Examined first because its own whole-record test fired, and not kept: "
+            "temperature (temp_coeff = 0.00386, temp_coeff2 = 0): does not reduce the "
+            "held-out chi-squared beyond its scatter.") in text, text
+    c["fired_first_refused"] = []
+    assert "Examined first" not in "\n".join(explain_channel(c, 10))
 
 
 def test_the_verdicts_own_closure_says_it_is_its_own_beside_other_kept_effects() -> None:
@@ -1001,3 +1023,16 @@ def test_a_share_that_rounds_to_zero_reads_0_percent() -> None:
     from imubench.gap.explain import _pct
 
     assert (_pct(-0.001), _pct(0.004), _pct(-0.3), _pct(None)) == ("0%", "0%", "-30%", "-")
+
+
+def test_a_significant_departure_within_the_rms_scatter_is_said_to_be_local() -> None:
+    """An outside reviewer read "the systematic part ... 0 -> 0" beside an Allan region of
+    |z| 58 (a resonance at 18 Hz, which moves the shortest taus only) as a contradiction."""
+    c = _entry("temperature", effects=[TEMP_EFFECT], significant=True, gap_excess_before=0.0,
+               gap_excess_after=0.0)
+    text = "\n".join(explain_channel(c, 10))
+    assert ("is 0 -> 0; a departure confined to a few taus, the spectrum or a statistic is "
+            "significant by its own test while the RMS over all taus stays within the "
+            "scatter.") in text, text
+    c.update(gap_excess_before=0.3)
+    assert "confined to a few taus" not in "\n".join(explain_channel(c, 10))

@@ -770,6 +770,11 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     alt = _alternative_line(c, units)
     if alt:
         out.append(alt)
+    refused = c.get("fired_first_refused") or []
+    if refused:
+        out.append("Examined first because its own whole-record test fired, and not kept: "
+                   + "; ".join(f"{d['effect']} ({_refused_params(d, units)}): {d['reason']}"
+                               for d in refused) + ".")
     return out
 
 
@@ -795,16 +800,23 @@ def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None)
         return ""
     names = " + ".join(f"{k['effect']} ({params_text(k['params'], units)})" for k in a["kept"])
     worse_score = a["score"] >= a["score_kept"]
-    why = ("it does not score lower on the fit part" if worse_score
-           else "its held-out gap's excess is above the kept effects' by more than the "
-                "scatter")
+    if a["score"] >= a["score_kept"] + LOOK_ALIKE_SCORE:
+        why = f"it scores higher on the fit part by {LOOK_ALIKE_SCORE:g} or more"
+    elif worse_score:
+        why = (f"it scores higher on the fit part (by less than {LOOK_ALIKE_SCORE:g}, which "
+               "the fit part does not tell apart) and its held-out gap's excess is not "
+               "lower")
+    else:
+        why = ("its held-out gap's excess is above the kept effects' by more than the "
+               "scatter")
     favour = ("; the held-out part favours it" if a["holdout_excess"] < a["holdout_excess_kept"]
               and worse_score else "")
     return (f"Examined and not kept: {names}, the effects that the other selection (the "
             f"one that examines first the effects whose own whole-record tests fired) "
             f"kept. It scores {a['score']:.1f} "
-            f"against {a['score_kept']:.1f} for the kept effects on the fit part "
-            f"({a['n_params']} parameters against {a['n_params_kept']}; lower is better), "
+            f"against {a['score_kept']:.1f} for the kept effects on the fit part, both as "
+            f"the selections end, refitted ("
+            f"{a['n_params']} parameters against {a['n_params_kept']}; lower is better), "
             f"held-out gap's excess over its scatter {_f(a['holdout_excess'])} against "
             f"{_f(a['holdout_excess_kept'])} (scatter {_f(a['holdout_scatter'])}){favour}; "
             f"not taken because {why}.")
@@ -1058,7 +1070,10 @@ def explain_channel(c: dict[str, Any], realisations: int,
             f"Gap (RMS over all taus of ln ADEV_real/ADEV_sim) {_f(c['gap_before'])} -> "
             f"{_f(c['gap_after'])}. A perfect model would still show about {_f(g0)} "
             f"(the taus' scatter); the systematic part{_floor(c)} is {_f(ge)} -> "
-            f"{_f(c.get('gap_excess_after'))}.")
+            f"{_f(c.get('gap_excess_after'))}"
+            + ("; a departure confined to a few taus, the spectrum or a statistic is "
+               "significant by its own test while the RMS over all taus stays within the "
+               "scatter" if ge == 0 and c.get("significant") else "") + ".")
     h = c.get("holdout")
     if h and h.get("gap_before") is not None and "region_gap_before" in h:
         whole = [("to locate the kept bias step" if k["effect"] == "bias_step"

@@ -93,6 +93,12 @@ class ChannelDiagnosis:
     """Another set of effects that explains the record nearly as well and was not kept
     (:attr:`imubench.gap.diagnose._Path.alternative`; JSON ``alternative``, None when
     there is none)."""
+    fired_refused: list[Candidate] = field(default_factory=list)
+    """The effects whose own whole-record tests fired (temperature, ramp, bias step, a
+    line found again on the held-out part) and that the selection examining them first
+    (:func:`imubench.gap.diagnose._better_start`) refused, each with its ``note``, when
+    that selection then kept what the other did (JSON ``fired_first_refused``): why a test
+    that fired names no effect."""
     look_alike: dict[str, Any] | None = None
     """Another effect the fit part does not tell apart from the verdict's (JSON
     ``look_alike``, :func:`imubench.gap.diagnose._look_alike_dict`; None when there is none)."""
@@ -207,6 +213,7 @@ class ChannelDiagnosis:
             "global": self.before.global_dict(),
             "background": self.background,
             "alternative": self.alternative,
+            "fired_first_refused": [self._refused_dict(c) for c in self.fired_refused],
             "look_alike": self.look_alike,
             "ramp_temperature_alias": self.ramp_temperature,
         }
