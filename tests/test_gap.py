@@ -168,7 +168,7 @@ def test_gap_excess_is_the_systematic_part() -> None:
     d = 0.3 + sigma * rng.standard_normal(400)
     nan = np.full(400, np.nan)
     c = Comparison(np.arange(400.0), nan, nan, nan, nan, d, d / sigma, sigma, nan, nan,
-                   0.0, 0.0, 0.0)
+                   nan, 0.0, 0.0, 0.0)
     assert c.gap_null == pytest.approx(0.1)
     # gap^2 = 0.3^2 + 0.1^2 in expectation: the excess recovers the offset
     assert c.gap == pytest.approx(np.hypot(0.3, 0.1), rel=0.05)

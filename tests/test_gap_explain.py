@@ -173,7 +173,8 @@ def _comparison(z: list[float], line_z: float = 0.0, temp_z: float = 0.0,
     return Comparison(
         tau_s=tau, adev_real=one, adev_sim=one, adev_sim_lo=one, adev_sim_hi=one,
         d=0.1 * zz, z=zz, sigma=0.1 * one, band_f_hz=np.array([0.1, 1.0]),
-        band_z=np.zeros(2), line_z=line_z, line_f_hz=3.3, tail_z=0.0, temp_z=temp_z,
+        band_z=np.zeros(2), band_sigma=np.ones(2),
+        line_z=line_z, line_f_hz=3.3, tail_z=0.0, temp_z=temp_z,
         trend_z=0.0, level_z=0.0, realisations=10,
         regions=[Region(a, b, "real_above", 0.5, 6.0) for a, b in regions])
 
@@ -1036,3 +1037,23 @@ def test_a_significant_departure_within_the_rms_scatter_is_said_to_be_local() ->
             "scatter.") in text, text
     c.update(gap_excess_before=0.3)
     assert "confined to a few taus" not in "\n".join(explain_channel(c, 10))
+
+
+def test_a_whole_record_test_that_fired_without_its_effect_kept_is_said() -> None:
+    """An outside reviewer's Markov process beside a temperature response, kept as a random
+    walk alone: the text read as if the temperature had never been seen, though the
+    whole-record temperature test fired at z 7.0 (2.4 with the walk)."""
+    rw = dict(RW_EFFECT, params={"random_walk": 6.2e-4})
+    c = _entry("random_walk", effects=[rw], kept=[rw],
+               whole_record={"temperature_fired": True, "drift_fired": False,
+                             "step_fired": False},
+               temperature_record_z=7.04, whole_record_after={"temperature_record_z": 2.41})
+    text = "\n".join(explain_channel(c, 10))
+    assert ("The whole-record temperature test fired (z 7) and no temperature response is "
+            "kept: with the kept effects it reads 2.4 (random_walk widens the realisations' "
+            "spread of it, so a temperature response beside a noise process of shorter "
+            "memory is another reading of this record).") in text, text
+    c["fired_after"] = ["temperature_record_z"]
+    assert "it reads 2.4, still firing." in "\n".join(explain_channel(c, 10))
+    c["kept"] = [rw, dict(TEMP_EFFECT)]
+    assert "whole-record temperature test fired" not in "\n".join(explain_channel(c, 10))

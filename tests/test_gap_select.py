@@ -227,7 +227,8 @@ def _cmp(z: list[float], regions: list[tuple[float, float]] = ()) -> Comparison:
     return Comparison(
         tau_s=2.0 ** np.arange(n), adev_real=one, adev_sim=one, adev_sim_lo=one,
         adev_sim_hi=one, d=0.1 * zz, z=zz, sigma=0.1 * one, band_f_hz=np.array([0.1, 1.0]),
-        band_z=np.zeros(2), line_z=0.0, line_f_hz=1.0, tail_z=0.0, temp_z=0.0, trend_z=0.0,
+        band_z=np.zeros(2), band_sigma=np.ones(2),
+        line_z=0.0, line_f_hz=1.0, tail_z=0.0, temp_z=0.0, trend_z=0.0,
         level_z=0.0, realisations=10,
         regions=[Region(a, b, "real_above", 0.5, 6.0) for a, b in regions])
 

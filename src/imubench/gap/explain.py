@@ -545,7 +545,8 @@ def headline(c: dict[str, Any], realisations: int,
         alone += f" ({_not_independent(main)})"
     if others and alone.startswith("; modelling it closes "):  # read as all of them (a reviewer)
         alone = alone.replace("; modelling it closes ", "; modelling it on its own closes ", 1)
-    text = text[0].upper() + text[1:] + alone + "." + _look_alike_text(c, units)
+    text = (text[0].upper() + text[1:] + alone + "." + _look_alike_text(c, units)
+            + _covered_tests(c))
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units, k)
                                            + _unfixed(k) for k in others)
@@ -561,6 +562,46 @@ def headline(c: dict[str, Any], realisations: int,
         else:
             text += "."
     return text
+
+
+COVERED = (("temperature_fired", "temperature_record_z", "z", "temperature",
+            "the whole-record temperature test", "a temperature response"),
+           ("drift_fired", "drift_t", "t", "ramp", "the whole-record drift test", "a ramp"),
+           ("step_fired", "bias_step_z", "z", "bias_step", "the whole-record bias-step test",
+            "a bias step"))
+"""(JSON ``whole_record`` flag, statistic key, its symbol, effect, the test in words, the
+effect in words) of the whole-record tests of a deterministic effect."""
+NOISE_WORDS = frozenset({"random_walk", "flicker", "markov", "telegraph"})
+"""Kept noise processes whose slow wander widens the whole-record tests' null spread."""
+
+
+def _covered_tests(c: dict[str, Any]) -> str:
+    """' The whole-record temperature test fired (z 7.0) and no temperature response is
+    kept: ...' for each whole-record test of a deterministic effect that fired at the
+    first step while its effect is not kept (an outside reviewer's Markov process beside
+    a temperature response, kept as a random walk alone, read as if the temperature
+    had never been seen); empty without one."""
+    fired = c.get("whole_record") or {}
+    after = c.get("whole_record_after") or {}
+    kept = {k["effect"] for k in c.get("kept", [])}
+    still = set(c.get("fired_after") or [])
+    noise = sorted(kept & NOISE_WORDS)
+    out = ""
+    for flag, key, sym, effect, test, words in COVERED:
+        if not fired.get(flag) or effect in kept:
+            continue
+        out += (f" {test[0].upper()}{test[1:]} fired ({sym} {_f(c.get(key), 2)}) and no "
+                f"{words.removeprefix('a ')} is kept: with the kept effects it reads "
+                f"{_f(after.get(key), 2)}")
+        if key in still:
+            out += ", still firing."
+        elif noise:
+            out += (f" ({' and '.join(noise)} widens the realisations' spread of it, so "
+                    f"{words} beside a noise process of shorter memory is another reading "
+                    "of this record).")
+        else:
+            out += "."
+    return out
 
 
 RECORD_WORDS = {"bias_step_z": "the whole-record bias-step test",
