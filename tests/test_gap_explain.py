@@ -1049,11 +1049,11 @@ def test_a_whole_record_test_that_fired_without_its_effect_kept_is_said() -> Non
                              "step_fired": False},
                temperature_record_z=7.04, whole_record_after={"temperature_record_z": 2.41})
     text = "\n".join(explain_channel(c, 10))
-    assert ("The whole-record temperature test fired (z 7) and no temperature response is "
-            "kept: with the kept effects it reads 2.4 (random_walk widens the realisations' "
+    assert ("The whole-record temperature test fired (z 7.04) and no temperature response is "
+            "kept: with the kept effects it reads 2.41 (random_walk widens the realisations' "
             "spread of it, so a temperature response beside a noise process of shorter "
             "memory is another reading of this record).") in text, text
     c["fired_after"] = ["temperature_record_z"]
-    assert "it reads 2.4, still firing." in "\n".join(explain_channel(c, 10))
+    assert "it reads 2.41, still firing." in "\n".join(explain_channel(c, 10))
     c["kept"] = [rw, dict(TEMP_EFFECT)]
     assert "whole-record temperature test fired" not in "\n".join(explain_channel(c, 10))

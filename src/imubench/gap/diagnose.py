@@ -1138,8 +1138,9 @@ def _forward(r: _Realiser, first: Step, sims: np.ndarray, effects: tuple[str, ..
                 path.ranked0, path.ev0 = ranked, ev
             check = _check_of(variant, r.channel, reps, r.seeds, path.rep_now)
             chosen, chosen_sims = _choose(ranked, best_sims, r.hold, st, check)
-            if subset is own and chosen is None:
-                path.fired_refused += [c for c in ranked if c.note]
+            if subset is own and chosen is None:  # each effect's first refusal
+                seen = {c.effect for c in path.fired_refused}
+                path.fired_refused += [c for c in ranked if c.note and c.effect not in seen]
             if chosen is not None and chosen_sims is not None:
                 if subset is todo:
                     pair = _look_alike(ranked, best_sims, chosen, r.hold, st, check, k + 1)

@@ -590,9 +590,9 @@ def _covered_tests(c: dict[str, Any]) -> str:
     for flag, key, sym, effect, test, words in COVERED:
         if not fired.get(flag) or effect in kept:
             continue
-        out += (f" {test[0].upper()}{test[1:]} fired ({sym} {_f(c.get(key), 2)}) and no "
+        out += (f" {test[0].upper()}{test[1:]} fired ({sym} {_f(c.get(key))}) and no "
                 f"{words.removeprefix('a ')} is kept: with the kept effects it reads "
-                f"{_f(after.get(key), 2)}")
+                f"{_f(after.get(key))}")
         if key in still:
             out += ", still firing."
         elif noise:

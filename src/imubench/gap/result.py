@@ -94,8 +94,8 @@ class ChannelDiagnosis:
     (:attr:`imubench.gap.diagnose._Path.alternative`; JSON ``alternative``, None when
     there is none)."""
     fired_refused: list[Candidate] = field(default_factory=list)
-    """The effects whose own whole-record tests fired (temperature, ramp, bias step, a
-    line found again on the held-out part) and that the selection examining them first
+    """The effects whose own whole-record tests fired (temperature, ramp, bias step) and
+    that the selection examining them first
     (:func:`imubench.gap.diagnose._better_start`) refused, each with its ``note``, when
     that selection then kept what the other did (JSON ``fired_first_refused``): why a test
     that fired names no effect."""
