@@ -424,8 +424,8 @@ def test_a_verdict_after_another_effect_says_why_it_is_the_verdict() -> None:
     assert ("Verdict ramp (ramp = 2e-06 dps/s) kept at step 2, after flicker (named as the "
             "verdict: taking it out of the kept effects raises the fit part's chi-squared by "
             "1351.9, against 31.5 for flicker)") in text
-    assert ("Kept first, then dropped: random_walk (random_walk = 1e-05 dps/sqrt(s)), made "
-            "redundant") in text
+    assert ("Kept at a step of the forward selection, then dropped: random_walk "
+            "(random_walk = 1e-05 dps/sqrt(s)), made redundant") in text
 
 
 def test_a_none_verdict_says_when_the_held_out_part_departs() -> None:

@@ -796,7 +796,8 @@ def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> li
     out = [first + "; ".join(parts) + "."]
     out.extend(_check_lines(kept, h, c.get("temperature_spans_c")))
     if dropped:
-        out.append("Kept first, then dropped: " + "; ".join(dropped) + ".")
+        out.append("Kept at a step of the forward selection, then dropped: "
+                   + "; ".join(dropped) + ".")
     if c.get("residual_significant") and c["verdict"] not in ("none",):
         tried = [f"{d['effect']} ({_refused_params(d, units)}): {d['reason']}"
                  for d in c.get("not_kept", [])]
