@@ -1057,3 +1057,21 @@ def test_a_whole_record_test_that_fired_without_its_effect_kept_is_said() -> Non
     assert "it reads 2.41, still firing." in "\n".join(explain_channel(c, 10))
     c["kept"] = [rw, dict(TEMP_EFFECT)]
     assert "whole-record temperature test fired" not in "\n".join(explain_channel(c, 10))
+
+
+def test_a_markov_process_refused_for_its_span_beside_a_kept_walk_is_said() -> None:
+    """An outside reviewer's Gauss-Markov processes of 75-120 s beside a temperature
+    response, each kept as a random walk on the 30 min fit part: the JSON's
+    ``not_fitted.markov`` said why the Markov process was refused, the text nothing."""
+    rw = dict(RW_EFFECT, params={"random_walk": 5.1e-4})
+    why = ("no Gauss-Markov turnover on the fit part: the fitted correlation time must be "
+           "at most the longest tau / 8; fitted sigma 0.0134, tau_c 630 s (at most 39.4 s, "
+           "or 78.8 s with its turnover)")
+    c = _entry("random_walk", effects=[rw], kept=[rw], not_fitted={"markov": why})
+    text = "\n".join(explain_channel(c, 10))
+    assert (f"A Gauss-Markov process was fitted as well and refused ({why}): on a fit part "
+            "this short a Gauss-Markov process whose correlation time is that long and a "
+            "random walk look alike; the whole record (--holdout-fraction 0, without a "
+            "held-out check) or a longer recording can show its turnover.") in text, text
+    c["not_fitted"] = {"markov": "its share of the Allan variance is too small"}
+    assert "fitted as well and refused" not in "\n".join(explain_channel(c, 10))

@@ -781,6 +781,11 @@ def _temperature_gates(dof: int) -> tuple[float, float]:
             t_threshold(Z_TEMP_CANDIDATE, stat_dof("temp_level_z", dof)))
 
 
+MARKOV_NO_TURNOVER = "no Gauss-Markov turnover"
+"""How the refusal of a Markov (or telegraph) candidate whose correlation time is beyond
+what the fit part shows with a turnover begins (JSON ``not_fitted``)."""
+
+
 def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
                     temp_record_z: float,
                     markov_fit: tuple[float, float, float, float, float] | None = None
@@ -790,7 +795,7 @@ def _why_not_fitted(effect: str, s: Series, before: Comparison, dof: int,
     (sigma, tau_c, the longest tau_c allowed, its share of the model's noise at 3 tau_c, its
     misfit drop below the better look-alike)."""
     if effect in ("markov", "telegraph"):
-        why = (f"no Gauss-Markov turnover on the fit part: the fitted correlation time "
+        why = (f"{MARKOV_NO_TURNOVER} on the fit part: the fitted correlation time "
                f"must be at most the longest tau / {MARKOV_SPAN:g} with the term fitting "
                f"the Allan curve better than a random walk or flicker (or at most / "
                f"{MARKOV_SPAN_SHOWN:g} when better by {MARKOV_DESCENT:.1f}), and the term "

@@ -22,7 +22,7 @@ from typing import Any
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as student_t
 
-from imubench.gap.candidates import DENSE_TAIL, SLOW_TERMS
+from imubench.gap.candidates import DENSE_TAIL, MARKOV_NO_TURNOVER, SLOW_TERMS
 from imubench.gap.curves import (
     POOLED_DOF,
     POOLED_STATS,
@@ -546,7 +546,7 @@ def headline(c: dict[str, Any], realisations: int,
     if others and alone.startswith("; modelling it closes "):  # read as all of them (a reviewer)
         alone = alone.replace("; modelling it closes ", "; modelling it on its own closes ", 1)
     text = (text[0].upper() + text[1:] + alone + "." + _look_alike_text(c, units)
-            + _covered_tests(c))
+            + _covered_tests(c) + _markov_beyond_span(c))
     if others:
         text += " Also kept: " + "; ".join(describe(k["effect"], k["params"], units, k)
                                            + _unfixed(k) for k in others)
@@ -602,6 +602,24 @@ def _covered_tests(c: dict[str, Any]) -> str:
         else:
             out += "."
     return out
+
+
+def _markov_beyond_span(c: dict[str, Any]) -> str:
+    """' A Gauss-Markov process was fitted as well and refused: ...' when a random walk is
+    kept and the first step refused the Markov candidate because its correlation time is
+    beyond what the fit part shows with a turnover: there the two are look-alikes, which
+    the whole record can tell apart (an outside reviewer's Markov processes of 75-120 s
+    beside a temperature response on a 30 min fit part, each kept as a random walk, the
+    text silent on the Markov; with --holdout-fraction 0, 6 of 6 named right). Empty
+    otherwise."""
+    why = (c.get("not_fitted") or {}).get("markov", "")
+    if not why.startswith(MARKOV_NO_TURNOVER) or \
+            "random_walk" not in {k["effect"] for k in c.get("kept", [])}:
+        return ""
+    return (f" A Gauss-Markov process was fitted as well and refused ({why}): on a fit part "
+            "this short a Gauss-Markov process whose correlation time is that long and a "
+            "random walk look alike; the whole record (--holdout-fraction 0, without a "
+            "held-out check) or a longer recording can show its turnover.")
 
 
 RECORD_WORDS = {"bias_step_z": "the whole-record bias-step test",
