@@ -931,7 +931,8 @@ def test_a_close_alternative_that_was_not_taken_is_said() -> None:
             "tests fired) kept.") in text, text
     assert ("It scores 76.9 against 68.5 for the kept effects on the fit part, both as the "
             "selections end, refitted (3 parameters against 1; lower is better), held-out "
-            "gap's excess over its scatter 0.0509 against 0.12 (scatter 0.0994); the "
+            "gap's excess over its scatter (moment estimate, without the floor of "
+            "gap_excess) 0.0509 against 0.12 (scatter 0.0994); the "
             "held-out part favours it; not taken because it scores higher on the fit part "
             "by 2 or more.") in text
     alt.update(score=69.5, holdout_excess=0.2)  # within the look-alike margin, held-out worse

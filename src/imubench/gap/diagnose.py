@@ -1274,8 +1274,8 @@ def _better_start(r: _Realiser, first: Step, main: _Path, alt: _Path
         c.note = (f"{REPLACED} {names}, the set kept when the effects whose own whole-record "
                   f"tests fired are tried first: score {s_alt:.1f} against {s_main:.1f} on the fit "
                   f"part{', which does not tell the two apart' if tie else ''}, held-out gap's "
-                  f"excess over its scatter {h_alt:.3f} against {h_main:.3f} (scatter "
-                  f"{scatter:.3f})")
+                  f"excess over its scatter (moment estimate, without the floor of "
+                  f"gap_excess) {h_alt:.3f} against {h_main:.3f} (scatter {scatter:.3f})")
     alt.ranked0, alt.ev0 = main.ranked0, main.ev0
     return alt, gone
 

@@ -877,7 +877,8 @@ def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None)
             f"against {a['score_kept']:.1f} for the kept effects on the fit part, both as "
             f"the selections end, refitted ("
             f"{a['n_params']} parameters against {a['n_params_kept']}; lower is better), "
-            f"held-out gap's excess over its scatter {_f(a['holdout_excess'])} against "
+            f"held-out gap's excess over its scatter (moment estimate, without the floor "
+            f"of gap_excess) {_f(a['holdout_excess'])} against "
             f"{_f(a['holdout_excess_kept'])} (scatter {_f(a['holdout_scatter'])}){favour}; "
             f"not taken because {why}.")
 
