@@ -1074,5 +1074,8 @@ def test_a_markov_process_refused_for_its_span_beside_a_kept_walk_is_said() -> N
             "this short a Gauss-Markov process whose correlation time is that long and a "
             "random walk look alike; the whole record (--holdout-fraction 0, without a "
             "held-out check) or a longer recording can show its turnover.") in text, text
+    c["holdout"] = None  # already the whole record
+    assert "look alike; a longer recording can show its turnover." in "\n".join(
+        explain_channel(c, 10))
     c["not_fitted"] = {"markov": "its share of the Allan variance is too small"}
     assert "fitted as well and refused" not in "\n".join(explain_channel(c, 10))

@@ -616,10 +616,11 @@ def _markov_beyond_span(c: dict[str, Any]) -> str:
     if not why.startswith(MARKOV_NO_TURNOVER) or \
             "random_walk" not in {k["effect"] for k in c.get("kept", [])}:
         return ""
+    whole = ("the whole record (--holdout-fraction 0, without a held-out check) or "
+             if c.get("holdout") else "")
     return (f" A Gauss-Markov process was fitted as well and refused ({why}): on a fit part "
             "this short a Gauss-Markov process whose correlation time is that long and a "
-            "random walk look alike; the whole record (--holdout-fraction 0, without a "
-            "held-out check) or a longer recording can show its turnover.")
+            f"random walk look alike; {whole}a longer recording can show its turnover.")
 
 
 RECORD_WORDS = {"bias_step_z": "the whole-record bias-step test",
