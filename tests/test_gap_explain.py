@@ -1079,3 +1079,21 @@ def test_a_markov_process_refused_for_its_span_beside_a_kept_walk_is_said() -> N
         explain_channel(c, 10))
     c["not_fitted"] = {"markov": "its share of the Allan variance is too small"}
     assert "fitted as well and refused" not in "\n".join(explain_channel(c, 10))
+
+
+def test_an_unfixed_response_beside_a_walk_says_its_own_test_fired() -> None:
+    """An outside reviewer's Markov process of 120 s beside 6e-3 dps/degC, kept as a random
+    walk and a response of 0.0046 +- 0.0041 dps/degC read "the record does not fix it"
+    while the whole-record temperature test had read z 8.6 under the model without the
+    walk: both are said."""
+    rw = dict(RW_EFFECT, params={"random_walk": 7.5e-4})
+    temp = dict(TEMP_EFFECT, params={"temp_coeff": 0.0046, "temp_coeff2": 0.0},
+                params_se={"temp_coeff": 0.0041})
+    c = _entry("random_walk", effects=[rw, temp], kept=[rw, temp],
+               whole_record={"temperature_fired": True}, temperature_record_z=8.61)
+    text = "\n".join(explain_channel(c, 10))
+    assert ("its size is within two standard errors of zero beside random_walk, whose "
+            "realisations' wander widens its refits, though the whole-record temperature "
+            "test read z 8.61 under the model without random_walk") in text, text
+    c["whole_record"] = {"temperature_fired": False}
+    assert "the record does not fix it" in "\n".join(explain_channel(c, 10))
