@@ -495,9 +495,11 @@ def _evaluate(r: _Realiser, kept: list[Candidate], st: Step, sims: np.ndarray,
 def _holdout_drop(before: Comparison, c: Candidate, hold: PartSetup) -> dict[str, float]:
     """The held-out check's chi-squared drop by source from ``before`` to ``c.holdout``
     (:meth:`~imubench.gap.curves.Comparison.chi2_drop`, a sine's line band left to the
-    line statistic)."""
+    line statistic; the bands on the wider spread for an effect with a deterministic
+    part, :data:`REFITTED`)."""
     assert c.holdout is not None
-    return before.chi2_drop(c.holdout, line_bands(c.effect, c.params, hold.edges))
+    return before.chi2_drop(c.holdout, line_bands(c.effect, c.params, hold.edges),
+                            c.effect in REFITTED)
 
 
 def _choose(ranked: list[Candidate], best: dict[int, np.ndarray], hold: PartSetup | None,
@@ -875,7 +877,8 @@ def _prune(r: _Realiser, kept: list[Candidate]) -> tuple[list[Candidate], list[C
             text = (f"{PRUNE_REASON}: without it the fit part's chi-squared rises by "
                     f"{rise:.1f} (needs {need:.1f})")
             if full.hold is not None and st.hold is not None:
-                hold_rise = sum(st.hold.chi2_drop(full.hold).values())
+                hold_rise = sum(st.hold.chi2_drop(full.hold, None,
+                                                  c.effect in REFITTED).values())
                 hold_need = float(chi2_dist.isf(HOLDOUT_ALPHA, c.n_params))
                 if hold_rise > hold_need:
                     continue
