@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as student_t
@@ -564,13 +564,24 @@ def headline(c: dict[str, Any], realisations: int,
     return text
 
 
-COVERED = (("temperature_fired", "temperature_record_z", "z", "temperature",
-            "the whole-record temperature test", "a temperature response"),
-           ("drift_fired", "drift_t", "t", "ramp", "the whole-record drift test", "a ramp"),
-           ("step_fired", "bias_step_z", "z", "bias_step", "the whole-record bias-step test",
-            "a bias step"))
-"""(JSON ``whole_record`` flag, statistic key, its symbol, effect, the test in words, the
-effect in words) of the whole-record tests of a deterministic effect."""
+class RecordTest(NamedTuple):
+    """A whole-record test of a deterministic effect, as the JSON reports it."""
+
+    flag: str
+    """Its ``whole_record`` flag (fired at the first step)."""
+    key: str
+    """Its statistic's key (named in words by :data:`RECORD_WORDS`)."""
+    symbol: str
+    effect: str
+    words: str
+    """The effect in words."""
+
+
+COVERED = (RecordTest("temperature_fired", "temperature_record_z", "z", "temperature",
+                      "a temperature response"),
+           RecordTest("drift_fired", "drift_t", "t", "ramp", "a ramp"),
+           RecordTest("step_fired", "bias_step_z", "z", "bias_step", "a bias step"))
+"""The whole-record tests of the deterministic effects."""
 NOISE_WORDS = frozenset({"random_walk", "flicker", "markov", "telegraph"})
 """Kept noise processes whose slow wander widens the whole-record tests' null spread."""
 
@@ -587,17 +598,18 @@ def _covered_tests(c: dict[str, Any]) -> str:
     still = set(c.get("fired_after") or [])
     noise = sorted(kept & NOISE_WORDS)
     out = ""
-    for flag, key, sym, effect, test, words in COVERED:
-        if not fired.get(flag) or effect in kept:
+    for rt in COVERED:
+        if not fired.get(rt.flag) or rt.effect in kept:
             continue
-        out += (f" {test[0].upper()}{test[1:]} fired ({sym} {_f(c.get(key))}) and no "
-                f"{words.removeprefix('a ')} is kept: with the kept effects it reads "
-                f"{_f(after.get(key))}")
-        if key in still:
+        test = RECORD_WORDS[rt.key]
+        out += (f" {test[0].upper()}{test[1:]} fired ({rt.symbol} {_f(c.get(rt.key))}) and "
+                f"no {rt.words.removeprefix('a ')} is kept: with the kept effects it reads "
+                f"{_f(after.get(rt.key))}")
+        if rt.key in still:
             out += ", still firing."
         elif noise:
             out += (f" ({' and '.join(noise)} widens the realisations' spread of it, so "
-                    f"{words} beside a noise process of shorter memory is another reading "
+                    f"{rt.words} beside a noise process of shorter memory is another reading "
                     "of this record).")
         else:
             out += "."
@@ -786,13 +798,14 @@ def _unfixed(k: Mapping[str, Any], c: Mapping[str, Any]) -> str:
     size, se = k["params"].get(key), (k.get("params_se") or {}).get(key)
     if size is None or se is None or not math.isfinite(se) or abs(size) >= 2.0 * se:
         return ""
-    own = next((x for x in COVERED if x[3] == k["effect"]), None)
+    own = next((rt for rt in COVERED if rt.effect == k["effect"]), None)
     noise = sorted({x["effect"] for x in c.get("kept", [])} & NOISE_WORDS)
-    if own is None or not (c.get("whole_record") or {}).get(own[0]) or not noise:
+    if own is None or not (c.get("whole_record") or {}).get(own.flag) or not noise:
         return "; its size is within two standard errors of zero: the record does not fix it"
     return (f"; its size is within two standard errors of zero beside {' and '.join(noise)}, "
-            f"whose realisations' wander widens its refits, though {own[4]} read "
-            f"{own[2]} {_f(c.get(own[1]))} under the model without {' and '.join(noise)}")
+            f"whose realisations' wander widens its refits, though {RECORD_WORDS[own.key]} "
+            f"read {own.symbol} {_f(c.get(own.key))} under the model without "
+            f"{' and '.join(noise)}")
 
 
 def _kept_lines(c: dict[str, Any], units: Mapping[str, str] | None = None) -> list[str]:
