@@ -516,7 +516,7 @@ def summarise(cases: list[Case], limits: dict, effects: tuple[str, ...], wall: f
         summarise_pairs(pairs)
     eff = [c for c in cases if c.effect != "null" and not c.pair]
     nul = [c for c in cases if c.effect == "null"]
-    print("\n## limits (smallest size identified 3/3; units of the channel: dps or g, per "
+    print("\n## limits (smallest size identified 5/5; units of the channel: dps or g, per "
           "s, per sqrt(s), per degC)")
 
     def shown(e: str, v: dict) -> str:

@@ -720,6 +720,44 @@ def test_detection_limits_of_a_sine_on_white_noise() -> None:
     assert lim["injections_per_size"] == 3
 
 
+@pytest.mark.parametrize(("identified_at", "limit", "tried"), [
+    # 3 of 3 at 1x, then 0 of 2 more: 2x (5 of 5) is the limit
+    ({4.0: 5, 2.0: 5, 1.0: 3, 0.5: 0}, 2.0,
+     [(4.0, 3, 3), (2.0, 5, 5), (1.0, 3, 5), (0.5, 0, 3)]),
+    # every size down to 0.5x passes 3 of 3 and 0.5x is confirmed: an upper bound
+    ({4.0: 5, 2.0: 5, 1.0: 5, 0.5: 5}, 0.5,
+     [(4.0, 3, 3), (2.0, 3, 3), (1.0, 3, 3), (0.5, 5, 5)]),
+    # 4x missed; 8x passes the screen, not the confirmation; 16x is confirmed
+    ({4.0: 1, 8.0: 3, 16.0: 5}, 16.0, [(4.0, 1, 3), (8.0, 3, 5), (16.0, 5, 5)]),
+])
+def test_a_limit_is_a_size_identified_in_5_of_5_injections(
+        monkeypatch: pytest.MonkeyPatch, identified_at: dict[float, int], limit: float,
+        tried: list[tuple[float, int, int]]) -> None:
+    """The search screens each size with 3 injections and confirms the size that would be
+    the limit with 2 more: 3 of 3 alone is passed once in 4.6 by an effect identified 60 %
+    of the time. Here the diagnosis of injection ``i`` at ``factor`` times the starting
+    size is replaced by a table (injections ``i < identified_at[factor]`` are
+    identified): only the search's rule is under test."""
+    import imubench.gap.limits as limits
+
+    s = Series(white(np.random.default_rng(4), int(600 * RATE)), None, RATE, "w")
+    start = start_sizes(s, 0.5)["ramp"]
+
+    def table(*args: Any) -> int:
+        size, first, count = args[5], args[7], args[8]
+        ok = identified_at[round(size / start, 6)]
+        return sum(i < ok for i in range(first, first + count))
+
+    monkeypatch.setattr(limits, "_hits", table)
+    lim = detection_limits(MODEL, "gx", s, GapOptions(seed=0), ("ramp",))
+    e = lim["effects"]["ramp"]
+    assert e["smallest_identified"] == pytest.approx(limit * start)
+    assert [(round(t["size"] / start, 6), t["identified"], t["of"]) for t in e["tried"]] \
+        == tried
+    assert e["smallest_tried_identified"] == (limit == min(f for f, _, _ in tried))
+    assert (lim["injections_per_size"], lim["confirmations"]) == (3, 2)
+
+
 def test_detection_limit_is_not_below_a_response_the_record_holds_unseen() -> None:
     """A temperature response of 1.5e-4 dps/degC in 10 min of white noise, below what the
     diagnosis keeps (whole-record z ~3): the stated limit must not say that it would have

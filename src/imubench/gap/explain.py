@@ -1210,7 +1210,9 @@ def explain_channel(c: dict[str, Any], realisations: int,
                 bound = ("at most " if e.get("smallest_tried_identified") else "")
                 parts.append(f"{eff} {e['key']} {bound}{_f(v)}{unit}")
         lines.append("Detection limits on this recording (smallest size identified in "
-                     f"{lim['rate_required']:.0%} of {lim['injections_per_size']} injections): "
+                     f"{lim['rate_required']:.0%} of its injections, "
+                     f"{lim['injections_per_size']} per size and {lim['confirmations']} more "
+                     "at the limit): "
                      + "; ".join(parts) + f" ({lim['note']}).")
     if verdict in ("none", "unexplained") and any(r.get("significant") for r in reps):
         lines.append("Replicates depart from the model beyond their scatter"
