@@ -448,15 +448,24 @@ def test_a_none_verdict_says_when_the_held_out_part_departs() -> None:
 
 def test_a_held_out_departure_by_another_test_than_the_taus_names_it() -> None:
     """An outside reviewer's null: only the held-out whole-curve test fired, and the text
-    read "departs from the model ... (systematic gap 0 against a scatter of 0.0953)"."""
+    read "departs from the model ... (systematic gap 0 against a scatter of 0.0953)";
+    another's ramp at its detection limit read "departs from the model (by a time trend)
+    where the fit part does not (systematic gap 0 against a scatter of 0.111)", which
+    reads as a contradiction: the Allan gap is said as the curve's, after the test."""
     hold = {"gap_before": 0.1, "gap_after": 0.1, "gap_excess_before": 0.0,
             "gap_excess_after": 0.0, "gap_null": 0.0953, "significant": True,
             "fired": ["global"], "regions": []}
     c = _entry("none", reason="within the scatter of the realisations", holdout=hold)
     text = "\n".join(explain_channel(c, 10))
-    assert ("The held-out part departs from the model (by the whole Allan curve's shape) "
-            "where the fit part does not (systematic gap 0 against a scatter of "
-            "0.0953)") in text
+    assert ("The held-out part departs from the model by the whole Allan curve's shape "
+            "where the fit part does not; its Allan curve's systematic gap is 0 against a "
+            "scatter of 0.0953") in text
+    hold |= {"fired": ["trend_z"], "gap_null": 0.111}
+    text = "\n".join(explain_channel(c, 10))
+    assert ("The held-out part departs from the model by a time trend where the fit part "
+            "does not; its Allan curve's systematic gap is 0 against a scatter of 0.111"
+            ) in text
+    assert "(systematic gap 0" not in text
 
 
 def test_a_base_model_refit_is_stated_beside_the_model_s_own_values() -> None:
@@ -496,8 +505,8 @@ def test_a_kept_effect_says_when_the_held_out_part_still_departs_after_it() -> N
     # no Allan region after: the tests that fired are named (an outside reviewer read
     # significant_after true with regions_after empty and no word of what fired)
     hold["regions_after"], hold["fired_after"] = [], ["global", "temp_z"]
-    assert ("still departs from the model with the kept effects (by the whole Allan "
-            "curve's shape, a correlation with temperature) where the fit part"
+    assert ("still departs from the model with the kept effects by the whole Allan "
+            "curve's shape, a correlation with temperature where the fit part"
             ) in "\n".join(explain_channel(c, 10))
     # a region of one tau reads as that tau (an outside reviewer: "(1020-1020 s real above)")
     hold["regions_after"], hold["fired_after"] = [{"tau_min_s": 1020.0, "tau_max_s": 1020.0,

@@ -804,8 +804,9 @@ def test_limits_say_what_they_are_and_skip_a_temperature_that_only_drifts() -> N
     text = " ".join(explain_channel(entry, 10, {"sine_amplitude": "dps",
                                                 "ramp": "dps/s"}))
     assert "temperature not searched (the temperature only drifts" in text
-    assert "sine sine_amplitude at most 0.002 dps" in text
-    assert "ramp ramp 2e-05 dps/s" in text
+    assert "sine (sine_amplitude) at most 0.002 dps (tried 0.004 3/3, 0.002 3/3)" in text
+    assert "ramp 2e-05 dps/s (tried 4e-05 3/3, 2e-05 3/3, 1e-05 1/3)" in text
+    assert "kept (named or not) in 5 of 5 injections, 3 per size and 2 more" in text
     assert "a limit may be off by a factor of 2 either way" in text
 
 

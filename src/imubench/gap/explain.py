@@ -981,11 +981,42 @@ def _held_out_departure(h: dict[str, Any], after: bool) -> str:
     gap = h.get("gap_excess_after" if after else "gap_excess_before")
     tests = [FIRED_WORDS[t] for t in h.get("fired_after" if after else "fired", [])
              if t != "regions"]
-    if not regs and tests:  # another test than the Allan taus' regions
-        regs = "by " + ", ".join(tests)
-    return (lead + (f" ({regs})" if regs else "")
-            + f" where the fit part {'no longer does' if after else 'does not'} (systematic "
-            f"gap {_f(gap)} against a scatter of {_f(h.get('gap_null'))})")
+    where = f" where the fit part {'no longer does' if after else 'does not'}"
+    scatter = f"{_f(gap)} against a scatter of {_f(h.get('gap_null'))}"
+    if not regs and tests:  # another test than the Allan taus' regions: the Allan gap
+        # may be at its floor (an outside reviewer read "departs (by a time trend) ...
+        # (systematic gap 0 against a scatter of 0.111)" as a contradiction)
+        return (f"{lead} by {', '.join(tests)}{where}; its Allan curve's systematic gap is "
+                + scatter)
+    return lead + (f" ({regs})" if regs else "") + where + f" (systematic gap {scatter})"
+
+
+def _limits_sentence(lim: dict[str, Any], units: Mapping[str, str] | None) -> str:
+    """The detection limits (JSON ``limits``, :mod:`imubench.gap.limits`) in words: how
+    they were measured, then each effect's limit with its unit and the sizes tried
+    (identified / injections, largest first)."""
+    parts = []
+    for eff, e in lim["effects"].items():
+        v = e.get("smallest_identified")
+        unit = f" {units[e['key']]}" if units and units.get(e["key"]) else ""
+        name = eff if e["key"] == eff else f"{eff} ({e['key']})"
+        tried = ", ".join(f"{_f(t['size'])} {t['identified']}/{t['of']}"
+                          for t in sorted(e["tried"], key=lambda t: -t["size"]))
+        if e.get("not_searched"):
+            parts.append(f"{eff} not searched ({e['not_searched']})")
+        elif v is None:
+            parts.append(f"{name} not identified up to {_f(max(t['size'] for t in e['tried']))}"
+                         f"{unit} (tried {tried})")
+        else:
+            bound = ("at most " if e.get("smallest_tried_identified") else "")
+            parts.append(f"{name} {bound}{_f(v)}{unit} (tried {tried})")
+    n = lim["injections_per_size"] + lim["confirmations"]
+    return ("Detection limits on this recording: each effect was added to this recording "
+            f"at sizes a factor 2 apart and diagnosed again ({lim['realisations']} "
+            "realisations); a limit is the smallest size at which the effect was kept "
+            f"(named or not) in {n} of {n} injections, {lim['injections_per_size']} per "
+            f"size and {lim['confirmations']} more at the limit: " + "; ".join(parts)
+            + f" ({lim['note']}).")
 
 
 def explain_channel(c: dict[str, Any], realisations: int,
@@ -1197,23 +1228,7 @@ def explain_channel(c: dict[str, Any], realisations: int,
         lines.append(txt + ".")
     lim = c.get("limits")
     if lim:
-        parts = []
-        for eff, e in lim["effects"].items():
-            v = e.get("smallest_identified")
-            unit = f" {units[e['key']]}" if units and units.get(e["key"]) else ""
-            if e.get("not_searched"):
-                parts.append(f"{eff} not searched ({e['not_searched']})")
-            elif v is None:
-                top = max(t["size"] for t in e["tried"])
-                parts.append(f"{eff} not identified up to {_f(top)}{unit}")
-            else:
-                bound = ("at most " if e.get("smallest_tried_identified") else "")
-                parts.append(f"{eff} {e['key']} {bound}{_f(v)}{unit}")
-        lines.append("Detection limits on this recording (smallest size identified in "
-                     f"{lim['rate_required']:.0%} of its injections, "
-                     f"{lim['injections_per_size']} per size and {lim['confirmations']} more "
-                     "at the limit): "
-                     + "; ".join(parts) + f" ({lim['note']}).")
+        lines.append(_limits_sentence(lim, units))
     if verdict in ("none", "unexplained") and any(r.get("significant") for r in reps):
         lines.append("Replicates depart from the model beyond their scatter"
                      + (" although this recording does not" if verdict == "none" else "")
