@@ -162,6 +162,23 @@ def test_markov_psd_is_lorentzian() -> None:
     assert np.std(y) == pytest.approx(sigma, rel=0.05)
 
 
+def test_markov_avar_keeps_its_digits_far_below_tau_c() -> None:
+    """IEEE 952 C.6 as written, ``1 - (3 - 4 e^-x + e^-2x) / (2 x)`` with x = tau / tau_c,
+    loses every digit for small x (60 % off at 1e-5, negative below): against the same
+    formula in 60-digit decimal arithmetic, every x from 1e-9 to 1e3 within 1e-9, and
+    positive."""
+    from decimal import Decimal, getcontext
+
+    getcontext().prec = 60
+    x = np.geomspace(1e-9, 1e3, 241)
+    got = nz.avar_markov(x * 100.0, 1.0, 100.0)  # tau_c 100 s
+    for xi, g in zip(x, got, strict=True):
+        d = Decimal(float(xi))
+        bracket = 1 - (3 - 4 * (-d).exp() + (-2 * d).exp()) / (2 * d)
+        want = float(Decimal(2) * Decimal(100) / (d * Decimal(100)) * bracket)
+        assert g > 0 and abs(g / want - 1.0) < 1e-9, (xi, g, want)
+
+
 def test_quantization_avar_exact_at_every_m() -> None:
     """3 Q^2 / tau^2 holds from m = 1 (not only asymptotically): allantools OADEV."""
     Q = 2e-4
