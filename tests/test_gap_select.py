@@ -758,6 +758,29 @@ def test_a_limit_is_a_size_identified_in_5_of_5_injections(
     assert (lim["injections_per_size"], lim["confirmations"]) == (3, 2)
 
 
+def test_an_allan_fit_never_gains_from_a_prediction_that_is_not_positive() -> None:
+    """The weighted ln-AVAR misfit (``avarfit._loss``) left out every tau whose residual
+    was not finite, so a candidate predicting a negative variance at a tau lost that
+    tau's misfit and scored better (the Markov AVAR went negative far below tau_c). Such
+    a prediction is now an infinite misfit; a tau the record or the realisations cannot
+    measure is still left out for every candidate alike."""
+    from imubench.gap.avarfit import _loss
+
+    real = np.array([4.0, 2.0, 1.0, 0.5])
+    model = np.array([1.0, 1.0, 1.0, 1.0])
+    sig = np.full(4, 0.1)
+    good = _loss(real, model, np.zeros(4), sig)
+    assert good == pytest.approx(100.0 * sum((0.5 * math.log(r)) ** 2 for r in real))
+    assert _loss(real, model, np.array([0.0, 0.0, -2.0, 0.0]), sig) == math.inf
+    assert _loss(real, model, np.array([0.0, 0.0, -1.0, 0.0]), sig) == math.inf
+    # taus without a measurement: the same for every candidate
+    real_gap = np.array([4.0, 0.0, np.nan, 0.5])
+    assert _loss(real_gap, model, np.zeros(4), sig) == pytest.approx(
+        100.0 * ((0.5 * math.log(4.0)) ** 2 + (0.5 * math.log(0.5)) ** 2))
+    model_gap = np.array([1.0, np.nan, 1.0, 1.0])
+    assert math.isfinite(_loss(real, model_gap, np.zeros(4), sig))
+
+
 def test_detection_limit_is_not_below_a_response_the_record_holds_unseen() -> None:
     """A temperature response of 1.5e-4 dps/degC in 10 min of white noise, below what the
     diagnosis keeps (whole-record z ~3): the stated limit must not say that it would have

@@ -52,10 +52,19 @@ BASES: dict[str, Basis] = {
 
 def _loss(real_avar: np.ndarray, model_avar: np.ndarray, add: np.ndarray,
           sigma_ln_adev: np.ndarray) -> float:
-    w = 1.0 / np.maximum(sigma_ln_adev, 1e-3) ** 2
-    r = 0.5 * np.log(real_avar / (model_avar + add))
-    ok = np.isfinite(r)
-    return float(np.sum(w[ok] * r[ok] ** 2))
+    """Weighted sum of squares of ``ln ADEV_real - ln ADEV_predicted`` over the taus where
+    both are defined (a tau whose real AVAR is not positive, or whose realisations' mean
+    is not finite, is left out for every candidate alike); a finite prediction that is
+    not positive where the record has variance makes the loss infinite, as no noise
+    process has a negative variance (dropping that tau instead favoured the prediction:
+    the Markov AVAR before 21f7db3 went negative far below tau_c)."""
+    pred = model_avar + add
+    have = np.isfinite(real_avar) & (real_avar > 0) & np.isfinite(pred)
+    if np.any(have & (pred <= 0)):
+        return math.inf
+    w = 1.0 / np.maximum(sigma_ln_adev[have], 1e-3) ** 2
+    r = 0.5 * np.log(real_avar[have] / pred[have])
+    return float(np.sum(w * r**2))
 
 
 def scaled_loss(real_avar: np.ndarray, model_avar: np.ndarray, ratio: np.ndarray,
