@@ -1000,13 +1000,13 @@ def _limits_sentence(lim: dict[str, Any], units: Mapping[str, str] | None) -> st
         v = e.get("smallest_identified")
         unit = f" {units[e['key']]}" if units and units.get(e["key"]) else ""
         name = eff if e["key"] == eff else f"{eff} ({e['key']})"
-        tried = ", ".join(f"{_f(t['size'])} {t['identified']}/{t['of']}"
-                          for t in sorted(e["tried"], key=lambda t: -t["size"]))
+        order = sorted(e["tried"], key=lambda t: -t["size"])  # largest first
+        tried = ", ".join(f"{_f(t['size'])} {t['identified']}/{t['of']}" for t in order)
         if e.get("not_searched"):
             parts.append(f"{eff} not searched ({e['not_searched']})")
         elif v is None:
-            parts.append(f"{name} not identified up to {_f(max(t['size'] for t in e['tried']))}"
-                         f"{unit} (tried {tried})")
+            parts.append(f"{name} not identified up to {_f(order[0]['size'])}{unit} "
+                         f"(tried {tried})")
         else:
             bound = ("at most " if e.get("smallest_tried_identified") else "")
             parts.append(f"{name} {bound}{_f(v)}{unit} (tried {tried})")

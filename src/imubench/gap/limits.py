@@ -17,7 +17,7 @@ where a look-alike covers both the effect and the background's own departure (Sa
 S5 gx, second segment: a random walk confirmed 5 of 5 at 0.0068 dps/sqrt(s) was named
 ``telegraph`` and not kept at twice that, with the background's ~2 s wander).
 
-The injections alternate in sign (:func:`injection_sign`: +, -, +), so a limit holds for
+The injections alternate in sign (:func:`injection_sign`: +, -, +, -, +), so a limit holds for
 an added effect of either sign. The recording may already hold the effect below what the
 diagnosis keeps, and a deterministic injection adds to it coherently: blind pair Markov
 (4 mdps, 30 s) + temperature 1e-3 dps/degC, temperature not kept, gave a limit of
