@@ -1121,6 +1121,22 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
         st = _without(st, failed)
 
 
+def _first_to_exclude(failed: list[str], st: Structure, pts: Points) -> str:
+    """Which of the extensions that failed their verdict is excluded (or, a filter pinned
+    at the search's floor, searched above it) first: the first in
+    :data:`VERDICT_ORDER`, except a Markov term whose tau_c is within the data's taus
+    beside a filter that failed pinned at the lowest bandwidth searched. A filter pinned
+    there shapes the same taus as the Markov term and leaves its tau_c profile
+    degenerate (Samsung S5 gx, first 2 h at 10 Hz: tau_c 0.404 s [0.404, 0.404] beside a
+    filter at 0.2 Hz; the Markov term, chi2 drop 487, was excluded, then the filter, and
+    the model kept flicker alone with a discrepancy floor of 0.89; with the filter
+    searched above its floor first the model is white + flicker + markov)."""
+    if (failed[0] == "markov" and "filter" in failed and _filter_pinned(st, pts)
+            and not pts.filter_bounded and st.tau_c_s >= float(pts.tau_s[0])):
+        return "filter"
+    return failed[0]
+
+
 def _backed_extensions(pts: Points, arr: np.ndarray
                        ) -> tuple[Structure, Points, dict[str, float], dict[str, str]]:
     """The best subset of extensions (:func:`_select_extensions`) among those the data
@@ -1143,9 +1159,10 @@ def _backed_extensions(pts: Points, arr: np.ndarray
         if not failed:
             return backed, sel_pts, all_drops, reasons
         # one at a time: the others were judged with settings searched alongside it
-        reasons[failed[0]] = why[failed[0]]
+        first = _first_to_exclude(failed, st, pts)
+        reasons[first] = why[first]
         floor = pts.filter_floor_hz * FILTER_FLOOR_STEP
-        pinned = (failed[0] == "filter" and _filter_pinned(st, pts)
+        pinned = (first == "filter" and _filter_pinned(st, pts)
                   and not pts.filter_bounded)  # refused as "the lowest searched"
         if pinned and floor < FILTER_FLOOR_MAX * pts.rate_hz:
             # pinned at the search's edge: search above it (a local optimum, or a slow
@@ -1158,7 +1175,7 @@ def _backed_extensions(pts: Points, arr: np.ndarray
             # if the short taus need its shape (judged by _extension_verdict)
             pts = replace(pts, filter_bounded=True)
             continue
-        banned.append(failed[0])
+        banned.append(first)
 
 
 def _base_structure(pts: Points, terms: tuple[str, ...] = BASE_TERMS) -> Structure:
