@@ -762,8 +762,10 @@ def test_an_allan_fit_never_gains_from_a_prediction_that_is_not_positive() -> No
     """The weighted ln-AVAR misfit (``avarfit._loss``) left out every tau whose residual
     was not finite, so a candidate predicting a negative variance at a tau lost that
     tau's misfit and scored better (the Markov AVAR went negative far below tau_c). Such
-    a prediction is now an infinite misfit; a tau the record or the realisations cannot
-    measure is still left out for every candidate alike."""
+    a prediction is now scored as the smallest positive double, worse than any positive
+    prediction (finite, so that the Brent searches minimising the loss do not run into
+    NaN arithmetic); a tau the record or the realisations cannot measure is still left
+    out for every candidate alike."""
     from imubench.gap.avarfit import _loss
 
     real = np.array([4.0, 2.0, 1.0, 0.5])
@@ -771,8 +773,10 @@ def test_an_allan_fit_never_gains_from_a_prediction_that_is_not_positive() -> No
     sig = np.full(4, 0.1)
     good = _loss(real, model, np.zeros(4), sig)
     assert good == pytest.approx(100.0 * sum((0.5 * math.log(r)) ** 2 for r in real))
-    assert _loss(real, model, np.array([0.0, 0.0, -2.0, 0.0]), sig) == math.inf
-    assert _loss(real, model, np.array([0.0, 0.0, -1.0, 0.0]), sig) == math.inf
+    worst_positive = _loss(real, np.array([1.0, 1.0, 1e-300, 1.0]), np.zeros(4), sig)
+    for add in (-2.0, -1.0):  # a negative and a zero variance at the third tau
+        bad = _loss(real, model, np.array([0.0, 0.0, add, 0.0]), sig)
+        assert math.isfinite(bad) and bad > worst_positive > 1e4 * good
     # taus without a measurement: the same for every candidate
     real_gap = np.array([4.0, 0.0, np.nan, 0.5])
     assert _loss(real_gap, model, np.zeros(4), sig) == pytest.approx(

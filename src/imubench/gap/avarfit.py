@@ -50,20 +50,26 @@ BASES: dict[str, Basis] = {
 """Single-coefficient effects fitted on the Allan curve (the ramp is fitted in time)."""
 
 
+TINY_AVAR = float(np.finfo(float).tiny)
+"""The Allan variance a prediction that is not positive is scored as (:func:`_loss`)."""
+
+
 def _loss(real_avar: np.ndarray, model_avar: np.ndarray, add: np.ndarray,
           sigma_ln_adev: np.ndarray) -> float:
     """Weighted sum of squares of ``ln ADEV_real - ln ADEV_predicted`` over the taus where
     both are defined (a tau whose real AVAR is not positive, or whose realisations' mean
     is not finite, is left out for every candidate alike); a finite prediction that is
-    not positive where the record has variance makes the loss infinite, as no noise
-    process has a negative variance (dropping that tau instead favoured the prediction:
-    the Markov AVAR before 21f7db3 went negative far below tau_c)."""
+    not positive where the record has variance is scored as the smallest positive double
+    (:data:`TINY_AVAR`), a misfit beyond any positive prediction's, as no noise process
+    has a negative variance (dropping that tau instead favoured the prediction: the
+    Markov AVAR before 21f7db3 went negative far below tau_c). Not infinite: the bounded
+    Brent searches that minimise this loss interpolate through its values, and an
+    infinite one made their arithmetic NaN (numpy's "invalid value" warnings on the
+    user's terminal; Samsung S5 gy, the base model's refit of the white level)."""
     pred = model_avar + add
     have = np.isfinite(real_avar) & (real_avar > 0) & np.isfinite(pred)
-    if np.any(have & (pred <= 0)):
-        return math.inf
     w = 1.0 / np.maximum(sigma_ln_adev[have], 1e-3) ** 2
-    r = 0.5 * np.log(real_avar[have] / pred[have])
+    r = 0.5 * np.log(real_avar[have] / np.maximum(pred[have], TINY_AVAR))
     return float(np.sum(w * r**2))
 
 
