@@ -1260,7 +1260,8 @@ def _better_start(r: _Realiser, first: Step, main: _Path, alt: _Path
     (s_main, h_main), (s_alt, h_alt) = score(main), score(alt)
     scatter = first.hold.gap_null if first.hold is not None else 0.0
     tie = s_main <= s_alt < s_main + LOOK_ALIKE_SCORE and h_alt < h_main
-    if not ((s_alt < s_main or tie) and h_alt - h_main <= scatter):
+    held_out = h_main - h_alt > scatter  # the held-out part tells them apart
+    if not (((s_alt < s_main or tie) and h_alt - h_main <= scatter) or held_out):
         main.alternative = {
             "kept": [{"effect": c.effect, "params": c.params} for c in alt.kept],
             "score": s_alt, "score_kept": s_main,
@@ -1273,10 +1274,13 @@ def _better_start(r: _Realiser, first: Step, main: _Path, alt: _Path
     gone = [c for c in main.kept if c.effect not in {a.effect for a in alt.kept}]
     for c in main.kept:
         c.accepted = False
+    why = (", which does not tell the two apart" if tie and not held_out else
+           " (better for the set replaced; the held-out part decides)"
+           if held_out and s_alt >= s_main else "")
     for c in gone:  # an effect both kept is not said to be replaced (by itself)
         c.note = (f"{REPLACED} {names}, the set kept when the effects whose own whole-record "
                   f"tests fired are tried first: score {s_alt:.1f} against {s_main:.1f} on the fit "
-                  f"part{', which does not tell the two apart' if tie else ''}, held-out gap's "
+                  f"part{why}, held-out gap's "
                   f"excess over its scatter (moment estimate, without the floor of "
                   f"gap_excess) {h_alt:.3f} against {h_main:.3f} (scatter {scatter:.3f})")
     alt.ranked0, alt.ev0 = main.ranked0, main.ev0
