@@ -2369,6 +2369,44 @@ def test_the_same_effects_kept_in_another_order_are_not_an_alternative() -> None
     assert kept is main and gone == [] and main.alternative is None
 
 
+@pytest.mark.parametrize(("s_alt", "h_alt", "taken"), [
+    (17010.5, 0.171, True),    # the S5 gy ramp: worse on the fit part, held-out decides
+    (17010.5, 0.500, False),   # held-out lower by less than its scatter: the fit part's
+    (13000.0, 0.700, True),    # better on the fit part, held-out within its scatter
+    (13000.0, 0.800, False),   # better on the fit part, held-out worse beyond it
+])
+def test_the_held_out_part_decides_between_two_selections_it_tells_apart(
+        s_alt: float, h_alt: float, taken: bool) -> None:
+    """Samsung S5 gy, segment 1, a ramp of -4.45e-4 dps/s added: the selection from the
+    best-scoring candidate kept the base model's refit, a bias step and a random walk
+    (fit part 13763.3 with the BIC penalty, held-out excess 0.627), the one with the
+    fired drift test first a bias step, the ramp (-3.88e-4) and the refit (17010.5,
+    0.171; scatter 0.146). On a fit part whose chi-squared is ~430 times its terms the
+    score difference says little; the held-out part, which neither was fitted on, tells
+    the two apart, and decides."""
+    def path(*effects: str) -> Any:
+        return diagnose._Path([Candidate(e, {}, 1) for e in effects], [], False, [], [], {})
+
+    main, alt = path("base_model", "bias_step", "random_walk"), path("bias_step", "ramp")
+    scores = {id(main.kept): (13763.3, 0.627), id(alt.kept): (s_alt, h_alt)}
+
+    def step(kept: list[Candidate]) -> Any:
+        s, h = scores[id(kept)]
+        return SimpleNamespace(chi2=lambda: s - 3.0 * math.log(30.0),
+                               before=SimpleNamespace(n_terms=30),
+                               hold=SimpleNamespace(excess_moment=h))
+
+    first = cast(Any, SimpleNamespace(hold=SimpleNamespace(gap_null=0.146)))
+    kept, gone = diagnose._better_start(cast(Any, SimpleNamespace(step=step)), first,
+                                        main, alt)
+    assert (kept is alt) == taken
+    if taken:
+        assert [c.effect for c in gone] == ["base_model", "random_walk"]
+        assert all("replaced by bias_step + ramp" in c.note for c in gone)
+    else:
+        assert main.alternative is not None and gone == []
+
+
 def _walk_record(seed: int, coeff: float) -> tuple[NoiseModel, NoiseModel, Series]:
     """30 min at RATE of white 0.004 dps/sqrt(Hz) + flicker 0.0008 dps + a random walk
     3e-4 dps/sqrt(s), with a response ``coeff`` (dps/degC) to a temperature cycling +-3
