@@ -1238,7 +1238,13 @@ def _better_start(r: _Realiser, first: Step, main: _Path, alt: _Path
     apart, as for a look-alike at one step) and its held-out excess is the lower: an outside
     reviewer's Markov process (4 mdps, 30 s) beside a temperature response of 4e-3
     dps/degC kept as a random walk alone at 58.9 against temperature + Markov at 60.0, the
-    held-out excess 0.104 against 0 (scatter 0.127). The held-out chi-squared is not the
+    held-out excess 0.104 against 0 (scatter 0.127); and whatever the scores when its
+    held-out excess is below ``main``'s by more than the held-out scatter: the held-out
+    part, which neither selection was fitted on, tells them apart (Samsung S5 gy with a
+    ramp of -4.45e-4 dps/s added: the refit, a bias step and a random walk scored
+    13763.3 against 17010.5 for a bias step, the ramp, -3.88e-4, and the refit, on a fit
+    part whose chi-squared was ~430 times its terms, held-out excess 0.627 against 0.171,
+    scatter 0.146). The held-out chi-squared is not the
     judge between the two: a noise process widens its realisations' spread of the held-out
     temperature and trend statistics, which lowers their z without bringing the curves
     closer (fresh blind pair: held-out statistics drop 112.6 with the random walk against
