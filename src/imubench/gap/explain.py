@@ -885,7 +885,9 @@ def _alternative_line(c: dict[str, Any], units: Mapping[str, str] | None = None)
     names = " + ".join(f"{k['effect']} ({params_text(k['params'], units)})" for k in a["kept"])
     worse_score = a["score"] >= a["score_kept"]
     if a["score"] >= a["score_kept"] + LOOK_ALIKE_SCORE:
-        why = f"it scores higher on the fit part by {LOOK_ALIKE_SCORE:g} or more"
+        why = (f"it scores higher on the fit part by {LOOK_ALIKE_SCORE:g} or more and its "
+               "held-out gap's excess is not below the kept effects' by more than the "
+               "scatter (where it is, the held-out part decides)")
     elif worse_score:
         why = (f"it scores higher on the fit part (by less than {LOOK_ALIKE_SCORE:g}, which "
                "the fit part does not tell apart) and its held-out gap's excess is not "
