@@ -943,7 +943,8 @@ def test_a_close_alternative_that_was_not_taken_is_said() -> None:
             "gap's excess over its scatter (moment estimate, without the floor of "
             "gap_excess) 0.0509 against 0.12 (scatter 0.0994); the "
             "held-out part favours it; not taken because it scores higher on the fit part "
-            "by 2 or more.") in text
+            "by 2 or more and its held-out gap's excess is not below the kept effects' by "
+            "more than the scatter (where it is, the held-out part decides).") in text
     alt.update(score=69.5, holdout_excess=0.2)  # within the look-alike margin, held-out worse
     text = "\n".join(explain_channel(c, 10))
     assert ("not taken because it scores higher on the fit part (by less than 2, which the "
