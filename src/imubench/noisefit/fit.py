@@ -1130,7 +1130,8 @@ def _first_to_exclude(failed: list[str], st: Structure, pts: Points) -> str:
     degenerate (Samsung S5 gx, first 2 h at 10 Hz: tau_c 0.404 s [0.404, 0.404] beside a
     filter at 0.2 Hz; the Markov term, chi2 drop 487, was excluded, then the filter, and
     the model kept flicker alone with a discrepancy floor of 0.89; with the filter
-    searched above its floor first the model is white + flicker + markov)."""
+    searched above its floor first the model keeps the Markov term, tau_c 1.23 s [0.84,
+    1.39], beside a random walk, discrepancy 0.235)."""
     if (failed[0] == "markov" and "filter" in failed and _filter_pinned(st, pts)
             and not pts.filter_bounded and st.tau_c_s >= float(pts.tau_s[0])):
         return "filter"
