@@ -1121,7 +1121,8 @@ def _validate(st: Structure, pts: Points, arr: np.ndarray, drops: dict[str, floa
         st = _without(st, failed)
 
 
-def _first_to_exclude(failed: list[str], st: Structure, pts: Points) -> str:
+def _first_to_exclude(failed: list[str], st: Structure, pts: Points,
+                      filter_pinned: bool) -> str:
     """Which of the extensions that failed their verdict is excluded (or, a filter pinned
     at the search's floor, searched above it) first: the first in
     :data:`VERDICT_ORDER`, except a Markov term whose tau_c is within the data's taus
@@ -1131,9 +1132,9 @@ def _first_to_exclude(failed: list[str], st: Structure, pts: Points) -> str:
     filter at 0.2 Hz; the Markov term, chi2 drop 487, was excluded, then the filter, and
     the model kept flicker alone with a discrepancy floor of 0.89; with the filter
     searched above its floor first the model keeps the Markov term, tau_c 1.23 s [0.84,
-    1.39], beside a random walk, discrepancy 0.235)."""
-    if (failed[0] == "markov" and "filter" in failed and _filter_pinned(st, pts)
-            and not pts.filter_bounded and st.tau_c_s >= float(pts.tau_s[0])):
+    1.39], beside a random walk, discrepancy 0.235). ``filter_pinned``: the filter failed
+    and sits at the lowest bandwidth searched, not yet known to be bounded from above only."""
+    if failed[0] == "markov" and filter_pinned and st.tau_c_s >= float(pts.tau_s[0]):
         return "filter"
     return failed[0]
 
@@ -1160,11 +1161,12 @@ def _backed_extensions(pts: Points, arr: np.ndarray
         if not failed:
             return backed, sel_pts, all_drops, reasons
         # one at a time: the others were judged with settings searched alongside it
-        first = _first_to_exclude(failed, st, pts)
+        filter_pinned = ("filter" in failed and _filter_pinned(st, pts)
+                         and not pts.filter_bounded)  # refused as "the lowest searched"
+        first = _first_to_exclude(failed, st, pts, filter_pinned)
         reasons[first] = why[first]
         floor = pts.filter_floor_hz * FILTER_FLOOR_STEP
-        pinned = (first == "filter" and _filter_pinned(st, pts)
-                  and not pts.filter_bounded)  # refused as "the lowest searched"
+        pinned = first == "filter" and filter_pinned
         if pinned and floor < FILTER_FLOOR_MAX * pts.rate_hz:
             # pinned at the search's edge: search above it (a local optimum, or a slow
             # "filter" standing in for a term that is not there)
