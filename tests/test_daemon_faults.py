@@ -145,8 +145,9 @@ def test_a_device_lost_for_good_ends_with_status_2_and_every_sample_accounted(
         tmp_path: Path) -> None:
     """A SensorTile unplugged and not back within ``reconnect_timeout_s``: the daemon
     exited 2 naming the port but never printed its account of the samples it had. The
-    unplug comes 3 s in: at 1.5 s a loaded machine (a benchmark beside the suite) had
-    not started reading yet, and there was nothing to account for."""
+    simulated kit's unplug timer counts from the host's stream start: counted from
+    plug-in, a loaded machine (CI, a benchmark beside the suite) had not started reading
+    3 s in, and there was nothing to account for."""
     cfg = config(tmp_path, "sensortile-sim://?unplug_every_s=3&replug_after_s=100000"
                  "&reconnect_timeout_s=0.5&max_unplugs=1")
     proc = run_daemon(cfg, timeout_s=60)
@@ -156,6 +157,23 @@ def test_a_device_lost_for_good_ends_with_status_2_and_every_sample_accounted(
     rec = load_recording(tmp_path / "rec" / "bench1_imu0.imbr")
     assert produced > 0 and produced == delivered + lost
     assert len(rec) + rec.lost_samples == produced
+
+
+def test_a_source_failing_while_it_is_set_up_is_accounted_as_nothing_produced(
+        tmp_path: Path) -> None:
+    """A source that fails before its stream starts (a bus stuck from power-up): the
+    daemon exited 2 with the error but no account at all (a CI run of the test above,
+    the kit gone before the loaded machine started streaming, printed none)."""
+    cfg = config(tmp_path, "sim://lsm6dsl?stuck_bus_at_s=0&stuck_bus_for_s=1000"
+                 "&io_timeout_s=0.2")
+    proc = run_daemon(cfg, timeout_s=60)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "no answer from an lsm6dsl at 0x6a" in proc.stderr
+    assert "stopped before the acquisition started" in proc.stdout
+    assert "stopped after" not in proc.stdout
+    rec = tmp_path / "rec" / "bench1_imu0.imbr"
+    if rec.exists():  # opened before the failure: closed, with its end record, empty
+        assert len(load_recording(rec)) == 0
 
 
 def test_daemon_records_each_fault_gap_once_with_the_driver_reason(tmp_path: Path) -> None:

@@ -180,6 +180,28 @@ def test_reconnect_backoff_doubles_and_gives_up() -> None:
     assert slept[:4] == [0.01, 0.02, 0.04, 0.04]
 
 
+def test_the_unplug_timer_counts_from_the_hosts_stream_start() -> None:
+    """``unplug_every_s`` counts streaming time: a host that takes longer than that to
+    start its stream (a loaded machine compiling) still gets samples before the pull;
+    counted from plug-in, the kit was gone before the first one."""
+    from lsm6ds_sim.clock import SimClock
+
+    faults = SerialFaults(unplug_every_s=0.3, replug_after_s=100.0, max_unplugs=1)
+    with SensorTileFirmware(seed=3, clock=SimClock("wall"), faults=faults) as fw:
+        link = SensorTileLink(fw.url, config=LinkConfig(reconnect_timeout_s=0.05))
+        link.open()
+        time.sleep(0.8)  # plugged and idle for longer than unplug_every_s
+        assert fw.sim_plugged and fw.sim_stats.unplugs == 0
+        link.start_streaming()
+        got: list[object] = []
+        with pytest.raises(SensorTileError, match="did not come back"):
+            while True:
+                got += link.read_stream()
+        link.close()
+    assert fw.sim_stats.unplugs == 1
+    assert 15 <= len(got) <= 35  # 0.3 s at 100 Hz, less what the pull cut off
+
+
 def test_link_reconnects_after_unplug_and_restarts_stream() -> None:
     with SensorTileFirmware(seed=2, keep_log=True) as fw:
         link = SensorTileLink(fw.url, config=LinkConfig(backoff_initial_s=0.01))

@@ -24,8 +24,9 @@ drops frames the host does not read in time (USB CDC busy), like the real kit.
 Faults (host-visible, on the firmware's output bytes): ``corrupt_rate`` (a byte XOR a
 random non-zero value), ``drop_rate`` (a byte vanishes), ``split_rate`` (the write is
 split after a byte, the rest follows in a later write); ``unplug_every_s`` of simulated
-time the USB cable is pulled: pty and symlink vanish, streaming stops, the firmware keeps
-running on its battery (RTC and timer continue); ``replug_after_s`` later a new pty
+time after the host starts the binary stream (after plug-in in ``ascii`` mode, which
+streams from then) the USB cable is pulled: pty and symlink vanish, streaming stops, the
+firmware keeps running on its battery (RTC and timer continue); ``replug_after_s`` later a new pty
 appears behind the same symlink. Test hooks are prefixed ``sim_``.
 """
 
@@ -175,7 +176,7 @@ class SensorTileFirmware:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._tick = 0
-        self._plugged_since_s = 0.0
+        self._pull_timer_from_s = 0.0
         self._unplugged_at_s: float | None = None
         self._stale = {"acc": (0, 0, 0), "gyro": (0, 0, 0), "temp": 0.0}
         self._regs = {0x0F: 0x6A, 0x10: 0x40, 0x11: 0x40, 0x12: 0x44}
@@ -240,7 +241,7 @@ class SensorTileFirmware:
         os.replace(tmp, self.link_path)  # atomic re-point, like udev
         self._master, self._slave = master, slave
         self._decoder.reset()
-        self._plugged_since_s = self.clock.now()
+        self._pull_timer_from_s = self.clock.now()
         self._unplugged_at_s = None
 
     def _unplug(self, count: bool = True) -> None:
@@ -300,7 +301,8 @@ class SensorTileFirmware:
         if self._master is not None:
             if (
                 f.unplug_every_s is not None
-                and now - self._plugged_since_s >= f.unplug_every_s
+                and (self.mode == "ascii" or self._streaming is not None)
+                and now - self._pull_timer_from_s >= f.unplug_every_s
                 and (f.max_unplugs is None or self.sim_stats.unplugs < f.max_unplugs)
             ):
                 self._unplug()
@@ -353,6 +355,10 @@ class SensorTileFirmware:
             reply = cmds.reply_message(msg, struct.pack("<i", cmds.DATALOG_EXT_MODE))
         elif cmd == cmds.Cmd.START_DATA_STREAMING and len(payload) == 4:
             self._host = msg[1]
+            if self._streaming is None:  # the cable-pull timer counts streaming time: a
+                # host slow to start (a loaded machine compiling) saw the kit vanish
+                # before its first sample and had nothing to account for
+                self._pull_timer_from_s = self.clock.now()
             self._streaming = struct.unpack("<I", payload)[0]
             reply = cmds.reply_message(msg)
         elif cmd == cmds.Cmd.STOP_DATA_STREAMING:

@@ -376,10 +376,10 @@ class Daemon:
         if started:  # the account of every sample, also when a source failed
             for unit in self.sensors:
                 self.say(unit.summary())
+        else:  # also when a source failed while it was set up: nothing was produced
+            self.say("stopped before the acquisition started")
         if error is not None:
             raise error
-        if not started:
-            self.say("stopped before the acquisition started")
         return 0
 
     async def _start_pipelines(self) -> bool:
