@@ -292,6 +292,30 @@ def test_acquire_errors_name_the_uri_as_written(tmp_path: Path,
     assert "duration_s=1" not in err
 
 
+def test_a_source_failing_mid_recording_says_what_the_recording_holds(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A device lost for good 5 s into an acquisition: ``acquire`` printed the error alone,
+    not the samples its closed recording held, and wrote no counters."""
+    import json
+
+    from imubench.cli import main
+
+    uri = ("sim://lsm6dsl?odr_hz=104&clock=virtual&stuck_bus_at_s=5&stuck_bus_for_s=1e9"
+           "&io_timeout_s=3")
+    out, js = tmp_path / "x.imbr", tmp_path / "x.json"
+    assert main(["acquire", uri, "--duration-s", "10", "--out", str(out),
+                 "--stats-json", str(js)]) == 2
+    cap = capsys.readouterr()
+    rec = load_recording(out)
+    stats = json.loads(js.read_text())
+    assert len(rec) == stats["recorded"] > 100 and rec.lost_samples == 0
+    assert f"{out}: {len(rec)} samples recorded, 0 lost;" in cap.out
+    assert "up to the failure below" in cap.out
+    error = next(x for x in cap.err.splitlines() if x.startswith("imubench acquire: error:"))
+    assert "has not answered for 3" in stats["error"] and "has not answered for 3" in error
+    assert "duration_s=10" not in error
+
+
 def test_a_device_that_stops_answering_is_given_up_after_io_timeout_s() -> None:
     """A bus stuck for good was retried for ever: a jig whose board was unplugged hung
     without a word. With ``io_timeout_s`` the source names the silence; without it, it

@@ -13,7 +13,9 @@ error shows here), ``elapsed_s``, ``expected_samples``, ``lost_by_reason``) plus
 the samples whose die temperature lay outside the calibration's sweep (a warning says
 when it leaves and re-enters it). Ctrl-C or SIGTERM stops the acquisition and keeps,
 closed and readable, everything recorded so far; the counters of it are still written,
-with ``"interrupted": true``.
+with ``"interrupted": true``. A source or a consumer that fails (a device lost for good, a
+disk full) ends it the same way: the recording is closed with what it holds, the summary
+line and the counters say so (``"error"``: the failure's message), then the error.
 """
 
 from __future__ import annotations
@@ -65,12 +67,22 @@ def record(src: Source, out: Path, duration_s: float | None = None,
         stats = _stats(src, pipeline, recorder, live)
         stats["interrupted"] = True
         raise AcquisitionInterrupted(stats) from None
-    if pipeline.error is not None:
-        raise pipeline.error
-    errors = pipeline.consumer_errors()
-    if errors:
-        raise next(iter(errors.values()))
-    return _stats(src, pipeline, recorder, live)
+    stats = _stats(src, pipeline, recorder, live)
+    failure = pipeline.error or next(iter(pipeline.consumer_errors().values()), None)
+    if failure is not None:
+        stats["error"] = str(failure)
+        raise AcquisitionError(stats, failure) from failure
+    return stats
+
+
+class AcquisitionError(Exception):
+    """The source or a consumer failed: :attr:`error`, with the counters of what the
+    (closed) recording holds (:attr:`stats`)."""
+
+    def __init__(self, stats: dict[str, Any], error: BaseException) -> None:
+        super().__init__(str(error))
+        self.stats = stats
+        self.error = error
 
 
 class AcquisitionInterrupted(KeyboardInterrupt):
@@ -111,7 +123,8 @@ def record_uri(uri: str, out: Path, stats_json: Path | None,
         cal.check_data(src.info.chip, src.info.fs_dps, src.info.fs_g, None, f"source {uri}")
     try:
         stats = record(src, out, duration_s, cal)
-    except AcquisitionInterrupted as stop:  # the counters of what was kept, then the exit
+    except (AcquisitionInterrupted, AcquisitionError) as stop:  # the counters of what
+        # was kept, then the exit
         if stats_json is not None:
             write_json(stop.stats, str(stats_json))
         raise
@@ -147,15 +160,28 @@ def run(args: argparse.Namespace) -> int:
     uri = add_duration(args.source, args.duration_s)
     try:
         stats = record_uri(uri, args.out, args.stats_json, args.duration_s, args.calibration)
-    except SourceError as exc:  # name the URI the user wrote, not the one with duration_s
-        raise SourceError(str(exc).replace(uri, args.source)) from None
-    # the file's own counts first (the source may have read past the duration, which the
-    # pipeline does not deliver), then the source's
-    print(
-        f"{args.out}: {stats['recorded']} samples recorded, {stats['recording_lost']} lost; "
-        f"source: {stats['samples']} read, {stats['gaps']} gaps, "
-        f"{stats['lost_samples']} lost, {stats['overruns']} overruns, "
-        f"{stats['io_errors']} I/O errors",
-        file=summary_stream(args.stats_json),
-    )
+    except AcquisitionError as failed:  # what the closed recording holds, then the error
+        print(_summary(args.out, failed.stats) + " (up to the failure below)",
+              file=summary_stream(args.stats_json))
+        raise _as_written(failed.error, uri, args.source) from None
+    except SourceError as exc:
+        raise _as_written(exc, uri, args.source) from None
+    print(_summary(args.out, stats), file=summary_stream(args.stats_json))
     return 0
+
+
+def _summary(out: Path, stats: dict[str, Any]) -> str:
+    """The file's own counts first (the source may have read past the duration, which the
+    pipeline does not deliver), then the source's."""
+    return (f"{out}: {stats['recorded']} samples recorded, {stats['recording_lost']} lost; "
+            f"source: {stats['samples']} read, {stats['gaps']} gaps, "
+            f"{stats['lost_samples']} lost, {stats['overruns']} overruns, "
+            f"{stats['io_errors']} I/O errors")
+
+
+def _as_written(error: BaseException, uri: str, written: str) -> BaseException:
+    """``error``, a source error naming the URI the user wrote (not the one with
+    ``duration_s`` added)."""
+    if isinstance(error, SourceError):
+        return SourceError(str(error).replace(uri, written))
+    return error

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 from urllib.parse import quote
 
 from lsm6ds.registers import CHIPS
 
 from imubench.commands import summary_stream
-from imubench.commands.acquire import record_uri
+from imubench.commands.acquire import AcquisitionError, record_uri
 from imubench.errors import SourceError
 
 
@@ -70,10 +71,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
-    stats = record_uri(build_uri(args), args.out, args.stats_json, args.duration_s)
-    print(
-        f"{args.out}: {stats['samples']} samples from a simulated {args.chip} "
-        f"({stats['gaps']} gaps, {stats['lost_samples']} lost)",
-        file=summary_stream(args.stats_json),
-    )
+    try:
+        stats = record_uri(build_uri(args), args.out, args.stats_json, args.duration_s)
+    except AcquisitionError as failed:  # what the closed recording holds, then the error
+        print(_summary(args, failed.stats) + " up to the failure below",
+              file=summary_stream(args.stats_json))
+        raise failed.error from None
+    print(_summary(args, stats), file=summary_stream(args.stats_json))
     return 0
+
+
+def _summary(args: argparse.Namespace, stats: dict[str, Any]) -> str:
+    return (f"{args.out}: {stats['samples']} samples from a simulated {args.chip} "
+            f"({stats['gaps']} gaps, {stats['lost_samples']} lost)")
