@@ -669,6 +669,9 @@ def test_a_markov_term_is_not_excluded_for_a_filter_pinned_beside_it(
     assert "markov_sigma" in f.present
     assert 0.5 < f.params["markov_tau"] < 3.0
     assert not any("misses the Allan curve broadly" in n for n in f.notes)
+    # the filter's reason is the search above the floor's, not the refusal at the floor
+    # that this search replaced ("0.2 Hz is the lowest searched")
+    assert f.reasons["filter"].startswith("dropped, chi2 drop"), f.reasons["filter"]
 
 
 def test_model_correlation_is_a_positive_definite_correlation_matrix() -> None:

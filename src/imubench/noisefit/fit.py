@@ -1164,7 +1164,6 @@ def _backed_extensions(pts: Points, arr: np.ndarray
         filter_pinned = ("filter" in failed and _filter_pinned(st, pts)
                          and not pts.filter_bounded)  # refused as "the lowest searched"
         first = _first_to_exclude(failed, st, pts, filter_pinned)
-        reasons[first] = why[first]
         floor = pts.filter_floor_hz * FILTER_FLOOR_STEP
         pinned = first == "filter" and filter_pinned
         if pinned and floor < FILTER_FLOOR_MAX * pts.rate_hz:
@@ -1178,6 +1177,9 @@ def _backed_extensions(pts: Points, arr: np.ndarray
             # if the short taus need its shape (judged by _extension_verdict)
             pts = replace(pts, filter_bounded=True)
             continue
+        # the reason of an exclusion only: a filter searched again above its floor is
+        # judged again (its "lowest searched" refusal had outlived the new search)
+        reasons[first] = why[first]
         banned.append(first)
 
 
