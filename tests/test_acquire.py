@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -308,12 +309,38 @@ def test_a_source_failing_mid_recording_says_what_the_recording_holds(
     cap = capsys.readouterr()
     rec = load_recording(out)
     stats = json.loads(js.read_text())
-    assert len(rec) == stats["recorded"] > 100 and rec.lost_samples == 0
-    assert f"{out}: {len(rec)} samples recorded, 0 lost;" in cap.out
+    # the outage before the give-up is declared (it had been left uncounted)
+    assert len(rec) == stats["recorded"] > 100
+    assert rec.lost_samples == stats["recording_lost"] > 3 * 104
+    assert len(rec) + rec.lost_samples == stats["produced"]
+    assert [g.reason for g in rec.gaps] == ["device not answering"]
+    assert f"{out}: {len(rec)} samples recorded, {rec.lost_samples} lost;" in cap.out
     assert "up to the failure below" in cap.out
     error = next(x for x in cap.err.splitlines() if x.startswith("imubench acquire: error:"))
     assert "has not answered for 3" in stats["error"] and "has not answered for 3" in error
     assert "duration_s=10" not in error
+
+
+def test_the_outage_before_a_give_up_is_counted_at_the_odr() -> None:
+    """The samples the chip made between the newest one read and the failure are one gap
+    ("device not answering") delivered before the error: samples + lost = ODR x the
+    source's time to the failure (an outside reviewer's stuck bus ended "8 recorded, 0
+    lost" after 6.4 s at 104 Hz)."""
+    src = open_source("sim://lsm6dsl?odr_hz=104&clock=virtual&stuck_bus_at_s=2"
+                      "&stuck_bus_for_s=1e9&io_timeout_s=3")
+    got: list[Any] = []
+    with pytest.raises(SourceError, match="has not answered"), src:
+        for b in src:
+            got.append(b)
+    n = sum(len(b) for b in got)
+    gaps = [g for b in got for g in b.gaps]
+    assert [g.reason for g in gaps] == ["device not answering"]
+    assert gaps[0].at == n + gaps[0].lost  # the hole follows the newest sample read
+    made = src.elapsed_s * src.info.odr_hz
+    # within 1 % (the clock read after the give-up; the measured ODR): the FIFO's ~200
+    # samples at the failure or the outage's seconds would be far outside
+    assert abs(n + gaps[0].lost - made) <= 0.01 * made, (n, gaps[0].lost, made)
+    assert src.telemetry().lost_samples == gaps[0].lost
 
 
 def test_a_device_that_stops_answering_is_given_up_after_io_timeout_s() -> None:

@@ -202,6 +202,26 @@ def test_the_unplug_timer_counts_from_the_hosts_stream_start() -> None:
     assert 15 <= len(got) <= 35  # 0.3 s at 100 Hz, less what the pull cut off
 
 
+def test_a_kit_lost_for_good_has_its_outage_counted_before_the_error() -> None:
+    """Unplugged and not back within ``reconnect_timeout_s``: the frames the kit made
+    from the newest one received to the give-up are one gap ("serial link down"),
+    delivered before the error (an outside reviewer: "151 recorded, 0 lost", where a stop
+    during the same outage counted 226 lost)."""
+    src = open_source("sensortile-sim://?clock=wall&unplug_every_s=1&replug_after_s=100"
+                      "&reconnect_timeout_s=1")
+    got: list[Batch] = []
+    t0 = time.monotonic()
+    with pytest.raises(SourceError, match="did not come back"), src:
+        for b in src:
+            got.append(b)
+    wall = time.monotonic() - t0
+    n = sum(len(b) for b in got)
+    gaps = [g for b in got for g in b.gaps]
+    assert 50 <= n <= 110 and [g.reason for g in gaps] == ["serial link down"]
+    # the kit's 100 Hz over the host's time to the give-up (opening took some of it)
+    assert 100 * (wall - 1.0) <= n + gaps[0].lost <= 100 * wall + 2, (n, gaps, wall)
+
+
 def test_link_reconnects_after_unplug_and_restarts_stream() -> None:
     with SensorTileFirmware(seed=2, keep_log=True) as fw:
         link = SensorTileLink(fw.url, config=LinkConfig(backoff_initial_s=0.01))

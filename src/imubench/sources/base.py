@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from imubench.batch import Batch
+from imubench.errors import SourceError
 
 COUNTER_NAMES: tuple[str, ...] = (
     "samples", "gaps", "lost_samples", "overruns", "bus_bytes", "io_errors",
@@ -115,6 +116,9 @@ class Source(abc.ABC):
     loses is a hole in the sample index declared by a :class:`~imubench.batch.Gap` in
     the next batch (or in a batch without samples at the end of the stream); the base
     class counts them (``gaps``, ``lost_samples``, :attr:`Telemetry.lost_by_reason`).
+    A backend whose :meth:`_read` fails for good (:class:`SourceError`: a device lost)
+    says in :meth:`_lost_at_failure` what the outage before the failure cost; that batch
+    is delivered first and the error raised by the next :meth:`read`.
     """
 
     info: SourceInfo
@@ -125,6 +129,8 @@ class Source(abc.ABC):
         self._opened = False
         self._interrupt = threading.Event()
         """Set by :meth:`interrupt`; backends wait on it instead of sleeping."""
+        self._failure: SourceError | None = None
+        """The failure to raise at the next :meth:`read`, after its outage's batch."""
 
     # -- hooks for backends -------------------------------------------------------
     @abc.abstractmethod
@@ -135,6 +141,14 @@ class Source(abc.ABC):
 
     @abc.abstractmethod
     def _close(self) -> None: ...
+
+    def _lost_at_failure(self) -> Batch | None:
+        """At a failure that ends the stream: the samples the device made after the newest
+        one read, as a batch of gaps with their reason, or None (none, or the backend
+        cannot tell). A device lost for good had its outage uncounted: an outside
+        reviewer's bus stuck for 2.5 s before ``io_timeout_s`` gave up ended with "112
+        recorded, 0 lost" where a stop during the same outage counted 204 lost."""
+        return None
 
     def prepare(self) -> None:  # noqa: B027 - optional hook
         """Slow set-up before the stream starts (a simulator generating its first noise
@@ -175,9 +189,18 @@ class Source(abc.ABC):
         :meth:`interrupt`)."""
         if not self._opened:
             self.open()
+        if self._failure is not None:
+            failure, self._failure = self._failure, None
+            raise failure
         if self._interrupt.is_set():
             return None
-        batch = self._read()
+        try:
+            batch = self._read()
+        except SourceError as exc:
+            batch = self._lost_at_failure()
+            if batch is None:
+                raise
+            self._failure = exc
         if batch is not None:
             self.counters["samples"] += len(batch)
             for gap in batch.gaps:

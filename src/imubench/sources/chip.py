@@ -377,6 +377,11 @@ class ChipSource(Source):
         self._pending = []
         return Batch.empty(with_raw=True, gaps=tuple(gaps)) if gaps else None
 
+    def _lost_at_failure(self) -> Batch | None:
+        """The outage before a failure, as a stop during it counts it
+        (:meth:`_outage_tail`)."""
+        return self._outage_tail(stopping=True)
+
     def _outage_reason(self) -> str:
         """Why the samples after the newest read were lost (:meth:`_outage_tail`)."""
         if self._io_failing_since is not None:

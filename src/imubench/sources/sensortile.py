@@ -266,16 +266,22 @@ class SensorTileSource(Source):
         return Gap(end, end - last - 1, "frames lost on the serial link") if end > last + 1 \
             else None
 
-    def _stopped_in_outage(self) -> Batch | None:
+    def _lost_at_failure(self) -> Batch | None:
+        """The frames lost in the outage that ended in a failure (the kit not back within
+        ``reconnect_timeout_s``), counted as at a stop during it however short it was."""
+        return self._stopped_in_outage(failed=True)
+
+    def _stopped_in_outage(self, *, failed: bool = False) -> Batch | None:
         """At a stop: the frames the kit made since the newest one arrived, lost, when no
-        frame came for longer than an outage allows (an unplug, a silent link); None
-        otherwise. A stop during an unplug reported 0 lost for the seconds it lasted.
-        Counted from the host clock at the frame period, on a real-time link only (a
-        virtual-clock simulator's firmware time is not the host's)."""
+        frame came for longer than an outage allows (an unplug, a silent link), or at a
+        failure (``failed``) whatever the time; None otherwise. A stop during an unplug
+        reported 0 lost for the seconds it lasted. Counted from the host clock at the frame
+        period, on a real-time link only (a virtual-clock simulator's firmware time is
+        not the host's)."""
         self._done = True
         if not self.info.realtime:
             return None
-        quiet = max(1.0, self.link.config.stall_timeout_s)
+        quiet = 0.0 if failed else max(1.0, self.link.config.stall_timeout_s)
         since = time.monotonic() - self._last_frame_host_s
         if since <= quiet:
             return None
