@@ -321,6 +321,21 @@ def test_a_source_failing_mid_recording_says_what_the_recording_holds(
     assert "duration_s=10" not in error
 
 
+def test_a_device_that_never_answers_leaves_a_closed_recording(tmp_path: Path) -> None:
+    """A device that does not answer at the start: the recording opened for it was left
+    without its end record (read as "the writer did not close this file")."""
+    from imubench.cli import main
+    from imubench.recording.native import NativeReader
+
+    out = tmp_path / "x.imbr"
+    assert main(["acquire", "sim://lsm6dsl?odr_hz=104&clock=virtual&stuck_bus_at_s=0"
+                 "&stuck_bus_for_s=1e9&io_timeout_s=1", "--duration-s", "3", "--out",
+                 str(out)]) == 2
+    with NativeReader(out) as reader:
+        assert sum(len(b) for b in reader.batches()) == 0
+        assert reader.end is not None
+
+
 def test_the_outage_before_a_give_up_is_counted_at_the_odr() -> None:
     """The samples the chip made between the newest one read and the failure are one gap
     ("device not answering") delivered before the error: samples + lost = ODR x the

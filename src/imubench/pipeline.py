@@ -260,11 +260,17 @@ class Pipeline:
 
     def start(self) -> None:
         """Open the source and start the acquisition and consumer threads (call
-        :meth:`prepare` first). Errors opening the source are raised here."""
+        :meth:`prepare` first). Errors opening the source are raised here, after the
+        consumers prepared are closed (:meth:`close_unstarted`: a recording opened for a
+        device that never answered was left without its end record)."""
         # the source first: a device that does not answer leaves no consumer thread
         # unstarted (join() then failed with "cannot join thread before it is started",
         # an internal error of the daemon hiding the device's own)
-        self.source.open()
+        try:
+            self.source.open()
+        except BaseException:
+            self.close_unstarted()
+            raise
         info = self.source.info
         capacity = max(MIN_CAPACITY, round(self.capacity_s * info.odr_hz))
         self.ring = RingBuffer(capacity, with_raw=info.has_raw, blocking=not info.realtime)
