@@ -321,6 +321,29 @@ def test_a_source_failing_mid_recording_says_what_the_recording_holds(
     assert "duration_s=10" not in error
 
 
+def test_a_full_disk_ends_acquire_with_an_error_naming_what_was_not_recorded(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A disk that fills during ``acquire``: it exited 0 with "56 lost" and no reason
+    (the recorder went on counting what it could not write). Now the counters and the
+    summary come first, then the error (exit 2) naming the samples not recorded."""
+    from small_disk import small_tmpfs
+
+    from imubench.cli import main
+
+    with small_tmpfs(tmp_path) as disk:
+        out, js = disk / "a.imbr", tmp_path / "a.json"
+        assert main(["acquire", "sim://lsm6dsl?odr_hz=104&clock=virtual", "--duration-s",
+                     "20", "--out", str(out), "--stats-json", str(js)]) == 2
+        stats = json.loads(js.read_text())
+        cap = capsys.readouterr()
+        assert stats["produced"] == 2080 and 0 < stats["recorded"] < 2080
+        assert stats["recorded"] + stats["recording_lost"] == 2080
+        lost = stats["recording_lost"]
+        assert f"{lost} samples not recorded (disk full: not recorded" in stats["error"]
+        assert f"{out}: {stats['recorded']} samples recorded, {lost} lost" in cap.out
+        assert f"{lost} samples not recorded" in cap.err
+
+
 def test_a_device_that_never_answers_leaves_a_closed_recording(tmp_path: Path) -> None:
     """A device that does not answer at the start: the recording opened for it was left
     without its end record (read as "the writer did not close this file")."""

@@ -28,10 +28,10 @@ from typing import Any
 from imubench.calibration import Calibration, recording_header
 from imubench.calibration.live import LiveCalibration
 from imubench.commands import summary_stream, write_json
-from imubench.errors import SourceError
+from imubench.errors import RecordingError, SourceError
 from imubench.pipeline import Pipeline
 from imubench.progress import progress
-from imubench.recorder import Recorder
+from imubench.recorder import NOT_RECORDED, Recorder
 from imubench.sources.base import Source
 from imubench.sources.registry import open_source, with_default_param
 
@@ -69,6 +69,11 @@ def record(src: Source, out: Path, duration_s: float | None = None,
         raise AcquisitionInterrupted(stats) from None
     stats = _stats(src, pipeline, recorder, live)
     failure = pipeline.error or next(iter(pipeline.consumer_errors().values()), None)
+    if failure is None and recorder.not_recorded:  # a full disk: the recorder went on
+        # counting what it could not write (exit 0, "56 lost" with no reason, before)
+        failure = RecordingError(
+            f"{out}: {recorder.not_recorded} samples not recorded ({NOT_RECORDED}; "
+            f"the recorder's state at the end: {recorder.state})")
     if failure is not None:
         stats["error"] = str(failure)
         raise AcquisitionError(stats, failure) from failure
