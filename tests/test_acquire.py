@@ -344,6 +344,23 @@ def test_a_full_disk_ends_acquire_with_an_error_naming_what_was_not_recorded(
         assert f"{lost} samples not recorded" in cap.err
 
 
+@pytest.mark.parametrize("command", [["acquire", "sim://lsm6dsl?odr_hz=104&clock=virtual"],
+                                     ["sim"]])
+def test_a_stats_json_that_cannot_be_written_is_refused_before_the_acquisition(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: list[str]) -> None:
+    """``--stats-json`` into a missing folder was found after the whole acquisition (an
+    hour on a real-time source), as "--json ...: cannot write", and the counters lost."""
+    from imubench.cli import main
+
+    out = tmp_path / "x.imbr"
+    assert main([*command, "--duration-s", "5", "--out", str(out), "--stats-json",
+                 str(tmp_path / "nodir" / "s.json")]) == 2
+    err = capsys.readouterr().err
+    assert f"--stats-json {tmp_path / 'nodir' / 's.json'}: the folder" in err
+    assert "does not exist" in err
+    assert not out.exists()  # refused before the recording was opened
+
+
 def test_a_device_that_never_answers_leaves_a_closed_recording(tmp_path: Path) -> None:
     """A device that does not answer at the start: the recording opened for it was left
     without its end record (read as "the writer did not close this file")."""

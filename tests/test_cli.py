@@ -151,6 +151,26 @@ def test_interrupted_sim_keeps_what_it_made(tmp_path: Path, sig: int, status: in
     assert counted["produced"] == counted["recorded"] + counted["recording_lost"]
 
 
+def test_an_interrupted_convert_says_its_partial_output_is_removed(tmp_path: Path) -> None:
+    """A conversion is all or nothing: Ctrl-C removes the partial CSV, and the message
+    said "output written so far is kept" over a file that was not there."""
+    rec = tmp_path / "r.imbr"
+    assert cli.main(["sim", "--odr-hz", "1660", "--duration-s", "600", "--out", str(rec)]) == 0
+    out = tmp_path / "r.csv"
+    proc = subprocess.Popen(imubench("convert", str(rec), str(out)),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    end = time.monotonic() + 120
+    while (not out.exists() or out.stat().st_size < 1_000_000) and time.monotonic() < end:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err.splitlines() == ["imubench convert: interrupted (Ctrl-C); the partial output "
+                                "is removed"]
+    assert not out.exists()
+
+
 def test_stats_json_dash_goes_to_stdout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                         capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.chdir(tmp_path)

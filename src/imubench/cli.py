@@ -174,8 +174,11 @@ def _run_command(func: Callable[[argparse.Namespace], Any], args: argparse.Names
         print(f"imubench {command}: {line}", file=sys.stderr, flush=True)
 
     def signalled() -> int:
-        return _signalled(f"imubench {command}", "; output written so far is kept",
-                          daemon=command == "run")
+        # a conversion is all or nothing: its partial output is removed (an outside
+        # reviewer read "output written so far is kept" over a CSV that was not there)
+        note = ("; the partial output is removed" if command == "convert"
+                else "; output written so far is kept")
+        return _signalled(f"imubench {command}", note, daemon=command == "run")
 
     try:
         with _signals():

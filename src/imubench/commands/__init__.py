@@ -31,9 +31,10 @@ def check_writable(dest: str | Path | None, option: str) -> None:
         raise ImubenchError(f"{option} {dest}: the folder {folder} does not exist")
 
 
-def write_json(doc: Any, dest: str) -> None:
+def write_json(doc: Any, dest: str, option: str = "--json") -> None:
     """Write ``doc`` as indented JSON to the file ``dest``, or to stdout when ``dest`` is
-    ``-`` (the ``--json PATH|-`` option of every subcommand)."""
+    ``-`` (the ``--json PATH|-`` option of every subcommand; ``option`` names it in an
+    error)."""
     text = json.dumps(doc, indent=1)
     if dest == "-":
         print(text)
@@ -41,7 +42,7 @@ def write_json(doc: Any, dest: str) -> None:
     try:
         Path(dest).write_text(text + "\n", encoding="utf-8")
     except OSError as exc:
-        raise ImubenchError(f"--json {dest}: cannot write ({exc.strerror})") from exc
+        raise ImubenchError(f"{option} {dest}: cannot write ({exc.strerror})") from exc
 
 
 def summary_stream(*json_dests: str | Path | None) -> TextIO:

@@ -27,7 +27,7 @@ from typing import Any
 
 from imubench.calibration import Calibration, recording_header
 from imubench.calibration.live import LiveCalibration
-from imubench.commands import summary_stream, write_json
+from imubench.commands import check_writable, summary_stream, write_json
 from imubench.errors import RecordingError, SourceError
 from imubench.pipeline import Pipeline
 from imubench.progress import progress
@@ -131,10 +131,10 @@ def record_uri(uri: str, out: Path, stats_json: Path | None,
     except (AcquisitionInterrupted, AcquisitionError) as stop:  # the counters of what
         # was kept, then the exit
         if stats_json is not None:
-            write_json(stop.stats, str(stats_json))
+            write_json(stop.stats, str(stats_json), "--stats-json")
         raise
     if stats_json is not None:
-        write_json(stats, str(stats_json))
+        write_json(stats, str(stats_json), "--stats-json")
     return stats
 
 
@@ -162,6 +162,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
+    check_writable(args.stats_json, "--stats-json")  # before the acquisition, not after
     uri = add_duration(args.source, args.duration_s)
     try:
         stats = record_uri(uri, args.out, args.stats_json, args.duration_s, args.calibration)

@@ -14,7 +14,7 @@ from urllib.parse import quote
 
 from lsm6ds.registers import CHIPS
 
-from imubench.commands import summary_stream
+from imubench.commands import check_writable, summary_stream
 from imubench.commands.acquire import AcquisitionError, record_uri
 from imubench.errors import SourceError
 
@@ -71,6 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.duration_s <= 0:
         raise SourceError(f"--duration-s {args.duration_s} must be > 0")
+    check_writable(args.stats_json, "--stats-json")  # before the acquisition, not after
     try:
         stats = record_uri(build_uri(args), args.out, args.stats_json, args.duration_s)
     except AcquisitionError as failed:  # what the closed recording holds, then the error
