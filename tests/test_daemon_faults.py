@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mqtt_fixtures import free_port
+from small_disk import small_tmpfs
 
 from imubench.commands import acquire as acquire_cmd
 from imubench.recording import load_recording, segment_path
@@ -264,22 +265,11 @@ def test_sigkill_leaves_a_readable_recording_losing_at_most_a_flush(
     assert missing_s < 0.5 + 1.0  # the flush interval, plus start-up and scheduling slack
 
 
-def _mount_tmpfs(path: Path, size: str) -> bool:
-    path.mkdir(parents=True, exist_ok=True)
-    if os.geteuid() != 0 or shutil.which("mount") is None:
-        return False
-    return subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
-                          capture_output=True).returncode == 0
-
-
 def test_disk_full_keeps_acquiring_and_resumes_in_a_new_segment(tmp_path: Path) -> None:
     """Disk full: writing stops cleanly, the daemon keeps acquiring and publishing, the
     status says so, and a new segment starts when space returns; every sample is in a
     segment or in a gap record that says why it is not."""
-    disk = tmp_path / "disk"
-    if not _mount_tmpfs(disk, "512k"):
-        pytest.skip("cannot mount a small tmpfs here (needs root and mount)")
-    try:
+    with small_tmpfs(tmp_path, "512k") as disk:
         filler = disk / "filler"
         filler.write_bytes(b"\0" * (512 * 1024 - 96 * 1024))
         # the disk fills ~2 s into the run and the recorder retries every 5 s (its
@@ -307,8 +297,6 @@ def test_disk_full_keeps_acquiring_and_resumes_in_a_new_segment(tmp_path: Path) 
         produced = int(re.search(r"stopped after (\d+) samples produced", out)[1])  # type: ignore[index]
         assert produced == 1660 * 10
         assert total + lost == produced, (produced, total, lost)
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
 
 
 def test_daemon_tells_systemd_ready_watchdog_and_stopping(tmp_path: Path) -> None:
