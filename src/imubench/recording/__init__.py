@@ -422,6 +422,8 @@ def _load(path: Path, kind: str, opts: InputOptions) -> tuple[Recording, str, bo
         b = read.batch
         for note in read.notes:
             log.log(logging.WARNING if read.inferred else logging.INFO, "%s", note)
+        for warning in read.warnings:
+            log.warning("%s", warning)
         damage = None
         where = str(path)
         if read.bad_lines:

@@ -35,7 +35,9 @@ length or sample count is impossible) is skipped, and reading resumes at the nex
 offset where a whole record with a valid CRC starts (a false match has probability 2^-32
 per candidate), so a flipped bit loses that one record; a truncated tail ends the
 reading. Each is reported
-(:attr:`NativeReader.damage`, :attr:`NativeReader.damaged`).
+(:attr:`NativeReader.damage`, :attr:`NativeReader.damaged`), and the samples a skipped
+stretch held become gaps with the reason :data:`DAMAGED_RECORD` at their true place
+(:meth:`NativeReader.batches`): kept + lost = what the writer produced.
 """
 
 from __future__ import annotations
@@ -66,6 +68,9 @@ MAX_RECORD_BYTES = 1 << 26
 """Largest record a reader accepts (64 MiB; writers emit at most a few MiB): a corrupted
 length field beyond it is damage, not a reason to read gigabytes."""
 _KINDS = (b"D", b"G", b"E")
+DAMAGED_RECORD = "damaged record"
+"""Gap reason of the samples a reader skipped with a damaged record (a data record that
+failed its CRC, or a gap record whose own reason was lost with it)."""
 STORAGE_RAW = "raw_int16"
 STORAGE_FLOAT = "float64"
 
@@ -218,6 +223,45 @@ class NativeWriter:
         self.close()
 
 
+def _covered(gaps: list[Gap]) -> list[tuple[int, int]]:
+    """The ``[start, end)`` sample indices the gaps declare lost, sorted by start; gaps
+    sharing ``at`` are adjacent holes (:func:`~imubench.batch.gaps_before`)."""
+    total: dict[int, int] = {}
+    for g in gaps:
+        total[g.at] = total.get(g.at, 0) + g.lost
+    return sorted((at - lost, at) for at, lost in total.items())
+
+
+def _uncovered(lo: int, hi: int, covered: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The parts of ``[lo, hi)`` outside the ``covered`` intervals (sorted by start)."""
+    out: list[tuple[int, int]] = []
+    pos = lo
+    for a, b in covered:
+        if b <= pos:
+            continue
+        if a >= hi:
+            break
+        if a > pos:
+            out.append((pos, a))
+        pos = b
+    if pos < hi:
+        out.append((pos, hi))
+    return out
+
+
+def _less(held: list[int | None], exact: list[Gap]) -> int | None:
+    """Samples of the skipped records (``held``, None: not known) that ``exact`` gaps do
+    not place already; None when not known."""
+    if any(h is None for h in held):
+        return None
+    return max(sum(h for h in held if h is not None) - sum(g.lost for g in exact), 0)
+
+
+def _damaged_gaps(lo: int, hi: int, covered: list[tuple[int, int]]) -> list[Gap]:
+    """A :data:`DAMAGED_RECORD` gap for each part of ``[lo, hi)`` that no gap covers."""
+    return [Gap(b, b - a, DAMAGED_RECORD) for a, b in _uncovered(lo, hi, covered)]
+
+
 def _find_all(data: bytes, needle: bytes) -> Iterator[int]:
     i = data.find(needle)
     while i >= 0:
@@ -235,6 +279,14 @@ class NativeReader:
         self._last_index: int | None = None  # of the last data record taken
         self.end: dict[str, Any] | None = None
         self.gaps: list[Gap] = []
+        self._first_index: int | None = None  # of the first data record taken
+        self._taken = 0  # data records taken (with samples)
+        self._kept = 0  # samples taken
+        self._holes: list[tuple[int, int]] = []  # [start, end) sample indices not taken
+        self._stretches: list[tuple[int, int | None]] = []
+        """Each damaged stretch skipped: (data records taken before it, samples its
+        records held by their own lengths, None when that is not known)."""
+        self._uncounted: list[str] = []  # losses that could not be counted, said
         try:
             self._fh: BinaryIO = open(self.path, "rb")  # noqa: SIM115
         except OSError as exc:
@@ -279,11 +331,18 @@ class NativeReader:
         if not self.damaged:
             return None
         more = f" (and {len(self.damaged) - 1} more)" if len(self.damaged) > 1 else ""
-        return self.damaged[0] + more
+        return "; ".join([self.damaged[0] + more, *self._uncounted])
 
     def batches(self) -> Iterator[Batch]:
         """Yield the data records as Batches (gap records are collected in ``gaps``),
-        skipping damaged records (:attr:`damaged`)."""
+        skipping damaged records (:attr:`damaged`). Once the last is read, the samples
+        the skipped records held are in ``gaps`` too (:meth:`_account_damage`), so that
+        the samples read plus the gaps' ``lost`` are every sample the writer produced."""
+        yield from self._records()
+        self._account_damage()
+
+    def _records(self) -> Iterator[Batch]:
+        """The data records that are whole and in order, in file order."""
         fh = self._fh
         while True:
             offset = fh.tell()
@@ -295,6 +354,8 @@ class NativeReader:
                 return
             kind, length, crc = _REC.unpack(head)
             problem = None
+            resumed: int | None = -1  # the next whole record once searched (-1: not yet)
+            held_from = offset  # where the samples of the skipped stretch are counted from
             if kind not in _KINDS:
                 problem = f"unknown record kind {kind!r} at byte {offset}"
             elif length > MAX_RECORD_BYTES:
@@ -302,9 +363,14 @@ class NativeReader:
             else:
                 payload = fh.read(length)
                 if len(payload) < length:
-                    self.damaged.append(f"truncated record at byte {offset}")
-                    return
-                if zlib.crc32(payload) != crc:
+                    resumed = self._resync(offset + 1)
+                    if resumed is None:  # a crashed writer's tail: nothing whole after it
+                        self.damaged.append(f"truncated record at byte {offset}")
+                        return
+                    # whole records follow (the whole file was lost to such a length)
+                    problem = (f"record at byte {offset} claims {length} bytes, past the "
+                               "end of the file (damaged length)")
+                elif zlib.crc32(payload) != crc:
                     problem = f"CRC mismatch in record at byte {offset}"
                 else:
                     problem = self._take(kind, payload, offset)
@@ -312,16 +378,145 @@ class NativeReader:
                         batch = self._decode(payload)
                         problem = self._out_of_order(batch, offset)
                         if problem is None:
-                            if len(batch):
-                                self._last_index = int(batch.index[-1])
+                            self._took(batch)
                             yield batch
+                        elif "repeated or out of order" in problem:
+                            # whole samples, read already or placed by the indices
+                            held_from = offset + _REC.size + length
             if problem is not None:
-                nxt = self._resync(offset + 1)
+                nxt = self._resync(offset + 1) if resumed == -1 else resumed
+                stop = os.fstat(fh.fileno()).st_size if nxt is None else nxt
+                self._stretches.append((self._taken, self._held(held_from, stop)))
                 if nxt is None:
                     self.damaged.append(f"{problem}; no whole record after it")
                     return
                 self.damaged.append(f"{problem}; resumed at byte {nxt}")
                 fh.seek(nxt)
+
+    def _took(self, batch: Batch) -> None:
+        """Note a data record taken: its samples and the holes before and inside it."""
+        if not len(batch):
+            return
+        idx = batch.index
+        first = int(idx[0])
+        if self._last_index is not None and first > self._last_index + 1:
+            self._holes.append((self._last_index + 1, first))
+        for k in np.flatnonzero(np.diff(idx) > 1):
+            self._holes.append((int(idx[k]) + 1, int(idx[k + 1])))
+        if self._first_index is None:
+            self._first_index = first
+        self._last_index = int(idx[-1])
+        self._taken += 1
+        self._kept += len(batch)
+
+    def _held(self, start: int, stop: int) -> int | None:
+        """Samples held by the records in bytes ``[start, stop)`` (a skipped stretch),
+        read from their own length fields, or None when that cannot be known: the
+        lengths must chain from ``start`` exactly to ``stop`` (the next whole record, or
+        the end of the file), so they were not what was damaged, and each record must be
+        a data record of whole samples (an unknown kind only when its sample count field
+        agrees) or an end record (none); a damaged gap record's count is lost with it."""
+        fh = self._fh
+        fh.seek(start)
+        data = fh.read(stop - start)
+        per = 8 + 8 + 4 + 6 * (2 if self.storage == STORAGE_RAW else 8)
+        pos, held = 0, 0
+        while pos < len(data):
+            if pos + _REC.size > len(data):
+                return None
+            kind, length, _ = _REC.unpack_from(data, pos)
+            end = pos + _REC.size + length
+            if end > len(data):
+                return None
+            n, part = divmod(length - 4, per)
+            counted = struct.unpack_from("<I", data, pos + _REC.size)[0] if length >= 4 else -1
+            samples = n > 0 and not part and (kind == b"D" or (kind not in _KINDS
+                                                               and counted == n))
+            if kind != b"E" and not samples:
+                return None
+            held += n if samples else 0
+            pos = end
+        return held
+
+    def _account_damage(self) -> None:
+        """Add the samples of the skipped stretches to ``gaps`` as :data:`DAMAGED_RECORD`
+        gaps at their true place; what cannot be counted is said in :attr:`damage`.
+
+        Between two records taken, a stretch's samples are the part of the hole in the
+        sample indices that no gap record covers (gap records sharing ``at`` are adjacent
+        holes, :func:`~imubench.batch.gaps_before`): exact, whatever the damage hit. Before
+        the first record taken and after the last one the indices bound only the part
+        between them and the gap records there; the rest is counted from the end record
+        (the writer's ``samples + lost_samples`` less what was read and declared), else
+        from the skipped records' own lengths (:meth:`_held`). Left out, a damaged first
+        record's samples were counted nowhere, and a damaged record between two others
+        was a hole that a conversion wrote as ``unexplained``."""
+        if not self._stretches:
+            return
+        covered = _covered(self.gaps)
+        new: list[Gap] = []
+        for lo, hi in self._holes:
+            new += _damaged_gaps(lo, hi, covered)
+        lead = [held for taken, held in self._stretches if taken == 0]
+        tail = [held for taken, held in self._stretches if taken == self._taken]
+        first, last = self._first_index, self._last_index
+        # each end with damage: (what to call it, its count by the records' lengths, the
+        # index its uncounted samples end at (before) or start at (after), before?)
+        ends: list[tuple[str, int | None, int, bool]] = []
+        if first is not None and lead:
+            ahead = [(a, b) for a, b in covered if b <= first]
+            start = min([a for a, _ in ahead], default=first)
+            exact = _damaged_gaps(start, first, ahead)
+            new += exact
+            ends.append((f"before sample {first}", _less(lead, exact), start, True))
+        if tail:  # (every stretch, when no record was taken)
+            behind = [(a, b) for a, b in covered if last is None or a > last]
+            base = 0 if last is None else last + 1
+            stop = max([b for _, b in behind], default=base)
+            exact = _damaged_gaps(base, stop, behind)
+            new += exact
+            what = "in the file" if last is None else f"after sample {last}"
+            ends.append((what, _less(tail, exact), stop, False))
+        counts = self._end_counts(ends, self._kept + sum(g.lost for g in [*self.gaps, *new]))
+        for (_, _, at, before), count in zip(ends, counts, strict=True):
+            if count > 0:
+                new.append(Gap(at, count, DAMAGED_RECORD) if before
+                           else Gap(at + count, count, DAMAGED_RECORD))
+        if new:
+            self.gaps = sorted([*self.gaps, *new], key=lambda g: g.at)
+
+    def _end_counts(self, ends: list[tuple[str, int | None, int, bool]],
+                    known: int) -> list[int]:
+        """The samples lost in damaged records at each of ``ends`` (before the first
+        record taken, after the last) that the indices do not bound; ``known``: samples
+        read plus lost in gaps so far. Said in :attr:`damage` when not known."""
+        end = self.end if isinstance(self.end, dict) else {}
+        samples, lost = end.get("samples"), end.get("lost_samples")
+        if not (isinstance(samples, int) and isinstance(lost, int)):  # by the lengths
+            for what, held, _, _ in ends:
+                if held is None:
+                    self._uncounted.append(
+                        f"the samples of the damaged record(s) {what} are not counted (no "
+                        "end record, and their lengths are damaged)")
+            return [held or 0 for _, held, _, _ in ends]
+        total = max(samples + lost - known, 0)
+        if not ends:
+            if total:
+                self._uncounted.append(f"the end record counts {total} samples more than "
+                                       "were read or declared; they are in no gap")
+            return []
+        if len(ends) == 1:
+            return [total]
+        (_, lead, start, _), (_, tail, _, _) = ends
+        if lead is None and tail is None:  # indices start at 0: at most ``start`` before
+            ahead = min(total, max(start, 0))
+            self._uncounted.append(f"{total} samples lost in damaged records at both ends, "
+                                   f"split {ahead} before and {total - ahead} after (a guess)")
+            return [ahead, total - ahead]
+        if lead is not None:
+            return [min(lead, total), total - min(lead, total)]
+        assert tail is not None
+        return [total - min(tail, total), min(tail, total)]
 
     def read_all(self) -> Batch:
         """Every data record (:meth:`batches`) as one Batch. The arrays are sized once

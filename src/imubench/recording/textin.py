@@ -7,8 +7,11 @@ exports, Stable32 / allantools one- and two-column files (``.gz`` for all).
   names (EuRoC writes ``#timestamp [ns],...``). ``# key: value`` lines before it are
   metadata (imubench writes ``# odr_hz: 104``; the rate and unit keys other tools write
   are read too, :mod:`imubench.recording.textmeta`), ``# gap at_index=N lost=M
-  reason=TEXT`` lines anywhere are declared gaps. Columns:
-  :mod:`imubench.recording.columns`.
+  reason=TEXT`` lines anywhere are declared gaps (one that cannot be read is refused;
+  one that the samples read contradict is cut to them, with a warning:
+  :func:`_checked_gaps`). Columns: :mod:`imubench.recording.columns`.
+* imubench's CSV with no data lines (its header and rate stated) is a recording of no
+  samples (:func:`_empty_own_csv`), as a native file of no samples is.
 * Encoding: UTF-8 (with or without a byte-order mark), UTF-16 with its mark, else
   Windows-1252, said in the notes.
 * Numbers: Fortran's ``1.5D-03`` exponents are read; a headerless file of one column with
@@ -82,7 +85,11 @@ from imubench.recording.timebase import (
     timebase_from_times,
 )
 
-GAP_LINE = re.compile(r"#\s*gap\s+at_index=(-?\d+)\s+lost=(\d+)(?:\s+reason=(.*))?")
+GAP_LINE = re.compile(r"#\s*gap\s+\w+\s*=")
+"""A ``# gap`` line: ``gap`` and a ``key=`` after it (a comment that starts with the word
+is not one); its fields are :data:`GAP_FIELDS`, or the file is refused."""
+GAP_FIELDS = re.compile(r"#\s*gap\s+at_index=(\S*)\s+lost=(\S*)(?:\s+reason=(.*))?$")
+GAP_FORM = "# gap at_index=N lost=M reason=TEXT"
 MOSTLY_BAD = 0.5
 """A file whose data lines are more than this share unreadable is not a table."""
 
@@ -108,6 +115,9 @@ class TextRead:
     """The rate is the one the file states (``# odr_hz``), not read off its time column:
     the time stamps may then show the chip's clock off it
     (:func:`imubench.recording.measured_rate`)."""
+    warnings: list[str] = field(default_factory=list)
+    """What the caller must warn of whatever the notes' level: ``# gap`` lines that the
+    samples read contradict (:func:`_checked_gaps`)."""
 
 
 def file_encoding(path: Path) -> str:
@@ -399,6 +409,8 @@ ROW_BLOCK = 65_536
 class _Raw:
     meta: dict[str, Any] = field(default_factory=dict)
     gaps: list[Gap] = field(default_factory=list)
+    gap_lines: list[int] = field(default_factory=list)
+    """The line of each of ``gaps``."""
     header: list[str] | None = None
     header_line: int = 0
     delim: str | None = None
@@ -483,13 +495,102 @@ def _scan(path: Path, decimal_comma: bool = False, mark: str | None = None) -> _
     return raw
 
 
+def _gap(line: str, where: str) -> Gap:
+    """The gap a ``# gap`` line declares; RecordingError naming ``where`` (file:line) and
+    the field when it is malformed: a gap line with a negative, zero or unreadable count
+    was skipped as a comment, its hole then declared by nobody, without a word."""
+    fields = GAP_FIELDS.match(line)
+    if fields is None:
+        raise RecordingError(f"{where}: a gap line must read '{GAP_FORM}', not {line!r}")
+    try:
+        at = int(fields[1])
+    except ValueError:
+        raise RecordingError(f"{where}: gap line field at_index is {fields[1]!r}, not a "
+                             "sample index (a whole number)") from None
+    try:
+        lost = int(fields[2])
+    except ValueError:
+        lost = 0
+    if lost <= 0:
+        raise RecordingError(f"{where}: gap line field lost is {fields[2]!r}, not a number "
+                             "of samples (a whole number, 1 or more)")
+    return Gap(at, lost, (fields[3] or "").strip())
+
+
+def _empty_own_csv(raw: _Raw, options: InputOptions, where: str) -> TextRead | None:
+    """A recording of no samples (its gaps, if any) when the file is imubench's own CSV,
+    its header (``index`` among imubench's columns) and rate stated, without data lines;
+    else None. imubench writes such a file for a recording of no samples (``convert`` of a
+    native file cut after its header; a live recording stopped before its first sample),
+    and a native or HDF5 file of no samples reads as one: the CSV was refused ("no
+    readable data lines"), so a 0-sample recording did not round-trip."""
+    if raw.n_rows or raw.bad_lines or raw.header is None:
+        return None
+    names = [c.name for c in map_columns(raw.header)]
+    if "index" not in names or not all(n in OWN_NAMES for n in names):
+        return None
+    meta = dict(raw.meta)
+    stated = stated_rate(meta, where)
+    rate = options.rate_hz if options.rate_hz is not None else (
+        stated[0] if stated is not None else None)
+    if rate is None:
+        return None
+    meta["odr_hz"] = float(rate)
+    meta.setdefault("channels", [c for c in CHANNELS if c in names])
+    meta.setdefault("source_format", "imubench CSV")
+    gaps, warnings = _checked_gaps(raw.gaps, raw.gap_lines, np.zeros(0, np.int64), where)
+    note = (f"{where}: read as imubench CSV: no data lines, a recording of no samples"
+            + (f" ({sum(g.lost for g in gaps)} lost in its gap lines)" if gaps else ""))
+    return TextRead(meta, Batch.empty(), gaps, [], [note], True,
+                    rate_stated=options.rate_hz is None, warnings=warnings)
+
+
+def _checked_gaps(gaps: list[Gap], lines: list[int], index: np.ndarray,
+                  where: str) -> tuple[list[Gap], list[str]]:
+    """``gaps`` as the samples read allow them, and a warning for each ``# gap`` line they
+    contradict: the index column is the truth of which samples exist, so a gap that
+    declares lost a sample the file holds is cut to the run of missing samples just
+    before its ``at_index`` (gone when there is none). Gaps sharing ``at_index`` are
+    adjacent holes, the one listed first the earlier (:func:`~imubench.batch.gaps_before`):
+    the earliest is cut first. Such a line was kept as it was: the recording's gaps then
+    counted samples that its rows hold (``lost=5`` where the index column had no hole
+    was read as '0 gaps' by ``convert`` and as 5 lost samples by the gaps, without a
+    word)."""
+    by_at: dict[int, list[int]] = {}
+    for k, g in enumerate(gaps):
+        by_at.setdefault(g.at, []).append(k)
+    keep: dict[int, Gap] = {}
+    warnings: list[str] = []
+    for at, ks in by_at.items():
+        total = sum(gaps[k].lost for k in ks)
+        below = int(np.searchsorted(index, at))  # rows with an index below at
+        room = total if below == 0 else min(total, at - int(index[below - 1]) - 1)
+        need = max(room, 0)
+        for k in reversed(ks):  # the gap nearest at keeps its samples first
+            take = min(gaps[k].lost, need)
+            need -= take
+            if take:
+                keep[k] = Gap(at, take, gaps[k].reason)
+        if room < total:
+            first, last = at - total, at - 1
+            held = total - max(room, 0)
+            also = ", ".join(str(lines[k]) for k in ks[1:])
+            warnings.append(
+                f"{where}:{lines[ks[0]]}: gap line at_index={at} "
+                + (f"(with line(s) {also}, the same at_index) " if also else "")
+                + f"declares samples {first}-{last} lost, but the file holds {held} of them: "
+                "the index column is the truth, "
+                + (f"read as {room} lost" if room > 0 else "the gap is not taken"))
+    return [keep[k] for k in sorted(keep)], warnings
+
+
 def _take_line(raw: _Raw, line: str, lineno: int, path: Path) -> None:
     if not line:
         return
     if line.startswith("#") or (line.startswith("%") and raw.header is None and not raw.n_rows):
-        gap = GAP_LINE.match(line)
-        if gap:
-            raw.gaps.append(Gap(int(gap[1]), int(gap[2]), (gap[3] or "").strip()))
+        if GAP_LINE.match(line):
+            raw.gaps.append(_gap(line, f"{path}:{lineno}"))
+            raw.gap_lines.append(lineno)
             return
         if raw.header is None and not raw.n_rows:
             delim = _delimiter(line)
@@ -674,6 +775,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
         raw = _scan(path, mark=mark)
     n_data = raw.n_rows + len([b for b in raw.bad_lines if b > 0])
     whole_bad = sum(1 for js in raw.row_fail.values() if len(js) == raw.width)
+    no_rows = _empty_own_csv(raw, options, where)
+    if no_rows is not None:
+        return no_rows
     if not raw.n_rows:
         what = "no readable data lines" if raw.header is not None or raw.bad_lines else (
             "no data")
@@ -939,9 +1043,10 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     # quietly; one whose file states a rate is an IMU's, and its assumed unit is said (a
     # rad/s series with '# rate_hz: 100' read as dps gave `fit` a white level 57x low,
     # ARW and all, with nothing on the screen)
-    return TextRead(meta, batch, raw.gaps, bad, notes, inferred,
+    gaps, warnings = _checked_gaps(raw.gaps, raw.gap_lines, batch.index, where)
+    return TextRead(meta, batch, gaps, bad, notes, inferred,
                     rate_stated=options.rate_hz is None and stated is not None
-                    and "t" in where_col)
+                    and "t" in where_col, warnings=warnings)
 
 
 UNREAD_SHOWN = 8
