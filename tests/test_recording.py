@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from small_disk import small_tmpfs
 
 from imubench.batch import Batch, Gap
 from imubench.cli import main
@@ -32,25 +30,6 @@ def make_batches(n: int = 1000, hole_at: int = 400, lost: int = 7, seed: int = 0
         gaps = (Gap(hole_at + lost, lost, "fifo overrun"),) if here else ()
         out.append(Batch(idx[sl], idx[sl] / 104.0, raw[sl] * SENS, temp[sl], raw[sl], gaps))
     return out
-
-
-@contextlib.contextmanager
-def small_tmpfs(tmp_path: Path, size: str = "64k") -> Iterator[Path]:
-    """A tmpfs of ``size`` mounted in ``tmp_path`` (a disk that fills); the test is
-    skipped where mounting is not allowed (needs root and mount)."""
-    import shutil
-    import subprocess
-
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    if os.geteuid() != 0 or shutil.which("mount") is None or subprocess.run(
-            ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(disk)],
-            capture_output=True).returncode:
-        pytest.skip("cannot mount a small tmpfs here (needs root and mount)")
-    try:
-        yield disk
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
 
 
 def meta(**kw: object) -> dict[str, object]:
