@@ -321,3 +321,17 @@ def test_other_header_only_files_are_still_refused(tmp_path: Path, text: str) ->
     path.write_text(text)
     with pytest.raises(RecordingError, match="no readable data lines"):
         load_recording(path)
+
+
+def test_an_index_that_is_not_a_whole_number_is_refused_naming_the_line(
+        tmp_path: Path) -> None:
+    """An index column value 49.5 was rounded in silence (an outside reviewer)."""
+    good = good_csv(tmp_path)
+    lines = good.read_text().splitlines()
+    k = next(n for n, text in enumerate(lines)
+             if not text.startswith("#") and text.endswith(",49"))
+    lines[k] = lines[k][:-len("49")] + "49.5"
+    path = tmp_path / "half.csv"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=rf"^{path}:{k + 1}: index 49.5 is not a whole"):
+        load_recording(path)

@@ -953,6 +953,13 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     if index_col is not None:
         if not np.all(np.isfinite(index_col)):
             raise RecordingError(f"{where}: the index column has empty values")
+        fraction = np.flatnonzero(index_col != np.round(index_col))
+        if fraction.size:  # a sample counter is whole: 49.5 was rounded in silence
+            k = int(fraction[0])
+            raise RecordingError(
+                f"{where}:{raw.row_lines[k]}: index {float(index_col[k]):g} is not a whole "
+                f"sample number ({fraction.size} row(s) like it); the index column counts "
+                "samples")
         stride = _index_stride(index_col)
         if stride > 1:  # every stride-th value of a counter: a decimated log
             notes.append(f"{where}: the index column steps by multiples of {stride} (a "
