@@ -144,7 +144,8 @@ def test_readouts_in_datasheet_units_with_intervals(sim: dict[str, np.ndarray]) 
         header = " ".join(v for (row, _), v in cells.items() if row == 0)
         for u in units:
             assert f"({u})" in header
-        assert "N at τ = 1 s" in header and "K at τ = 3 s" in header and "0.664" in header
+        assert "N: −½ line at τ = 1 s" in header and "K: +½ line at τ = 3 s" in header
+        assert "0.664" in header
         row_gx = [v for (row, col), v in sorted(cells.items()) if row == 1 and col >= 0]
         # B: a value with its interval, or an upper bound while the floor is not established
         assert re.fullmatch(r"< [\d.]+|[\d.]+ \[[\d.]+, [\d.]+\]", row_gx[1])
