@@ -33,8 +33,9 @@ _TIME_NAMES = ("t", "time", "timestamp", "stamp", "time_s", "t_s", "header_stamp
                "zeit")
 _TIME_SUFFIXES = {"_ms": "ms", "_us": "us", "_ns": "ns", "_s": "s", "_sec": "s",
                   "_min": "min", "_h": "h"}
-_VALUE_SUFFIXES = {"_dps": "dps", "_degs": "dps", "_deg_s": "dps", "_mdps": "mdps",
-                   "_rads": "rad/s", "_radps": "rad/s", "_rad_s": "rad/s",
+_VALUE_SUFFIXES = {"_dps": "dps", "_degs": "dps", "_deg_s": "dps", "_degps": "dps",
+                   "_mdps": "mdps", "_rads": "rad/s", "_radps": "rad/s", "_rad_s": "rad/s",
+                   "_mrads": "mrad/s", "_mradps": "mrad/s", "_mrad_s": "mrad/s",
                    "_g": "g", "_mg": "mg", "_mps2": "m/s2", "_ms2": "m/s2", "_m_s2": "m/s2"}
 """Unit suffixes of a gyro or accelerometer column's name (``gyro_x_dps``, ``ax_g``,
 ``acc_x_mps2``): the unit, and the name without it."""
