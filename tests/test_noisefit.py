@@ -755,14 +755,41 @@ def test_a_degenerate_profile_does_not_identify_a_setting() -> None:
     from imubench.noisefit.fit import _extension_verdict
 
     st = cast(Any, SimpleNamespace(tau_c_s=1.991))
-    pts = cast(Any, SimpleNamespace(tau_s=np.geomspace(1.0, 6.5e4, 17)))
+    pts = cast(Any, SimpleNamespace(tau_s=np.geomspace(1.0, 6.5e4, 17), rate_hz=1.0))
     ok, why, _ = _extension_verdict("markov", st, cast(Any, None),
                                     {"markov_tau": (1.9905, 1.9915)}, pts,
                                     np.zeros(0), 50.0, 0.0)
     assert not ok and "a profile this narrow is the optimiser's" in why
-    ok, why, _ = _extension_verdict("markov", st, cast(Any, None),
-                                    {"markov_tau": (1.5, 2.8)}, pts, np.zeros(0), 50.0, 0.0)
+    # (at 1 Hz a tau_c of 3 s: 1.991 s is within two samples, a low-pass's, not a bias's)
+    ok, why, _ = _extension_verdict("markov", cast(Any, SimpleNamespace(tau_c_s=3.0)),
+                                    cast(Any, None), {"markov_tau": (2.4, 3.9)}, pts,
+                                    np.zeros(0), 50.0, 0.0)
     assert ok and why.startswith("kept")
+
+
+def test_a_markov_term_within_two_samples_is_not_a_bias_process(reference_dir) -> None:
+    """ADIS16405 gz, first hour of replicate 1 (100 Hz): a Gauss-Markov term of tau_c
+    0.0118 s (1.2 samples) was kept beside quantization and an output white term (their
+    amplitudes correlated at -0.99 and -1.00) and no white term, where the second hour,
+    whose short-tau Allan curve agrees within 4 %, fits white + flicker (an outside
+    reviewer). Such a tau_c is white noise through a low-pass, not a correlated bias."""
+    from types import SimpleNamespace
+    from typing import Any, cast
+
+    from imubench.noisefit.fit import _extension_verdict
+
+    st = cast(Any, SimpleNamespace(tau_c_s=0.0118))
+    pts = cast(Any, SimpleNamespace(tau_s=np.geomspace(0.01, 655.0, 17), rate_hz=100.0))
+    ok, why, _ = _extension_verdict("markov", st, cast(Any, None),
+                                    {"markov_tau": (0.011, 0.013)}, pts, np.zeros(0), 50.0, 0.0)
+    assert not ok and "within 2 sample periods (0.02 s)" in why
+    path = reference_dir / "imu-real" / "adis16405" / "adis16405_rep1.npz"
+    if not path.is_file():
+        pytest.skip("ADIS16405 reference data not present")
+    z = np.load(path)
+    gz = z["gyro_counts"][:, 2].astype(float) * float(z["gyro_lsb_dps"])
+    f = fit_channel(gz[: len(gz) // 2], float(z["fs_hz"]), terms="auto", channel="gz")
+    assert "markov_sigma" not in f.present and "white" in f.present
 
 
 def test_an_undetected_random_walk_is_bounded_above_its_truth() -> None:

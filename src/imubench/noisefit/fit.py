@@ -817,6 +817,14 @@ def _endpoint_ci(x: np.ndarray, theta: np.ndarray, j: int, pts: Points,
     return math.sqrt(max(lo, 0.0)), math.sqrt(max(hi, 0.0))
 
 
+MARKOV_MIN_SAMPLES = 2.0
+"""A Gauss-Markov term's tau_c must be at least this many sample periods to count as a
+bias process: a shorter one is white noise through a first-order low-pass (the two are
+the same process), the output filter's shape at the shortest taus, not a correlated bias.
+An outside reviewer's ADIS16405 gz (first hour of replicate 1, 100 Hz) kept sigma 0.184
+dps at tau_c 0.0118 s (1.2 samples) beside quantization and an output white term (their
+amplitudes correlated at -0.99 and -1.00) and no white term; the second hour, whose
+short-tau Allan curve agrees within 4 %, fits white + flicker."""
 DEGENERATE_PROFILE = 0.01
 """A setting's profile interval narrower than this (relative) is degenerate: the whole
 74.5 h CATS record (non-stationary) gave tau_c 1.991 s [1.991, 1.991] and a bandwidth
@@ -999,6 +1007,10 @@ def _extension_verdict(kind: str, st: Structure, sol: _Solution,
         if hi / lo - 1.0 < DEGENERATE_PROFILE:
             return False, (f"dropped, tau_c not identified ({where}: a profile this narrow "
                            "is the optimiser's, not the data's)"), None
+        if value < MARKOV_MIN_SAMPLES / pts.rate_hz:
+            return False, (f"dropped, tau_c {value:.3g} s is within {MARKOV_MIN_SAMPLES:g} "
+                           f"sample periods ({MARKOV_MIN_SAMPLES / pts.rate_hz:.3g} s): white "
+                           "noise through a low-pass, not a correlated bias"), None
         if lo >= t0 and hi <= t1:
             return (True, f"kept, {head}, {where} within the data's taus "
                     f"[{t0:.3g}, {t1:.3g}] s", None)
