@@ -335,3 +335,23 @@ def test_an_index_that_is_not_a_whole_number_is_refused_naming_the_line(
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(RecordingError, match=rf"^{path}:{k + 1}: index 49.5 is not a whole"):
         load_recording(path)
+
+
+@pytest.mark.parametrize("where", ["json", "crc"])
+def test_a_file_cut_inside_its_header_is_called_truncated(tmp_path: Path, where: str) -> None:
+    """A native file cut inside its JSON header (or its CRC) read as "header damaged
+    (byte offset 8)", as a flipped bit does (an outside reviewer); the two are told
+    apart."""
+    path = tmp_path / "r.imbr"
+    write_resets(path)
+    data = path.read_bytes()
+    hlen = int.from_bytes(data[8:12], "little")  # after the 8-byte preamble
+    cut = 12 + hlen // 2 if where == "json" else 12 + hlen + 2
+    path.write_bytes(data[:cut])
+    with pytest.raises(RecordingError, match=rf"truncated header \({cut} of \d+ bytes"):
+        load_recording(path)
+    damaged = bytearray(data)
+    damaged[50] ^= 0xFF
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(RecordingError, match=r"header damaged \(byte offset 8\)"):
+        load_recording(path)

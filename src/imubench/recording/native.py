@@ -303,7 +303,12 @@ class NativeReader:
         (hlen,) = struct.unpack("<I", raw_len)
         header = self._fh.read(hlen)
         crc = self._fh.read(4)
-        if len(header) < hlen or len(crc) < 4 or struct.unpack("<I", crc)[0] != zlib.crc32(header):
+        if len(header) < hlen or len(crc) < 4:  # a file cut inside its header
+            raise RecordingError(
+                f"{self.path}: truncated header ({len(_PREAMBLE) + 4 + len(header) + len(crc)} "
+                f"of {len(_PREAMBLE) + 8 + hlen} bytes: the file was cut, e.g. by a crash "
+                "right after it was created)")
+        if struct.unpack("<I", crc)[0] != zlib.crc32(header):
             raise RecordingError(f"{self.path}: header damaged (byte offset {len(_PREAMBLE)})")
         self.metadata: dict[str, Any] = json.loads(header)
         storage = self.metadata.get("storage")
