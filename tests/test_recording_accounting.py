@@ -355,3 +355,34 @@ def test_a_file_cut_inside_its_header_is_called_truncated(tmp_path: Path, where:
     path.write_bytes(bytes(damaged))
     with pytest.raises(RecordingError, match=r"header damaged \(byte offset 8\)"):
         load_recording(path)
+
+
+def test_values_the_sensor_cannot_output_are_warned_of(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """gx = 1e300 in a file that states 250 dps was read without a word (an outside
+    reviewer); a saturated sample (32767 LSB, 286.7 dps) is one the sensor does output."""
+    src = tmp_path / "r.imbr"
+    with open_writer(src, meta(fs_dps=250.0, fs_g=2.0)) as w:
+        raw = np.zeros((50, 6), np.int16)
+        raw[10, 0] = 32767  # saturated: the sensor's own largest output
+        idx = np.arange(50)
+        w.write(Batch(idx, idx / 104.0, raw * np.array([8.75e-3] * 3 + [0.061e-3] * 3),
+                      np.full(50, 25.0), raw, ()))
+    good = tmp_path / "g.csv"
+    assert main(["convert", str(src), str(good), "--progress", "off"]) == 0
+    with caplog.at_level(logging.WARNING, logger="imubench.recording"):
+        load_recording(good)
+    assert "beyond what the sensor can output" not in caplog.text
+    lines = good.read_text().splitlines()
+    k = next(n for n, text in enumerate(lines) if not text.startswith("#")
+             and text.endswith(",20"))
+    fields = lines[k].split(",")
+    fields[1] = "1e300"
+    lines[k] = ",".join(fields)
+    bad = tmp_path / "b.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="imubench.recording"):
+        load_recording(bad)
+    assert (f"{bad}:{k + 1}: 1 row(s) hold values beyond what the sensor can output "
+            "(286.72 dps at the stated full scale 250 dps)") in caplog.text

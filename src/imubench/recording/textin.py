@@ -1051,9 +1051,34 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
     # rad/s series with '# rate_hz: 100' read as dps gave `fit` a white level 57x low,
     # ARW and all, with nothing on the screen)
     gaps, warnings = _checked_gaps(raw.gaps, raw.gap_lines, batch.index, where)
+    warnings += _beyond_full_scale(meta, batch.values, np.asarray(raw.row_lines)[keep], where)
     return TextRead(meta, batch, gaps, bad, notes, inferred,
                     rate_stated=options.rate_hz is None and stated is not None
                     and "t" in where_col, warnings=warnings)
+
+
+def _beyond_full_scale(meta: dict[str, Any], values: np.ndarray, lines: np.ndarray,
+                       where: str) -> list[str]:
+    """A warning per sensor whose values exceed what the file's sensor can output: its
+    16-bit range (32768 LSB x the stated sensitivity; 286.7 dps at the LSM6DS's 250 dps
+    full scale) or, without a sensitivity, 1.2 x the stated full scale (``fs_dps``,
+    ``fs_g``), with 5 % for a calibration's gain. gx = 1e300 in a file that says 250 dps
+    was read without a word."""
+    out = []
+    for key, sens_key, cols, unit in (("fs_dps", "gyro_sensitivity_dps", slice(0, 3), "dps"),
+                                      ("fs_g", "accel_sensitivity_g", slice(3, 6), "g")):
+        fs, sens = meta.get(key), meta.get(sens_key)
+        if not isinstance(fs, (int, float)) or not fs > 0 or not len(values):
+            continue
+        cap = 32768.0 * sens if isinstance(sens, (int, float)) and sens > 0 else 1.2 * fs
+        with np.errstate(invalid="ignore"):
+            beyond = np.any(np.abs(values[:, cols]) > 1.05 * cap, axis=1)
+        if np.any(beyond):
+            k = int(np.argmax(beyond))
+            out.append(f"{where}:{lines[k]}: {int(beyond.sum())} row(s) hold values beyond "
+                       f"what the sensor can output ({cap:g} {unit} at the stated full "
+                       f"scale {fs:g} {unit}): check the file's units and values")
+    return out
 
 
 UNREAD_SHOWN = 8
