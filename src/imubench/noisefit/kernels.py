@@ -280,6 +280,14 @@ def _filtered_avar(term: str, m: np.ndarray, rate_hz: float, rho: np.ndarray, *,
         return avar_from_gacv(apply_filter(g, rho, multiplicative=term == "markov"), m)
     g = gacv_unit(term, k1 + j + 2, 1.0 / rate_hz, tau_c_s=tau_c_s, f0_hz=f0_hz)
     head = apply_filter(g, rho, multiplicative=term == "markov")[: k1 + 1]
+    if term == "markov" and (g[1] / g[0]) ** (k1 - j) < MARKOV_TAIL_NEGLIGIBLE:
+        # G_f(k) = s phi^(k - J) for k >= J with s <= sum |rho| (:func:`_geometric_tail_sum`):
+        # beyond k1 it is below round-off of the head, which is the whole autocovariance.
+        # Written as r G + d, r = s / phi^J is huge and G_f the difference of two huge
+        # terms: tau_c 0.345 s beside an order-2 0.2 Hz filter at 10 Hz (J ~ 300 lags,
+        # phi^J ~ 1e-38) gave AVARs of -2, 8, 4, -8 and a chi2 that jumped by 9 between
+        # tau_c values one rounding apart (Samsung S5 gy, a crash of the profile search)
+        return _avar_short(head, m)
     if term == "markov":
         # G_f(k) = r G(k) for k >= J with r = sum_l rho(|l|) phi^(-l) (see apply_filter);
         # from rho and phi, not head[-1] / G(k1) (round-off over a tiny G(k1))
@@ -322,6 +330,9 @@ def _avar_short(d: np.ndarray, m: np.ndarray) -> np.ndarray:
     return (s1 - s2) / mf**2
 
 
+MARKOV_TAIL_NEGLIGIBLE: float = 1e-17
+"""phi^(K1 - J) below which a filtered Gauss-Markov autocovariance beyond the head
+(lags 0..K1) is below the head's round-off and is left out (:func:`_filtered_avar`)."""
 RESONANCE_TAIL: float = 1e-6
 """Least ``r^J`` (the resonance's decay over the output filter's length J) for which the
 filtered resonance's autocovariance beyond lag J is taken in closed form; below it the
