@@ -336,7 +336,9 @@ def test_a_full_disk_ends_acquire_with_an_error_naming_what_was_not_recorded(
                      "20", "--out", str(out), "--stats-json", str(js)]) == 2
         stats = json.loads(js.read_text())
         cap = capsys.readouterr()
-        assert stats["produced"] == 2080 and 0 < stats["recorded"] < 2080
+        # how much fits depends on the batching: a recorder that starts late takes the
+        # whole virtual-clock run (~80 kB) in one write, which the disk refuses whole
+        assert stats["produced"] == 2080 and 0 <= stats["recorded"] < 2080
         assert stats["recorded"] + stats["recording_lost"] == 2080
         lost = stats["recording_lost"]
         assert f"{lost} samples not recorded (disk full: not recorded" in stats["error"]
