@@ -1404,7 +1404,7 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
                                                    + Z_PRESENT * se_all[j]))
     n2 = white_equivalent(params) ** 2
     if n2 > 0:  # delta method on the squared amplitudes (tau_c held at its estimate)
-        g = white_equivalent_weights(st.terms, st.tau_c_s)
+        g = white_equivalent_weights(st.terms, st.tau_c_s, st.res_freq_hz, st.res_width_hz)
         ci[WHITE_EQUIVALENT] = white_equivalent_interval(n2, float(g @ sol.cov_theta @ g))
     if wanted is None:
         for term in BASE_TERMS:

@@ -20,7 +20,9 @@ N here is the **white-equivalent density** (:func:`white_equivalent`): every ter
 AVAR follows N^2/tau at the taus a datasheet reads it (1 s and beyond), i.e. the white
 noise before the output filter (``white``, unity DC gain), the white noise after it
 (``output_white``) and a Gauss-Markov term of correlation time <= :data:`SHORT_MARKOV_S`
-(AVAR -> 2 sigma^2 tau_c / tau for tau >> tau_c, IEEE 952 C.6). The split between these
+(AVAR -> 2 sigma^2 tau_c / tau for tau >> tau_c, IEEE 952 C.6) and a resonance's
+spectrum at 0 Hz (:func:`resonance_floor`; the ADIS16405 gz 20 Hz peak carries a third of
+the -1/2 line at 1-10 s). The split between these
 is often poorly determined (ADIS16405 gyros: ``white`` 0.029 and ``output_white`` 0.029
 dps/sqrt(Hz)); their sum is what the -1/2 slope of the measured curve shows.
 
@@ -80,24 +82,43 @@ from 10 to 200 s. A slower term is bias wander, not angle random walk. For tau_c
 its asymptote."""
 
 
+def resonance_floor(freq_hz: float, width_hz: float) -> float:
+    """Density N^2 (per unit of ``resonance_height``, unit^2/Hz) that a resonance adds
+    to the -1/2 line: its spectrum's value at 0 Hz halved, 1 / (1 + (2 f0 / w)^2) for the
+    pair of Lorentzian lines at +-f0 of half width w/2 that a damped cosine autocovariance
+    has (peak H at f0; the one-sided S(0) is 2 H / (1 + (2 f0 / w)^2), and N^2 = S(0) / 2
+    as for white noise). 0 when the resonance decays slower than :data:`SHORT_MARKOV_S`
+    (1 / (pi w) > SHORT_MARKOV_S) or has no width. The sampled process's floor is higher
+    where f0 is a sizeable fraction of the rate (aliasing): +14 % at 20 Hz of 100 Hz."""
+    if not (width_hz > 0.0 and 1.0 / (math.pi * width_hz) <= SHORT_MARKOV_S):
+        return 0.0
+    return 1.0 / (1.0 + (2.0 * freq_hz / width_hz) ** 2)
+
+
 def white_equivalent(params: Mapping[str, float]) -> float:
     """White-equivalent density N (unit/sqrt(Hz)) of a channel's model-file values:
-    sqrt(white^2 + output_white^2 + 2 markov_sigma^2 markov_tau) where the Markov term
-    counts only when markov_tau <= :data:`SHORT_MARKOV_S` (module docstring)."""
+    sqrt(white^2 + output_white^2 + 2 markov_sigma^2 markov_tau + resonance_height x
+    :func:`resonance_floor`) where the Markov term counts only when markov_tau <=
+    :data:`SHORT_MARKOV_S` (module docstring)."""
     n2 = float(params.get("white", 0.0)) ** 2 + float(params.get("output_white", 0.0)) ** 2
     tau_c = float(params.get("markov_tau", 0.0))
     if 0.0 < tau_c <= SHORT_MARKOV_S:
         n2 += 2.0 * float(params.get("markov_sigma", 0.0)) ** 2 * tau_c
+    n2 += float(params.get("resonance_height", 0.0)) * resonance_floor(
+        float(params.get("resonance_freq_hz", 0.0)), float(params.get("resonance_width_hz", 0.0)))
     return math.sqrt(n2)
 
 
-def white_equivalent_weights(terms: Sequence[str], tau_c_s: float) -> np.ndarray:
+def white_equivalent_weights(terms: Sequence[str], tau_c_s: float, res_freq_hz: float = 0.0,
+                             res_width_hz: float = 0.0) -> np.ndarray:
     """d(N^2)/d(theta_j) for squared amplitudes theta_j of ``terms`` (names ``white``,
-    ``output_white``, ``markov``; others 0): the gradient of the delta-method interval
-    of :func:`white_equivalent`."""
+    ``output_white``, ``markov``, ``resonance`` (its height); others 0): the gradient of
+    the delta-method interval of :func:`white_equivalent`."""
     short = 0.0 < tau_c_s <= SHORT_MARKOV_S
+    floor = resonance_floor(res_freq_hz, res_width_hz)
     return np.array([1.0 if t in ("white", "output_white") else
-                     2.0 * tau_c_s if (t == "markov" and short) else 0.0 for t in terms])
+                     2.0 * tau_c_s if (t == "markov" and short) else
+                     floor if t == "resonance" else 0.0 for t in terms])
 
 
 def white_equivalent_interval(n2: float, var_n2: float, z: float = 1.959964
@@ -386,6 +407,7 @@ __all__ = [
     "kalibr_yaml",
     "param_units",
     "quantities",
+    "resonance_floor",
     "term_value",
     "white_equivalent",
     "white_equivalent_interval",
