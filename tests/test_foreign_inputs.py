@@ -894,6 +894,37 @@ def test_an_unreadable_file_says_what_it_probably_is(tmp_path: Path, data: str |
         load_recording(path)
 
 
+@pytest.mark.parametrize("after_hz", [102.0, 106.0, 104.2])
+def test_a_rate_change_within_the_file_is_named_where_it_happens(tmp_path: Path,
+                                                                after_hz: float) -> None:
+    """Stamps at 104 Hz for 30 000 rows and then at another rate (a logger whose clock
+    changed, two sessions written as one file): read at one rate, 102 Hz after gave 588
+    one-sample holes that are no lost samples and 106 Hz 566 good rows skipped as
+    "damaged". The file is refused, naming the line the new rate starts at and both
+    rates; read in order with --rate and no time column it is whole. Stamps jittered by
+    0.3 period and a steady rate with missing samples are not called a change."""
+    rng = np.random.default_rng(5)
+    t = np.concatenate([np.arange(30_000) / 104.0,
+                        (29_999 + np.arange(1, 30_001) * 104.0 / after_hz) / 104.0])
+    y = rng.normal(0.0, 0.01, t.size)
+    path = tmp_path / "two_rates.csv"
+    for jitter in (0.0, 0.3):
+        stamps = t + rng.uniform(-jitter, jitter, t.size) / 104.0
+        path.write_text("t,gx\n" + "\n".join(
+            f"{a:.6f},{b:.6f}" for a, b in zip(stamps, y, strict=True)) + "\n")
+        with pytest.raises(RecordingError, match=(
+                rf"two_rates\.csv:30002: the sample rate changes here: the time stamps give "
+                rf"104 Hz before and {after_hz:g} Hz from here")):
+            load_recording(path)
+    rec = load_recording(path, InputOptions(rate_hz=104.0, columns={"t": "-", "gx": "gx"}))
+    assert len(rec) == 60_000 and rec.lost_samples == 0
+    steady = np.delete(np.arange(60_000) / 104.0, rng.choice(60_000, 50, replace=False))
+    steady += rng.uniform(-0.3, 0.3, steady.size) / 104.0
+    path.write_text("t,gx\n" + "\n".join(f"{a:.6f},0.0" for a in steady) + "\n")
+    rec = load_recording(path)
+    assert len(rec) == steady.size and rec.lost_samples == 50
+
+
 def test_a_logger_restart_is_named_where_it_happens(tmp_path: Path) -> None:
     """A log whose time restarts at 0 halfway had its first half dropped as "damaged"."""
     rows = [f"{(k % 5000) / 100:.2f},{k % 7}" for k in range(10000)]

@@ -30,6 +30,7 @@ damaged, so a single bad time stamp costs one row, never the rest of the record.
 from __future__ import annotations
 
 import bisect
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -536,6 +537,115 @@ def _consistent_with_times(index: np.ndarray, t_s: np.ndarray, keep: np.ndarray,
     out = keep.copy()
     out[rows[sorted(drop)]] = False
     return out
+
+
+RATE_WINDOW_ROWS = 2000
+"""Rows of consecutive stamps (every interval within half a period of one) over which
+:func:`rate_change` measures the local period by least squares."""
+RUN_STEP_TOLERANCE = 0.75
+"""Largest departure (in periods) of an interval between consecutive stamps within a run
+of :func:`rate_change`: stamps jittered by up to 3/8 of a period stay in runs; a missing
+sample without jitter (2 periods) ends one."""
+RATE_CHANGE_Z = 10.0
+"""z of the difference of the local periods before and after the best split that
+:func:`rate_change` needs (the largest of ~1000 splits of a steady clock stays near 4)."""
+RATE_CHANGE_SLIP = 1.0
+"""Samples that indexing at one rate must slip over the record (from the local periods)
+before a change of period is reported: less is read as one rate without a fake hole."""
+
+
+@dataclass(frozen=True)
+class RateChange:
+    """The stamps' period changes within the record: ``before_hz`` up to row ``row``
+    (0-based, of the stamps given), ``after_hz`` from it; ``slip`` samples is how far
+    indexing at one rate drifts from the stamps over the record."""
+
+    row: int
+    before_hz: float
+    after_hz: float
+    slip: float
+
+
+def rate_change(t_s: np.ndarray, rate_hz: float) -> RateChange | None:
+    """Whether time stamps hold more than one sample rate (a logger whose clock changed,
+    two sessions at different ODRs written as one file), or None.
+
+    Indexed at one rate, a record whose period changes by 2 % half-way is read with a
+    one-sample hole every 50 samples where the rate is lower (588 samples "missing" from
+    30 000 at 102 Hz after 104 Hz) and a row dropped as "damaged" every 50 where it is
+    higher (566 good rows skipped at 106 Hz). The local period is the least-squares slope
+    of t against the row number over windows of :data:`RATE_WINDOW_ROWS` consecutive
+    stamps (every interval within :data:`RUN_STEP_TOLERANCE` of 1 / ``rate_hz``: no
+    hole, no skipped row; jitter does not accumulate in a slope). Stamps jittered by half
+    a period or more make no such runs, and are not checked. A change is reported when, at the best
+    split of the windows in time, the mean local periods before and after differ by
+    :data:`RATE_CHANGE_Z` standard errors and the local periods make indexing at one
+    rate slip by :data:`RATE_CHANGE_SLIP` sample or more over the record.
+    """
+    step = 1.0 / rate_hz
+    rows = np.flatnonzero(np.isfinite(t_s))
+    if rows.size < 2 * RATE_WINDOW_ROWS:
+        return None
+    t = t_s[rows]
+    dt = np.diff(t)
+    ok = (np.abs(dt - step) < RUN_STEP_TOLERANCE * step) & (np.diff(rows) == 1)
+    breaks = np.flatnonzero(~ok)
+    starts = np.concatenate(([0], breaks + 1))
+    ends = np.concatenate((breaks + 1, [t.size]))  # runs t[starts[k]:ends[k]]
+    first: list[int] = []
+    slope: list[float] = []
+    se: list[float] = []
+    x = np.arange(RATE_WINDOW_ROWS, dtype=np.float64)
+    xc = x - x.mean()
+    sxx = float(xc @ xc)
+    for a, b in zip(starts, ends, strict=True):
+        for w in range(int(a), int(b) - RATE_WINDOW_ROWS + 1, RATE_WINDOW_ROWS):
+            y = t[w:w + RATE_WINDOW_ROWS] - t[w]
+            k = float(xc @ (y - y.mean())) / sxx
+            resid = y - y.mean() - k * xc
+            first.append(w)
+            slope.append(k)
+            se.append(math.sqrt(max(float(resid @ resid), 0.0) / (x.size - 2) / sxx))
+    if len(slope) < 2:
+        return None
+    k_w = np.asarray(slope) / step - 1.0  # relative departure of each window's period
+    se_w = np.maximum(np.asarray(se) / step, 1e-12)
+    slip_w = np.cumsum(k_w * RATE_WINDOW_ROWS)
+    slip = float(np.ptp(np.concatenate(([0.0], slip_w))))
+    if slip < RATE_CHANGE_SLIP:
+        return None
+    wt = 1.0 / se_w**2
+    best: tuple[float, int] | None = None
+    for j in range(1, k_w.size):
+        w1, w2 = wt[:j].sum(), wt[j:].sum()
+        m1, m2 = (wt[:j] @ k_w[:j]) / w1, (wt[j:] @ k_w[j:]) / w2
+        z = abs(m1 - m2) / math.sqrt(1.0 / w1 + 1.0 / w2)
+        if best is None or z > best[0]:
+            best = (float(z), j)
+    assert best is not None
+    z, j = best
+    before = float(np.average(k_w[:j], weights=wt[:j]))
+    after = float(np.average(k_w[j:], weights=wt[j:]))
+    # the windows' scatter about the two periods, when above their fitted errors (a
+    # jitter correlated over many rows), widens the difference's error alike
+    resid = np.concatenate((k_w[:j] - before, k_w[j:] - after))
+    birge = math.sqrt(float(resid**2 @ wt) / max(k_w.size - 2, 1))
+    if z / max(birge, 1.0) < RATE_CHANGE_Z:
+        return None
+    # the change lies between the last window before and the first after: its row is the
+    # first stamp of the window after (the reader names its line)
+    return RateChange(int(rows[first[j]]), rate_hz / (1.0 + before), rate_hz / (1.0 + after),
+                      slip)
+
+
+def rate_change_message(change: RateChange, where: str) -> str:
+    """The error for a record whose stamps hold two rates (``where`` names the row)."""
+    return (f"{where}: the sample rate changes here: the time stamps give "
+            f"{change.before_hz:.6g} Hz before and {change.after_hz:.6g} Hz from here; "
+            f"read at one rate they would slip {change.slip:.0f} sample(s) over the "
+            "record (holes that are no lost samples, good rows dropped as damaged). "
+            "Split the file here, or read the rows in order at one rate with --rate HZ "
+            "--columns t=- (holes in the stamps are then not seen)")
 
 
 def timebase_from_index(index: np.ndarray, t_s: np.ndarray | None, where: str,
