@@ -933,21 +933,25 @@ def test_adis_gyro_subsets_agree_once_the_filter_is_searched_per_term_set(
 def test_a_resonance_adds_its_zero_frequency_floor_to_the_white_equivalent_density(
         reference_dir: Path) -> None:
     """A resonance's spectrum has a floor at 0 Hz that follows the -1/2 line: its AVAR
-    tends to H / (1 + (2 f0 / w)^2) / tau (checked against the fit's own column at long
-    taus). The ADIS16405 gz peak at 20 Hz carries a third of the line at 1-4 s: N was
-    0.0315 where ADEV x sqrt(tau) read 0.039; now within 5 % of the measured curve less
-    its flicker floor."""
-    from imubench.noisefit.units import resonance_floor
+    tends to S(0) / tau, S the two-sided spectrum of the sampled process (about H / (1 +
+    (2 f0 / w)^2) in continuous time; checked against the fit's own column at long taus,
+    near Nyquist too, where aliasing doubles it). The ADIS16405 gz peak at 20 Hz carries a
+    third of the line at 1-4 s: N was 0.0315 where ADEV x sqrt(tau) read 0.039; now within
+    5 % of the measured curve less its flicker floor."""
+    from imubench.noisefit.units import resonance_floor, white_equivalent
 
-    m = np.array([200_000, 400_000])
-    for f0, w in ((2.0, 1.0), (5.0, 0.5)):
+    m = np.array([10**6])
+    for f0, w in ((2.0, 1.0), (5.0, 0.5), (20.0, 2.0), (45.0, 5.0), (1.0, 4.0)):
         col = term_avar("resonance", m, 100.0, f0_hz=f0, width_hz=w)
-        np.testing.assert_allclose(col * m / 100.0, resonance_floor(f0, w), rtol=0.03)
-    assert resonance_floor(5.0, 0.01) == 0.0  # decays over 32 s: not on the -1/2 line
+        np.testing.assert_allclose(col * m / 100.0, resonance_floor(f0, w, 100.0), rtol=2e-3)
+    assert resonance_floor(5.0, 0.01, 100.0) == 0.0  # decays over 32 s: not on the line
+    with pytest.raises(FitError, match="sample rate is needed"):
+        white_equivalent({"resonance_height": 1.0, "resonance_freq_hz": 5.0,
+                          "resonance_width_hz": 1.0})
     y = _adis(reference_dir, 1, "gz")
     f = fit_channel(y, 100.0, channel="gz")
     assert "resonance_height" in f.present
-    n = datasheet_units("gz", f.params)["noise_density_mdps_per_sqrt_hz"] / 1000
+    n = datasheet_units("gz", f.params, 100.0)["noise_density_mdps_per_sqrt_hz"] / 1000
     one = oadev(y, 100.0, "freq", [1.0]).dev[0]
     assert n == pytest.approx(math.sqrt(one**2 - (0.664 * f.params["flicker"]) ** 2),
-                              rel=0.05)
+                              rel=0.03)

@@ -227,7 +227,7 @@ class ChannelFit:
         only part). Value 0 when the fit judged it absent; the interval is then (0, upper
         limit) or None."""
         present = {k: v for k, v in self.params.items() if k in self.present}
-        value = term_value(present, key)
+        value = term_value(present, key, self.rate_hz)
         ci = self.ci.get(key)
         if key == WHITE_EQUIVALENT and ci is None and (
                 value <= 0 or math.isclose(value, float(present.get("white", 0.0)))):
@@ -1402,9 +1402,10 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
             j = withall.terms.index(term)
             ci[AMPLITUDE_KEY[term]] = (0.0, math.sqrt(max(sol_all.theta[j], 0.0)
                                                    + Z_PRESENT * se_all[j]))
-    n2 = white_equivalent(params) ** 2
+    n2 = white_equivalent(params, rate_hz) ** 2
     if n2 > 0:  # delta method on the squared amplitudes (tau_c held at its estimate)
-        g = white_equivalent_weights(st.terms, st.tau_c_s, st.res_freq_hz, st.res_width_hz)
+        g = white_equivalent_weights(st.terms, st.tau_c_s, st.res_freq_hz, st.res_width_hz,
+                                     rate_hz)
         ci[WHITE_EQUIVALENT] = white_equivalent_interval(n2, float(g @ sol.cov_theta @ g))
     if wanted is None:
         for term in BASE_TERMS:

@@ -154,7 +154,7 @@ class RecordingFit:
             "skipped_channels": dict(self.skipped),
             "kalibr": self._kalibr_or_reason(),
             "kalibr_units": dict(KALIBR_UNITS),
-            "datasheet_comparison": datasheet_comparison(self.chip, params),
+            "datasheet_comparison": datasheet_comparison(self.chip, params, self.rate_hz),
         }
 
 

@@ -82,40 +82,50 @@ from 10 to 200 s. A slower term is bias wander, not angle random walk. For tau_c
 its asymptote."""
 
 
-def resonance_floor(freq_hz: float, width_hz: float) -> float:
-    """Density N^2 (per unit of ``resonance_height``, unit^2/Hz) that a resonance adds
-    to the -1/2 line: its spectrum's value at 0 Hz halved, 1 / (1 + (2 f0 / w)^2) for the
-    pair of Lorentzian lines at +-f0 of half width w/2 that a damped cosine autocovariance
-    has (peak H at f0; the one-sided S(0) is 2 H / (1 + (2 f0 / w)^2), and N^2 = S(0) / 2
-    as for white noise). 0 when the resonance decays slower than :data:`SHORT_MARKOV_S`
-    (1 / (pi w) > SHORT_MARKOV_S) or has no width. The sampled process's floor is higher
-    where f0 is a sizeable fraction of the rate (aliasing): +14 % at 20 Hz of 100 Hz."""
+def resonance_floor(freq_hz: float, width_hz: float, rate_hz: float) -> float:
+    """Density N^2 (per unit of ``resonance_height``, unit^2/Hz) that a resonance sampled
+    at ``rate_hz`` adds to the -1/2 line: its two-sided spectrum at 0 Hz
+    (:func:`lsm6ds_sim.noise.resonance_shape`, the line pair at +-f0 of the damped cosine
+    the fit's column and the simulator share, aliasing included; N^2 = S(0) as for white
+    noise). In continuous time about 1 / (1 + (2 f0 / w)^2); the sampled value is 14 %
+    above that at 20 Hz of 100 Hz and twice it near Nyquist. 0 when the resonance decays
+    slower than :data:`SHORT_MARKOV_S` (1 / (pi w) > SHORT_MARKOV_S) or has no width."""
+    from lsm6ds_sim.noise import resonance_shape
+
     if not (width_hz > 0.0 and 1.0 / (math.pi * width_hz) <= SHORT_MARKOV_S):
         return 0.0
-    return 1.0 / (1.0 + (2.0 * freq_hz / width_hz) ** 2)
+    return 0.5 * float(resonance_shape(np.zeros(1), freq_hz, width_hz, rate_hz)[0])
 
 
-def white_equivalent(params: Mapping[str, float]) -> float:
+def white_equivalent(params: Mapping[str, float], rate_hz: float | None = None) -> float:
     """White-equivalent density N (unit/sqrt(Hz)) of a channel's model-file values:
     sqrt(white^2 + output_white^2 + 2 markov_sigma^2 markov_tau + resonance_height x
     :func:`resonance_floor`) where the Markov term counts only when markov_tau <=
-    :data:`SHORT_MARKOV_S` (module docstring)."""
+    :data:`SHORT_MARKOV_S` (module docstring). ``rate_hz``: the sample rate, needed when
+    the model has a resonance (its floor depends on it)."""
     n2 = float(params.get("white", 0.0)) ** 2 + float(params.get("output_white", 0.0)) ** 2
     tau_c = float(params.get("markov_tau", 0.0))
     if 0.0 < tau_c <= SHORT_MARKOV_S:
         n2 += 2.0 * float(params.get("markov_sigma", 0.0)) ** 2 * tau_c
-    n2 += float(params.get("resonance_height", 0.0)) * resonance_floor(
-        float(params.get("resonance_freq_hz", 0.0)), float(params.get("resonance_width_hz", 0.0)))
+    height = float(params.get("resonance_height", 0.0))
+    if height > 0.0:
+        if rate_hz is None:
+            raise FitError("white-equivalent density of a model with a resonance: the "
+                           "sample rate is needed (the resonance's floor depends on it)")
+        n2 += height * resonance_floor(float(params.get("resonance_freq_hz", 0.0)),
+                                       float(params.get("resonance_width_hz", 0.0)), rate_hz)
     return math.sqrt(n2)
 
 
 def white_equivalent_weights(terms: Sequence[str], tau_c_s: float, res_freq_hz: float = 0.0,
-                             res_width_hz: float = 0.0) -> np.ndarray:
+                             res_width_hz: float = 0.0, rate_hz: float = 0.0) -> np.ndarray:
     """d(N^2)/d(theta_j) for squared amplitudes theta_j of ``terms`` (names ``white``,
-    ``output_white``, ``markov``, ``resonance`` (its height); others 0): the gradient of
-    the delta-method interval of :func:`white_equivalent`."""
+    ``output_white``, ``markov``, ``resonance`` (its height, with its centre, width and
+    the sample rate); others 0): the gradient of the delta-method interval of
+    :func:`white_equivalent`."""
     short = 0.0 < tau_c_s <= SHORT_MARKOV_S
-    floor = resonance_floor(res_freq_hz, res_width_hz)
+    floor = (resonance_floor(res_freq_hz, res_width_hz, rate_hz) if "resonance" in terms
+             else 0.0)
     return np.array([1.0 if t in ("white", "output_white") else
                      2.0 * tau_c_s if (t == "markov" and short) else
                      floor if t == "resonance" else 0.0 for t in terms])
@@ -128,10 +138,12 @@ def white_equivalent_interval(n2: float, var_n2: float, z: float = 1.959964
     return math.sqrt(max(n2 - half, 0.0)), math.sqrt(n2 + half)
 
 
-def term_value(params: Mapping[str, float], term: str) -> float:
-    """A quantity's coefficient: a model-file key's value, or :func:`white_equivalent`."""
+def term_value(params: Mapping[str, float], term: str, rate_hz: float | None = None
+               ) -> float:
+    """A quantity's coefficient: a model-file key's value, or :func:`white_equivalent`
+    (``rate_hz`` as there)."""
     if term == WHITE_EQUIVALENT:
-        return white_equivalent(params)
+        return white_equivalent(params, rate_hz)
     return float(params.get(term, 0.0))
 
 GYRO_QUANTITIES: tuple[Quantity, ...] = (
@@ -169,9 +181,12 @@ def quantities(channel: str) -> tuple[Quantity, ...]:
     raise FitError(f"units: unknown channel {channel!r}; channels are gx gy gz ax ay az")
 
 
-def datasheet_units(channel: str, params: Mapping[str, float]) -> dict[str, float]:
-    """The fitted N, B, K of one channel in datasheet units (names carry the unit)."""
-    return {q.key: term_value(params, q.term) * q.factor for q in quantities(channel)}
+def datasheet_units(channel: str, params: Mapping[str, float], rate_hz: float | None = None
+                    ) -> dict[str, float]:
+    """The fitted N, B, K of one channel in datasheet units (names carry the unit;
+    ``rate_hz`` as in :func:`white_equivalent`)."""
+    return {q.key: term_value(params, q.term, rate_hz) * q.factor
+            for q in quantities(channel)}
 
 
 def param_units(channel: str) -> dict[str, str]:
@@ -287,7 +302,7 @@ def kalibr_imu(params_by_channel: Mapping[str, Mapping[str, float]], rate_hz: fl
             if ch not in params_by_channel:
                 continue
             v = (kalibr_random_walk(params_by_channel[ch]) if term == "random_walk"
-                 else term_value(params_by_channel[ch], term))
+                 else term_value(params_by_channel[ch], term, rate_hz))
             if term == "random_walk" and v > term_value(params_by_channel[ch], term):
                 folded.setdefault(key, []).append(ch)
             if v <= 0.0 and term in limits.get(ch, {}):
@@ -367,14 +382,15 @@ def kalibr_limit_message(path: object, values: Mapping[str, Any], key: str) -> s
 
 
 def datasheet_comparison(chip: str | None,
-                         params_by_channel: Mapping[str, Mapping[str, float]]
-                         ) -> dict[str, dict[str, Any]]:
+                         params_by_channel: Mapping[str, Mapping[str, float]],
+                         rate_hz: float | None = None) -> dict[str, dict[str, Any]]:
     """Fitted white-equivalent density vs the chip's datasheet-typical one (``datasheet:<chip>``).
 
     Returns ``{channel: {"fitted": N, "typical": N_typ, "ratio": N / N_typ, "unit": the
     unit of N and N_typ}}``; empty when
     the chip is unknown or has no shipped model. The typicals are those of the shipped
-    files (marked unverified there).
+    files (marked unverified there). ``rate_hz``: the fitted record's sample rate (as in
+    :func:`white_equivalent`).
     """
     from lsm6ds_sim.model import DATASHEET_PREFIX, datasheet_chips, load_model
 
@@ -384,7 +400,7 @@ def datasheet_comparison(chip: str | None,
     out: dict[str, dict[str, Any]] = {}
     for ch, p in params_by_channel.items():
         n_typ = white_equivalent(typical[ch].to_dict())
-        n = white_equivalent(p)
+        n = white_equivalent(p, rate_hz)
         if n_typ > 0:
             out[ch] = {"fitted": n, "typical": n_typ, "ratio": n / n_typ,
                        "unit": param_units(ch)["white"]}

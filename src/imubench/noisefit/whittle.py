@@ -607,7 +607,7 @@ def fit_whittle(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "
         half = Z95 * se["bandwidth_hz"]  # a bandwidth lies below Nyquist
         ci["bandwidth_hz"] = (st.bandwidth_hz * math.exp(-half),
                               min(st.bandwidth_hz * math.exp(half), 0.5 * rate_hz))
-    n2 = white_equivalent(params) ** 2
+    n2 = white_equivalent(params, rate_hz) ** 2
     if n2 > 0:  # delta method; cov is in log theta (and log tau_c)
         weights = white_equivalent_weights(st.terms, st.tau_c_s)
         grad = np.zeros(len(names))
