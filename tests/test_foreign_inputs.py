@@ -894,35 +894,84 @@ def test_an_unreadable_file_says_what_it_probably_is(tmp_path: Path, data: str |
         load_recording(path)
 
 
-@pytest.mark.parametrize("after_hz", [102.0, 106.0, 104.2])
-def test_a_rate_change_within_the_file_is_named_where_it_happens(tmp_path: Path,
-                                                                after_hz: float) -> None:
-    """Stamps at 104 Hz for 30 000 rows and then at another rate (a logger whose clock
-    changed, two sessions written as one file): read at one rate, 102 Hz after gave 588
-    one-sample holes that are no lost samples and 106 Hz 566 good rows skipped as
-    "damaged". The file is refused, naming the line the new rate starts at and both
-    rates; read in order with --rate and no time column it is whole. Stamps jittered by
-    0.3 period and a steady rate with missing samples are not called a change."""
+def _times_csv(path: Path, t: np.ndarray) -> Path:
+    path.write_text("t,gx\n" + "\n".join(f"{a:.6f},0.001" for a in t) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(("after_hz", "change_row"), [
+    (102.0, 30_000), (106.0, 33_017), (104.2, 30_000), (52.0, 31_234)])
+def test_a_rate_change_within_the_file_is_named_where_it_happens(
+        tmp_path: Path, after_hz: float, change_row: int) -> None:
+    """Stamps at 104 Hz and then at another rate (a logger whose clock changed, two
+    sessions written as one file): read at one rate, 102 Hz after gave 588 one-sample
+    holes that are no lost samples, 106 Hz 566 good rows skipped as "damaged", 52 Hz a
+    hole at every other sample. The file is refused naming the line the new rate starts
+    at and both rates, with stamps jittered by 0.2 period too; split there, each part
+    reads whole; read in order with --rate and no time column it is whole."""
     rng = np.random.default_rng(5)
-    t = np.concatenate([np.arange(30_000) / 104.0,
-                        (29_999 + np.arange(1, 30_001) * 104.0 / after_hz) / 104.0])
-    y = rng.normal(0.0, 0.01, t.size)
+    n = 60_000
+    t = np.concatenate([np.arange(change_row) / 104.0,
+                        (change_row - 1) / 104.0
+                        + np.arange(1, n - change_row + 1) / after_hz])
     path = tmp_path / "two_rates.csv"
-    for jitter in (0.0, 0.3):
-        stamps = t + rng.uniform(-jitter, jitter, t.size) / 104.0
-        path.write_text("t,gx\n" + "\n".join(
-            f"{a:.6f},{b:.6f}" for a, b in zip(stamps, y, strict=True)) + "\n")
+    for jitter in (0.0, 0.2):
+        _times_csv(path, t + rng.uniform(-jitter, jitter, n) / 104.0)
         with pytest.raises(RecordingError, match=(
-                rf"two_rates\.csv:30002: the sample rate changes here: the time stamps give "
-                rf"104 Hz before and {after_hz:g} Hz from here")):
+                r"two_rates\.csv:(\d+): the sample rate changes here: the time stamps give "
+                rf"104 Hz before and {after_hz:g} Hz from here")) as err:
             load_recording(path)
-    rec = load_recording(path, InputOptions(rate_hz=104.0, columns={"t": "-", "gx": "gx"}))
+        line = int(str(err.value).split(".csv:")[1].split(":")[0])
+        # to the line without jitter; with it, within the rows over which the change
+        # moves a stamp by the jitter
+        spread = 0 if jitter == 0 else 2 + int(jitter / abs(104.0 / after_hz - 1.0))
+        assert abs(line - (change_row + 2)) <= spread, (line, spread)
+    for part, rate in ((t[:change_row], 104.0), (t[change_row:], after_hz)):
+        rec = load_recording(_times_csv(tmp_path / "part.csv", part))
+        assert len(rec) == part.size and rec.lost_samples == 0
+        assert rec.rate_hz == pytest.approx(rate, rel=1e-6)
+    rec = load_recording(_times_csv(path, t), InputOptions(rate_hz=104.0,
+                                                         columns={"t": "-", "gx": "gx"}))
+    assert len(rec) == n and rec.lost_samples == 0
+
+
+def test_a_rate_change_in_a_ros_bag_names_the_message(tmp_path: Path) -> None:
+    """The MCAP / ROS 2 reader indexes header stamps the same way: 4000 messages at 104 Hz
+    and 4000 at 102 Hz are refused naming the first message at the new rate."""
+    t = np.concatenate([np.arange(4000) / 104.0, 3999 / 104.0 + np.arange(1, 4001) / 102.0])
+    write_mcap(tmp_path / "two.mcap", t, np.zeros((t.size, 6)))
+    with pytest.raises(RecordingError, match=r"two\.mcap: message 4001 of topic /imu: the "
+                                             r"sample rate changes here: the time stamps "
+                                             r"give 104 Hz before and 102 Hz from here"):
+        load_recording(tmp_path / "two.mcap")
+
+
+def test_a_rate_change_is_seen_through_lost_samples_and_a_steady_clock_is_not_called_one(
+        tmp_path: Path) -> None:
+    """A lossy link (1 % of the samples missing at random) does not hide a change from 104
+    to 102 Hz; a steady clock with such holes and 0.3 period of jitter, or stamps printed
+    to the millisecond, is read as one rate with its holes counted. A clock that drifts
+    (30 ppm over 10 min at 1 kHz) is named a drift, not a place to split."""
+    rng = np.random.default_rng(6)
+    t = np.concatenate([np.arange(30_000) / 104.0, 29_999 / 104.0
+                        + np.arange(1, 30_001) / 102.0])
+    lossy = np.delete(t, rng.choice(t.size, 600, replace=False))
+    with pytest.raises(RecordingError, match="104 Hz before and 102 Hz from here"):
+        load_recording(_times_csv(tmp_path / "lossy.csv", lossy))
+    steady = np.delete(np.arange(60_000) / 104.0, rng.choice(60_000, 600, replace=False))
+    rec = load_recording(_times_csv(tmp_path / "steady.csv",
+                                  steady + rng.uniform(-0.3, 0.3, steady.size) / 104.0))
+    assert len(rec) == steady.size and rec.lost_samples == 600
+    (tmp_path / "ms.csv").write_text("t,gx\n" + "\n".join(
+        f"{a:.3f},0.001" for a in np.arange(60_000) / 104.0) + "\n")
+    rec = load_recording(tmp_path / "ms.csv")
     assert len(rec) == 60_000 and rec.lost_samples == 0
-    steady = np.delete(np.arange(60_000) / 104.0, rng.choice(60_000, 50, replace=False))
-    steady += rng.uniform(-0.3, 0.3, steady.size) / 104.0
-    path.write_text("t,gx\n" + "\n".join(f"{a:.6f},0.0" for a in steady) + "\n")
-    rec = load_recording(path)
-    assert len(rec) == steady.size and rec.lost_samples == 50
+    drift = np.arange(600_000) / 1000.0
+    drift *= 1.0 + 30e-6 * drift / 600.0
+    with pytest.raises(RecordingError, match=r"the sample rate drifts within the file: the "
+                                             r"time stamps give 1000 Hz at its start and "
+                                             r"999\.9\d* Hz at its end.*--columns t=-"):
+        load_recording(_times_csv(tmp_path / "drift.csv", drift))
 
 
 def test_a_logger_restart_is_named_where_it_happens(tmp_path: Path) -> None:

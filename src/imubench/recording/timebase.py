@@ -540,12 +540,23 @@ def _consistent_with_times(index: np.ndarray, t_s: np.ndarray, keep: np.ndarray,
 
 
 RATE_WINDOW_ROWS = 2000
-"""Rows of consecutive stamps (every interval within half a period of one) over which
-:func:`rate_change` measures the local period by least squares."""
-RUN_STEP_TOLERANCE = 0.75
-"""Largest departure (in periods) of an interval between consecutive stamps within a run
-of :func:`rate_change`: stamps jittered by up to 3/8 of a period stay in runs; a missing
-sample without jitter (2 periods) ends one."""
+"""Rows of a run of stamps over which :func:`rate_change` measures the local period by
+least squares."""
+RATE_MEDIAN_ROWS = 101
+"""Intervals per block of which :func:`rate_change` takes the median as the local one."""
+RUN_STEP_TOLERANCE = 0.5
+"""Largest departure (in local periods) of an interval between consecutive stamps within
+a run of :func:`rate_change`: stamps jittered by up to a quarter period stay in runs, and
+a missing sample (two periods) is never taken for one period. (At 3/4, stamps jittered by
+0.3 period with 1 % of the samples missing read as a rate change: holes counted as one
+period bent the local periods.)"""
+RUN_HOLE_TOLERANCE = 0.2
+"""An interval within this (in local periods) of a whole number of 2 or more is a run's
+hole of that many periods less one."""
+COUNTED_CHANGE = 0.4
+"""A change of period by this much (relative) or more is placed by the intervals that are
+not one period of their side's rate (:func:`_change_row`); a smaller one by least
+squares on the stamps."""
 RATE_CHANGE_Z = 10.0
 """z of the difference of the local periods before and after the best split that
 :func:`rate_change` needs (the largest of ~1000 splits of a steady clock stays near 4)."""
@@ -558,88 +569,169 @@ before a change of period is reported: less is read as one rate without a fake h
 class RateChange:
     """The stamps' period changes within the record: ``before_hz`` up to row ``row``
     (0-based, of the stamps given), ``after_hz`` from it; ``slip`` samples is how far
-    indexing at one rate drifts from the stamps over the record."""
+    indexing at one rate drifts from the stamps over the record; ``drift``: the period
+    changes gradually (a trend fits the local periods better than one step), ``row``
+    is then where the trend crosses the mean period."""
 
     row: int
     before_hz: float
     after_hz: float
     slip: float
+    drift: bool = False
+
+
+def _windows(t: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                        np.ndarray]:
+    """(first stamp, period, its standard error, cumulative sample count) of the windows of
+    :func:`rate_change`: :data:`RATE_WINDOW_ROWS` stamps of a run (consecutive rows whose
+    intervals are one local period within :data:`RUN_STEP_TOLERANCE`, or a whole number
+    of them within :data:`RUN_HOLE_TOLERANCE`), the period the least-squares slope of t
+    against the samples counted. The local period is the median interval of blocks of
+    :data:`RATE_MEDIAN_ROWS`, so a run follows a rate that changes."""
+    dt = np.diff(t)
+    blocks = -(-dt.size // RATE_MEDIAN_ROWS)
+    padded = np.full(blocks * RATE_MEDIAN_ROWS, np.nan)
+    padded[:dt.size] = dt
+    with np.errstate(all="ignore"):
+        med = np.repeat(np.nanmedian(padded.reshape(blocks, RATE_MEDIAN_ROWS), axis=1),
+                        RATE_MEDIAN_ROWS)[:dt.size]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(med > 0, dt / med, np.nan)
+    r = np.nan_to_num(r, nan=0.0)
+    whole = np.rint(r)
+    single = np.abs(r - 1.0) < RUN_STEP_TOLERANCE
+    hole = (whole >= 2) & (np.abs(r - whole) < RUN_HOLE_TOLERANCE) & ~single
+    ok = (np.diff(rows) == 1) & (single | hole)
+    count = np.concatenate(([0.0], np.cumsum(np.where(single, 1.0, np.where(hole, whole,
+                                                                           0.0)))))
+    breaks = np.flatnonzero(~ok)
+    starts = np.concatenate(([0], breaks + 1))
+    ends = np.concatenate((breaks + 1, [t.size]))
+    long = np.flatnonzero(ends - starts >= RATE_WINDOW_ROWS)
+    firsts = [np.arange(starts[k], ends[k] - RATE_WINDOW_ROWS + 1, RATE_WINDOW_ROWS)
+              for k in long]
+    first = np.concatenate(firsts) if firsts else np.zeros(0, np.int64)
+    if first.size == 0:
+        return first, np.zeros(0), np.zeros(0), count
+    at = first[:, None] + np.arange(RATE_WINDOW_ROWS)[None, :]
+    x = count[at] - count[first][:, None]
+    y = t[at] - t[first][:, None]
+    xc = x - x.mean(axis=1, keepdims=True)
+    yc = y - y.mean(axis=1, keepdims=True)
+    sxx = np.sum(xc * xc, axis=1)
+    period = np.sum(xc * yc, axis=1) / sxx
+    resid = yc - period[:, None] * xc
+    se = np.sqrt(np.sum(resid * resid, axis=1) / (RATE_WINDOW_ROWS - 2) / sxx)
+    return first, period, se, count
+
+
+def _change_row(t: np.ndarray, count: np.ndarray, lo: int, hi: int, before_s: float,
+                after_s: float) -> int:
+    """The first stamp in ``t[lo:hi]`` after the period ``after_s`` replaced ``before_s``.
+
+    A change by less than :data:`COUNTED_CHANGE` (relative): least squares over the
+    hinge (stamps on the first line up to it, on the second after; the counted samples
+    ``count`` as abscissa), in one pass of suffix sums. A larger one: the hinge that
+    leaves the fewest intervals that are not one period of their side's rate (at half
+    the rate every interval after the change is two periods of the first; stamps alone
+    cannot tell that from every other sample missing, the run of regular intervals
+    does)."""
+    if abs(after_s / before_s - 1.0) >= COUNTED_CHANGE:
+        dt = np.diff(t[lo:hi])
+        # a quarter period: at half the rate an interval of the first is exactly half of
+        # the second's, on the run tolerance's edge
+        off1 = np.abs(dt / before_s - 1.0) >= 0.5 * RUN_STEP_TOLERANCE
+        off2 = np.abs(dt / after_s - 1.0) >= 0.5 * RUN_STEP_TOLERANCE
+        # hinge k: intervals before it judged by the first rate, from it by the second
+        cost = (np.concatenate(([0], np.cumsum(off1)))
+                + np.concatenate((np.cumsum(off2[::-1])[::-1], [0])))
+        return lo + int(np.argmin(cost)) + 1  # interval k ends at stamp k + 1
+    c = count[lo:hi] - count[lo]
+    lead = max(min(RATE_WINDOW_ROWS // 4, (hi - lo) // 4), 1)
+    u = t[lo:hi] - before_s * c
+    u = u - np.median(u[:lead])  # on the first line: 0 up to the change, then a ramp
+    d = after_s - before_s
+    n = np.arange(c.size, 0, -1, dtype=np.float64)  # stamps from each one on
+
+    def suffix(v: np.ndarray) -> np.ndarray:
+        return np.cumsum(v[::-1])[::-1]
+
+    s_uu, s_u, s_uc = suffix(u * u), suffix(u), suffix(u * c)
+    s_c, s_cc = suffix(c), suffix(c * c)
+    # SSE(k) = sum_{x<k} u^2 + sum_{x>=k} (u - d (c - c_k))^2, k the first stamp after
+    after = s_uu - 2 * d * (s_uc - c * s_u) + d * d * (s_cc - 2 * c * s_c + n * c * c)
+    sse = float(s_uu[0]) - s_uu + after
+    return lo + int(np.argmin(sse)) + 1  # the hinge stamp is on both lines
 
 
 def rate_change(t_s: np.ndarray, rate_hz: float) -> RateChange | None:
     """Whether time stamps hold more than one sample rate (a logger whose clock changed,
-    two sessions at different ODRs written as one file), or None.
+    two sessions at different ODRs written as one file, a clock that drifts), or None.
 
     Indexed at one rate, a record whose period changes by 2 % half-way is read with a
     one-sample hole every 50 samples where the rate is lower (588 samples "missing" from
-    30 000 at 102 Hz after 104 Hz) and a row dropped as "damaged" every 50 where it is
-    higher (566 good rows skipped at 106 Hz). The local period is the least-squares slope
-    of t against the row number over windows of :data:`RATE_WINDOW_ROWS` consecutive
-    stamps (every interval within :data:`RUN_STEP_TOLERANCE` of 1 / ``rate_hz``: no
-    hole, no skipped row; jitter does not accumulate in a slope). Stamps jittered by half
-    a period or more make no such runs, and are not checked. A change is reported when, at the best
-    split of the windows in time, the mean local periods before and after differ by
-    :data:`RATE_CHANGE_Z` standard errors and the local periods make indexing at one
-    rate slip by :data:`RATE_CHANGE_SLIP` sample or more over the record.
+    30 000 at 102 Hz after 104 Hz), a row dropped as "damaged" every 50 where it is higher
+    (566 good rows skipped at 106 Hz), and every other sample missing at half the rate.
+    The local period is the least-squares slope over windows of runs of stamps
+    (:func:`_windows`: jitter does not accumulate in a slope; holes in stamps without much
+    jitter are counted). A change is reported when the local periods make indexing at one
+    rate slip by :data:`RATE_CHANGE_SLIP` sample or more over the record and, at the best
+    split of the windows in time, the mean periods before and after differ by
+    :data:`RATE_CHANGE_Z` standard errors (widened by the windows' own scatter about
+    them). The change is placed to the stamp (:func:`_change_row`); a linear trend of the
+    periods that fits them better than the step is reported as a drift. Stamps jittered
+    by a quarter period or more make no long runs, and are not checked.
     """
     step = 1.0 / rate_hz
     rows = np.flatnonzero(np.isfinite(t_s))
     if rows.size < 2 * RATE_WINDOW_ROWS:
         return None
     t = t_s[rows]
-    dt = np.diff(t)
-    ok = (np.abs(dt - step) < RUN_STEP_TOLERANCE * step) & (np.diff(rows) == 1)
-    breaks = np.flatnonzero(~ok)
-    starts = np.concatenate(([0], breaks + 1))
-    ends = np.concatenate((breaks + 1, [t.size]))  # runs t[starts[k]:ends[k]]
-    first: list[int] = []
-    slope: list[float] = []
-    se: list[float] = []
-    x = np.arange(RATE_WINDOW_ROWS, dtype=np.float64)
-    xc = x - x.mean()
-    sxx = float(xc @ xc)
-    for a, b in zip(starts, ends, strict=True):
-        for w in range(int(a), int(b) - RATE_WINDOW_ROWS + 1, RATE_WINDOW_ROWS):
-            y = t[w:w + RATE_WINDOW_ROWS] - t[w]
-            k = float(xc @ (y - y.mean())) / sxx
-            resid = y - y.mean() - k * xc
-            first.append(w)
-            slope.append(k)
-            se.append(math.sqrt(max(float(resid @ resid), 0.0) / (x.size - 2) / sxx))
-    if len(slope) < 2:
+    first, period, se, count = _windows(t, rows)
+    if period.size < 2:
         return None
-    k_w = np.asarray(slope) / step - 1.0  # relative departure of each window's period
-    se_w = np.maximum(np.asarray(se) / step, 1e-12)
-    slip_w = np.cumsum(k_w * RATE_WINDOW_ROWS)
+    k_w = period / step - 1.0  # relative departure of each window's period
+    wt = 1.0 / np.maximum(se / step, 1e-12) ** 2
+    samples = (count[first + RATE_WINDOW_ROWS - 1] - count[first]) + 1.0
+    slip_w = np.cumsum(k_w * samples)
     slip = float(np.ptp(np.concatenate(([0.0], slip_w))))
     if slip < RATE_CHANGE_SLIP:
         return None
-    wt = 1.0 / se_w**2
-    best: tuple[float, int] | None = None
-    for j in range(1, k_w.size):
-        w1, w2 = wt[:j].sum(), wt[j:].sum()
-        m1, m2 = (wt[:j] @ k_w[:j]) / w1, (wt[j:] @ k_w[j:]) / w2
-        z = abs(m1 - m2) / math.sqrt(1.0 / w1 + 1.0 / w2)
-        if best is None or z > best[0]:
-            best = (float(z), j)
-    assert best is not None
-    z, j = best
-    before = float(np.average(k_w[:j], weights=wt[:j]))
-    after = float(np.average(k_w[j:], weights=wt[j:]))
-    # the windows' scatter about the two periods, when above their fitted errors (a
-    # jitter correlated over many rows), widens the difference's error alike
+    c_w, c_wk = np.cumsum(wt), np.cumsum(wt * k_w)
+    w1, w2 = c_w[:-1], c_w[-1] - c_w[:-1]
+    m1, m2 = c_wk[:-1] / w1, (c_wk[-1] - c_wk[:-1]) / w2
+    z_all = np.abs(m1 - m2) / np.sqrt(1.0 / w1 + 1.0 / w2)
+    j = int(np.argmax(z_all)) + 1  # windows [0, j) before, [j, n) after
+    before, after = float(m1[j - 1]), float(m2[j - 1])
     resid = np.concatenate((k_w[:j] - before, k_w[j:] - after))
-    birge = math.sqrt(float(resid**2 @ wt) / max(k_w.size - 2, 1))
-    if z / max(birge, 1.0) < RATE_CHANGE_Z:
+    dof = max(k_w.size - 2, 1)
+    step_chi2 = float(resid**2 @ wt)
+    if float(z_all[j - 1]) / max(math.sqrt(step_chi2 / dof), 1.0) < RATE_CHANGE_Z:
         return None
-    # the change lies between the last window before and the first after: its row is the
-    # first stamp of the window after (the reader names its line)
-    return RateChange(int(rows[first[j]]), rate_hz / (1.0 + before), rate_hz / (1.0 + after),
+    centre = t[first + RATE_WINDOW_ROWS // 2]
+    trend = np.polyfit(centre, k_w, 1, w=np.sqrt(wt))
+    trend_chi2 = float((k_w - np.polyval(trend, centre)) ** 2 @ wt)
+    if trend_chi2 < step_chi2:  # a drift: from the first window's period to the last's
+        ends = np.polyval(trend, centre[[0, -1]])
+        mid = int(first[int(np.argmin(np.abs(np.polyval(trend, centre) - k_w.mean())))])
+        return RateChange(int(rows[mid]), rate_hz / (1.0 + float(ends[0])),
+                          rate_hz / (1.0 + float(ends[1])), slip, drift=True)
+    lo = int(first[max(j - 2, 0)])
+    hi = int(min(first[min(j + 1, first.size - 1)] + RATE_WINDOW_ROWS, t.size))
+    row = _change_row(t, count, lo, hi, step * (1.0 + before), step * (1.0 + after))
+    return RateChange(int(rows[row]), rate_hz / (1.0 + before), rate_hz / (1.0 + after),
                       slip)
 
 
 def rate_change_message(change: RateChange, where: str) -> str:
     """The error for a record whose stamps hold two rates (``where`` names the row)."""
+    if change.drift:
+        return (f"{where}: the sample rate drifts within the file: the time stamps give "
+                f"{change.before_hz:.6g} Hz at its start and {change.after_hz:.6g} Hz at "
+                f"its end; read at one rate they would slip {change.slip:.0f} sample(s) "
+                "over the record (holes that are no lost samples, good rows dropped as "
+                "damaged). Read the rows in order at one rate with --rate HZ --columns "
+                "t=- (holes in the stamps are then not seen)")
     return (f"{where}: the sample rate changes here: the time stamps give "
             f"{change.before_hz:.6g} Hz before and {change.after_hz:.6g} Hz from here; "
             f"read at one rate they would slip {change.slip:.0f} sample(s) over the "
