@@ -44,7 +44,7 @@ its estimator is this GLS with a nonparametric instead of a model-based weight m
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
@@ -497,21 +497,25 @@ def _with(st: Structure, kind: str, value: float, order: int = 1) -> Structure:
 def _search(st: Structure, kind: str, pts: Points,
             corr: np.ndarray | None = None) -> tuple[Structure, float]:
     """Best value of one nonlinear setting (fixed correlation ``corr``; grid then refine)."""
+    return _search_scored(st, kind, pts,
+                          lambda cand: _fit_structure(cand, pts, corr, iterations=2).chi2)
+
+
+def _search_scored(st: Structure, kind: str, pts: Points,
+                   score: Callable[[Structure], float]) -> tuple[Structure, float]:
+    """The value of one nonlinear setting of lowest ``score`` (chi2 of the structure):
+    :func:`_grid`, then bounded refinement between the best point's neighbours (a filter:
+    for each order, 1 and 2)."""
     orders = (1, 2) if kind == "filter" else (1,)
     best: tuple[float, Structure] | None = None
     grid = _grid(kind, pts)
     for order in orders:
-        chis = []
-        for v in grid:
-            cand = _with(st, kind, float(v), order)
-            chis.append(_fit_structure(cand, pts, corr, iterations=2).chi2)
+        def f(logv: float, order: int = order) -> float:
+            return score(_with(st, kind, float(np.exp(logv)), order))
+
+        chis = [f(math.log(v)) for v in grid]
         i = int(np.argmin(chis))
         lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
-
-        def f(logv: float, order: int = order) -> float:
-            cand = _with(st, kind, float(np.exp(logv)), order)
-            return _fit_structure(cand, pts, corr, iterations=2).chi2
-
         if hi > lo:
             r = minimize_scalar(f, bounds=(math.log(lo), math.log(hi)), method="bounded",
                                 options={"xatol": 1e-3})
@@ -672,21 +676,9 @@ def _filter_profiled(st: Structure, pts: Points, sigma: np.ndarray
     chi2 = _chi2_fixed_sigma(st, pts, sigma)[0]
     if st.bandwidth_hz <= 0:
         return chi2, st
-    best = (chi2, st)
-    grid = _grid("filter", pts)
-    for order in (1, 2):
-        def f(logv: float, order: int = order) -> float:
-            cand = replace(st, bandwidth_hz=float(np.exp(logv)), filter_order=order)
-            return _chi2_fixed_sigma(cand, pts, sigma)[0]
-
-        chis = [f(math.log(v)) for v in grid]
-        i = int(np.argmin(chis))
-        lo, hi = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, grid.size - 1)])
-        r = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
-        v, c = (float(np.exp(r.x)), float(r.fun)) if r.fun < chis[i] else (grid[i], chis[i])
-        if c < best[0]:
-            best = (c, replace(st, bandwidth_hz=float(v), filter_order=order))
-    return best
+    searched, c = _search_scored(st, "filter", pts,
+                                 lambda cand: _chi2_fixed_sigma(cand, pts, sigma)[0])
+    return (c, searched) if c < chi2 else (chi2, st)
 
 
 def _stepwise(st: Structure, pts: Points
@@ -1418,6 +1410,8 @@ def fit_wls(y: np.ndarray, rate_hz: float, *, terms: str | Iterable[str] = "auto
                 if lo > 0:
                     reasons[term] = (f"kept, {how}, 95 % interval [{lo:.3g}, {hi:.3g}] "
                                      "excludes 0")
+                elif not _extensions_in(st):  # the one term kept when none is significant
+                    reasons[term] = f"kept, {how}, 95 % interval [{lo:.3g}, {hi:.3g}]"
                 else:
                     clo, chi = at_settings[AMPLITUDE_KEY[term]]
                     reasons[term] = (f"kept, {how}; 95 % interval [{lo:.3g}, {hi:.3g}] with "
