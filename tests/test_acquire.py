@@ -219,6 +219,8 @@ def test_cli_acquire_and_sim(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     }
     # two 4-byte status reads per poll (the second checks the burst's alignment)
     assert s["samples"] == 52 * 20 and 0 < s["bus_utilization"] < 0.08
+    # the source polls past the limit on its virtual clock (20 s had said 22.6 s)
+    assert 19.9 < s["duration_s"] <= 20.0
     rec = load_recording(out)
     assert rec.metadata["chip"] == "lsm6dsl" and rec.rate_hz == 52
     assert np.allclose(rec.values[:, 5], round(1 / 0.061e-3) * 0.061e-3)  # raw storage

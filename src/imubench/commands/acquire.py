@@ -8,14 +8,15 @@ the source telemetry (``samples``, ``gaps``, ``lost_samples``, ``overruns``,
 ``bus_bytes``, ``bus_utilization``, ``io_errors``, ``retries``, ``bad_frames``,
 ``reconnects``, ``measured_odr_hz`` (the ODR measured against the host clock: a crystal
 error shows here), ``elapsed_s``, ``expected_samples``, ``lost_by_reason``) plus
-``duration_s`` (source seconds elapsed), ``produced`` and what the recording holds
-(``recorded``, ``recording_lost``); with ``--calibration``, ``calibration_extrapolated``:
-the samples whose die temperature lay outside the calibration's sweep (a warning says
-when it leaves and re-enters it). Ctrl-C or SIGTERM stops the acquisition and keeps,
-closed and readable, everything recorded so far; the counters of it are still written,
-with ``"interrupted": true``. A source or a consumer that fails (a device lost for good, a
-disk full) ends it the same way: the recording is closed with what it holds, the summary
-line and the counters say so (``"error"``: the failure's message), then the error.
+``duration_s`` (source seconds elapsed, at most ``--duration-s``), ``produced`` and what
+the recording holds (``recorded``, ``recording_lost``); with ``--calibration``,
+``calibration_extrapolated``: the samples whose die temperature lay outside the
+calibration's sweep (a warning says when it leaves and re-enters it). Ctrl-C or SIGTERM
+stops the acquisition and keeps, closed and readable, everything recorded so far; the
+counters of it are still written, with ``"interrupted": true``. A source or a consumer
+that fails (a device lost for good, a disk full) ends it the same way: the recording is
+closed with what it holds, the summary line and the counters say so (``"error"``: the
+failure's message), then the error.
 """
 
 from __future__ import annotations
@@ -64,10 +65,10 @@ def record(src: Source, out: Path, duration_s: float | None = None,
         # what was recorded: stop, drain, close the file, and say what it holds
         pipeline.stop()
         pipeline.join()
-        stats = _stats(src, pipeline, recorder, live)
+        stats = _stats(src, pipeline, recorder, live, duration_s)
         stats["interrupted"] = True
         raise AcquisitionInterrupted(stats) from None
-    stats = _stats(src, pipeline, recorder, live)
+    stats = _stats(src, pipeline, recorder, live, duration_s)
     failure = pipeline.error or next(iter(pipeline.consumer_errors().values()), None)
     if failure is None and recorder.not_recorded:  # a full disk: the recorder went on
         # counting what it could not write (exit 0, "56 lost" with no reason, before)
@@ -100,11 +101,15 @@ class AcquisitionInterrupted(KeyboardInterrupt):
 
 
 def _stats(src: Source, pipeline: Pipeline, recorder: Recorder,
-           live: LiveCalibration | None) -> dict[str, Any]:
-    """The counters of a finished (or stopped) acquisition: the module docstring."""
+           live: LiveCalibration | None, duration_s: float | None) -> dict[str, Any]:
+    """The counters of a finished (or stopped) acquisition: the module docstring.
+    ``duration_s`` is the source's seconds up to ``duration_s`` (the acquisition's limit):
+    a source on a virtual clock polls on past the limit until the pipeline stops it (3 s
+    of ``sim://...&clock=virtual`` had said 5.6 s)."""
     tel = src.telemetry()
     stats: dict[str, Any] = tel.as_dict()
-    stats["duration_s"] = tel.elapsed_s
+    stats["duration_s"] = (tel.elapsed_s if duration_s is None
+                           else min(tel.elapsed_s, duration_s))
     stats["produced"] = pipeline.produced
     account = pipeline.accounts()["recorder"]
     stats["recorded"] = recorder.samples
