@@ -2,6 +2,9 @@
 
 import sys
 
-from imubench.cli import main
+try:
+    from imubench.cli import main
+except KeyboardInterrupt:  # Ctrl-C while the modules load: nothing started, no traceback
+    sys.exit(130)
 
 sys.exit(main())
