@@ -824,11 +824,12 @@ def _cross_validate(st: Structure, sol: _Solution, arr: np.ndarray, pts: Points
 
 # ------------------------------------------------------------------------ intervals
 def _se_at(x: np.ndarray, theta: np.ndarray, j: int, value: float, pts: Points,
-           corr: np.ndarray, free: np.ndarray | None = None) -> float:
+           corr: np.ndarray, free: Sequence[np.ndarray] = ()) -> float:
     """Standard error of theta_j with the covariance evaluated where theta_j = value.
 
-    ``free``: columns d(model AVAR)/d(ln setting) of nonlinear settings estimated
-    alongside (:func:`_setting_columns`); they enter the Fisher information as nuisance
+    ``free``: per nonlinear setting estimated alongside, the matrix D with d(model
+    AVAR)/d(ln setting) = D theta (:func:`_setting_derivatives`), taken at the theta the
+    covariance is evaluated at; those columns enter the Fisher information as nuisance
     parameters, so the standard error is the one with those settings free (the
     Gauss-Newton covariance of separable least squares, Golub & Pereyra 2003), not the
     one at their estimates.
@@ -839,7 +840,7 @@ def _se_at(x: np.ndarray, theta: np.ndarray, j: int, value: float, pts: Points,
     v = 2.0 * mod**2 / pts.edf
     sigma = corr * np.sqrt(np.outer(v, v)) + np.diag((pts.delta * mod) ** 2)
     chol = np.linalg.cholesky(sigma)
-    xw = np.linalg.solve(chol, x if free is None else np.column_stack([x, free]))
+    xw = np.linalg.solve(chol, np.column_stack([x, *(d @ t for d in free)]))
     scale = np.linalg.norm(xw, axis=0)
     scale[scale == 0] = 1.0
     cov = np.linalg.pinv((xw / scale).T @ (xw / scale), rcond=1e-12) / np.outer(scale, scale)
@@ -847,7 +848,7 @@ def _se_at(x: np.ndarray, theta: np.ndarray, j: int, value: float, pts: Points,
 
 
 def _endpoint_ci(x: np.ndarray, theta: np.ndarray, j: int, pts: Points,
-                 corr: np.ndarray, free: np.ndarray | None = None) -> tuple[float, float]:
+                 corr: np.ndarray, free: Sequence[np.ndarray] = ()) -> tuple[float, float]:
     """95 % interval of amplitude j: theta_j -/+ 1.96 se, se taken *at each endpoint*.
 
     The variance of an AVAR point is proportional to the model AVAR squared, so a Wald
@@ -867,20 +868,21 @@ def _endpoint_ci(x: np.ndarray, theta: np.ndarray, j: int, pts: Points,
 
 
 SETTING_STEP: float = 1e-3
-"""Step in ln(setting) of the central differences of :func:`_setting_columns`."""
+"""Step in ln(setting) of the central differences of :func:`_setting_derivatives`."""
 
 
-def _setting_columns(st: Structure, theta: np.ndarray, pts: Points) -> np.ndarray:
-    """d(model AVAR)/d(ln setting) at the points, one column per nonlinear setting of
-    ``st`` (filter bandwidth, Markov tau_c, sine frequency, resonance width), by central
-    differences of :data:`SETTING_STEP`."""
-    cols = []
+def _setting_derivatives(st: Structure, pts: Points) -> list[np.ndarray]:
+    """Per nonlinear setting of ``st`` (filter bandwidth, Markov tau_c, sine frequency,
+    resonance width) the matrix D with d(model AVAR)/d(ln setting) = D theta at the
+    points (the model is linear in theta), by central differences of
+    :data:`SETTING_STEP`."""
+    out = []
     for kind in _extensions_in(st):
         v = float(getattr(st, _SETTING[kind]))
         up = _with(st, kind, v * math.exp(SETTING_STEP), st.filter_order)
         down = _with(st, kind, v * math.exp(-SETTING_STEP), st.filter_order)
-        cols.append((design(up, pts) - design(down, pts)) @ theta / (2 * SETTING_STEP))
-    return np.column_stack(cols) if cols else np.zeros((pts.m.size, 0))
+        out.append((design(up, pts) - design(down, pts)) / (2 * SETTING_STEP))
+    return out
 
 
 MARKOV_MIN_SAMPLES = 2.0
@@ -961,7 +963,7 @@ def _settings_free_intervals(st: Structure, sol: _Solution, pts: Points
         return {}
     corr = _correlation(st, sol, pts)
     x = design(st, pts)
-    free = _setting_columns(st, sol.theta, pts)
+    free = _setting_derivatives(st, pts)
     ci: dict[str, tuple[float, float]] = {}
     for j, term in enumerate(st.terms):
         lo_a, hi_a = _endpoint_ci(x, sol.theta, j, pts, corr, free)
