@@ -280,23 +280,20 @@ def _filtered_avar(term: str, m: np.ndarray, rate_hz: float, rho: np.ndarray, *,
         return avar_from_gacv(apply_filter(g, rho, multiplicative=term == "markov"), m)
     g = gacv_unit(term, k1 + j + 2, 1.0 / rate_hz, tau_c_s=tau_c_s, f0_hz=f0_hz)
     head = apply_filter(g, rho, multiplicative=term == "markov")[: k1 + 1]
-    if term == "markov" and (g[1] / g[0]) ** (k1 - j) < MARKOV_TAIL_NEGLIGIBLE:
-        # G_f(k) = s phi^(k - J) for k >= J with s <= sum |rho| (:func:`_geometric_tail_sum`):
-        # beyond k1 it is below round-off of the head, which is the whole autocovariance.
-        # Written as r G + d, r = s / phi^J is huge and G_f the difference of two huge
-        # terms: tau_c 0.345 s beside an order-2 0.2 Hz filter at 10 Hz (J ~ 300 lags,
-        # phi^J ~ 1e-38) gave AVARs of -2, 8, 4, -8 and a chi2 that jumped by 9 between
-        # tau_c values one rounding apart (Samsung S5 gy, a crash of the profile search)
-        return _avar_short(head, m)
     if term == "markov":
+        if (g[1] / g[0]) ** (k1 - j) < MARKOV_TAIL_NEGLIGIBLE:
+            # G_f(k) = s phi^(k - J) for k >= J with s <= sum |rho|
+            # (:func:`_geometric_tail_sum`): beyond k1 it is below round-off of the head,
+            # which is the whole autocovariance. Written as r G + d, r = s / phi^J is huge
+            # and G_f the difference of two huge terms: tau_c 0.345 s beside an order-2
+            # 0.2 Hz filter at 10 Hz (J ~ 300 lags, phi^J ~ 1e-38) gave AVARs of -2, 8, 4,
+            # -8 and a chi2 that jumped by 9 between tau_c values one rounding apart
+            # (Samsung S5 gy, a crash of the profile search)
+            return _avar_short(head, m)
         # G_f(k) = r G(k) for k >= J with r = sum_l rho(|l|) phi^(-l) (see apply_filter);
-        # from rho and phi, not head[-1] / G(k1) (round-off over a tiny G(k1))
-        with np.errstate(over="ignore", invalid="ignore"):
-            r = _geometric_tail_sum(g, rho) / g[j] if g[j] > 0 else math.inf
-        if not math.isfinite(r):  # phi^J underflows: the direct form
-            g = _gacv_cached(term, kmax, 1.0 / rate_hz, tau_c_s, f0_hz)
-            return avar_from_gacv(apply_filter(g, rho, multiplicative=True), m)
-        c = 0.0
+        # from rho and phi, not head[-1] / G(k1) (round-off over a tiny G(k1)). Here
+        # phi^J >= MARKOV_TAIL_NEGLIGIBLE^(1/7) (K1 - J = 7 J + 64): r is finite
+        r, c = _geometric_tail_sum(g, rho) / g[j], 0.0
     else:
         r, c = 1.0, head[-1] - g[k1]
     d = head - r * g[: k1 + 1] - c
