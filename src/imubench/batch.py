@@ -153,6 +153,19 @@ class Batch:
         )
 
 
+def index_holes(index: np.ndarray, last_index: int | None) -> list[tuple[int, int]]:
+    """The holes ``[start, end)`` of sample indices before and inside ``index`` (increasing,
+    not empty): after ``last_index`` (the previous sample; None: nothing before) and
+    between neighbours."""
+    first = int(index[0])
+    holes: list[tuple[int, int]] = []
+    if last_index is not None and first > last_index + 1:
+        holes.append((last_index + 1, first))
+    for k in np.nonzero(np.diff(index) > 1)[0]:
+        holes.append((int(index[k]) + 1, int(index[k + 1])))
+    return holes
+
+
 def explain_holes(batch: Batch, last_index: int | None) -> list[Gap]:
     """Every hole before and inside ``batch`` as gaps with their declared reasons.
 
@@ -166,14 +179,8 @@ def explain_holes(batch: Batch, last_index: int | None) -> list[Gap]:
     """
     if not len(batch):
         return list(batch.gaps)
-    idx = batch.index
-    first = int(idx[0])
-    holes: list[tuple[int, int]] = []
-    if last_index is not None and first > last_index + 1:
-        holes.append((last_index + 1, first))
-    steps = np.diff(idx) - 1
-    for k in np.nonzero(steps > 0)[0]:
-        holes.append((int(idx[k]) + 1, int(idx[k + 1])))
+    first = int(batch.index[0])
+    holes = index_holes(batch.index, last_index)
     declared = sorted(batch.gaps, key=lambda g: g.at)
     out: list[Gap] = []
     j = 0
@@ -196,5 +203,14 @@ def explain_holes(batch: Batch, last_index: int | None) -> list[Gap]:
     return out
 
 
-__all__ = ["CHANNELS", "UNEXPLAINED", "UNITS", "Batch", "Gap", "explain_holes", "gaps_before",
-           "hole_start"]
+__all__ = [
+    "CHANNELS",
+    "UNEXPLAINED",
+    "UNITS",
+    "Batch",
+    "Gap",
+    "explain_holes",
+    "gaps_before",
+    "hole_start",
+    "index_holes",
+]

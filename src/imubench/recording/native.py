@@ -55,7 +55,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from imubench.batch import CHANNELS, Batch, Gap, explain_holes
+from imubench.batch import CHANNELS, Batch, Gap, explain_holes, index_holes
 from imubench.errors import RecordingError
 from imubench.recording.commit import cut_back, need_parent
 from imubench.recording.timebase import utc_now
@@ -402,15 +402,10 @@ class NativeReader:
         """Note a data record taken: its samples and the holes before and inside it."""
         if not len(batch):
             return
-        idx = batch.index
-        first = int(idx[0])
-        if self._last_index is not None and first > self._last_index + 1:
-            self._holes.append((self._last_index + 1, first))
-        for k in np.flatnonzero(np.diff(idx) > 1):
-            self._holes.append((int(idx[k]) + 1, int(idx[k + 1])))
+        self._holes += index_holes(batch.index, self._last_index)
         if self._first_index is None:
-            self._first_index = first
-        self._last_index = int(idx[-1])
+            self._first_index = int(batch.index[0])
+        self._last_index = int(batch.index[-1])
         self._taken += 1
         self._kept += len(batch)
 
