@@ -36,12 +36,7 @@ from imubench.recording.options import (
     InputOptions,
 )
 from imubench.recording.textin import TextRead
-from imubench.recording.timebase import (
-    Timebase,
-    rate_change,
-    rate_change_message,
-    timebase_from_times,
-)
+from imubench.recording.timebase import Timebase, check_one_rate, timebase_from_times
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 log = logging.getLogger("imubench.recording")
@@ -193,10 +188,8 @@ def read_ros(path: str | Path, options: InputOptions) -> TextRead:
         tb = Timebase.in_order(options.rate_hz, len(table), "--rate, messages in order")
     else:
         tb = timebase_from_times(table[:, 0], where, options.rate_hz)
-        change = rate_change(table[:, 0], tb.rate_hz)
-        if change is not None:
-            raise RecordingError(rate_change_message(
-                change, f"{where}: message {change.row + 1} of topic {topic}"))
+        check_one_rate(table[:, 0], tb.rate_hz,
+                       lambda row: f"{where}: message {row + 1} of topic {topic}")
     keep = tb.keep
     channels = [c for c, has in zip(CHANNELS, present, strict=True) if has]
     meta: dict[str, Any] = {"odr_hz": float(tb.rate_hz), "source_format": fmt,

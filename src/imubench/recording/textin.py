@@ -78,9 +78,8 @@ from imubench.recording.timebase import (
     MJD_OF_UNIX_EPOCH,
     SECONDS_PER_DAY,
     Timebase,
+    check_one_rate,
     increasing_step,
-    rate_change,
-    rate_change_message,
     start_utc,
     time_unit_from_spacing,
     timebase_from_index,
@@ -981,8 +980,9 @@ def read_text(path: str | Path, options: InputOptions) -> TextRead:
                              f"({100.0 * (own.rate_hz / stated[0] - 1.0):+.3g} %): read "
                              "at the stamps' rate (--rate overrides)")
                 tb, stated = own, None
-        _check_one_rate(t_s, tb, where, np.asarray(raw.row_lines))
-        _check_even_spacing(t_s, tb, where, np.asarray(raw.row_lines))
+        lines = np.asarray(raw.row_lines)
+        check_one_rate(t_s, tb.rate_hz, lambda row: f"{where}:{int(lines[row])}")
+        _check_even_spacing(t_s, tb, where, lines)
         if rate is None and not TIME_RATE_HZ[0] <= tb.rate_hz <= TIME_RATE_HZ[1]:
             raise RecordingError(
                 f"{where}: the time column gives {tb.rate_hz:.4g} Hz with t in "
@@ -1120,14 +1120,6 @@ RESTART_PERIODS = 10.0
 UNEVEN_SHARE = 0.02
 """Share of rows that may fall on a sample already taken before the stamps are called
 unevenly spaced (:func:`_check_even_spacing`)."""
-
-
-def _check_one_rate(t_s: np.ndarray, tb: Timebase, where: str, lines: np.ndarray) -> None:
-    """RecordingError when the stamps hold two sample rates (:func:`rate_change`),
-    naming the line the new rate starts at."""
-    change = rate_change(t_s, tb.rate_hz)
-    if change is not None:
-        raise RecordingError(rate_change_message(change, f"{where}:{int(lines[change.row])}"))
 
 
 def _check_even_spacing(t_s: np.ndarray, tb: Timebase, where: str,

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -723,7 +724,16 @@ def rate_change(t_s: np.ndarray, rate_hz: float) -> RateChange | None:
                       slip)
 
 
-def rate_change_message(change: RateChange, where: str) -> str:
+def check_one_rate(t_s: np.ndarray, rate_hz: float, where: Callable[[int], str]) -> None:
+    """RecordingError when the stamps hold two sample rates (:func:`rate_change`);
+    ``where(row)`` names the row the new rate starts at (for a drift: where the periods
+    cross their mean) in the reader's terms (a file's line, a bag's message)."""
+    change = rate_change(t_s, rate_hz)
+    if change is not None:
+        raise RecordingError(_rate_change_message(change, where(change.row)))
+
+
+def _rate_change_message(change: RateChange, where: str) -> str:
     """The error for a record whose stamps hold two rates (``where`` names the row)."""
     if change.drift:
         return (f"{where}: the sample rate drifts within the file: the time stamps give "
